@@ -1,0 +1,78 @@
+# nuno: `make serve` and `make test` are the two commands a fresh machine needs.
+# Everything else they depend on (the MuJoCo runtime from PyPI wheels, the Python
+# venv the parity tests compare against) is fetched here, once.
+
+MUJOCO_VERSION    := 3.17.0
+GYMNASIUM_VERSION := 1.2.2
+PYTHON            ?= python3
+CARGO             ?= cargo
+MUJOCO_DIR        := .mujoco
+MUJOCO_LIB        := $(MUJOCO_DIR)/lib/libmujoco.so
+MJCF_DIR          := $(MUJOCO_DIR)/assets
+MJCF_FILES        := $(MJCF_DIR)/hopper.xml $(MJCF_DIR)/half_cheetah.xml $(MJCF_DIR)/walker2d.xml
+VENV              := .venv
+VENV_STAMP        := $(VENV)/.installed
+# Any wheel of the pinned release carries the same libmujoco; take the one for this Python.
+PIP_DOWNLOAD      := $(PYTHON) -m pip download --quiet --no-deps --only-binary=:all:
+
+SERVE_TASK     ?= hopper
+SERVE_EPISODES ?= 10
+
+.PHONY: serve test mujoco venv system-deps build lint bench clean-runtime
+
+## serve: fetch what is missing, build, and run the main job.
+serve: mujoco
+	$(CARGO) run --release -p nuno-trainer -- evaluate --policy random --task $(SERVE_TASK) --episodes $(SERVE_EPISODES)
+
+## test: the full suite (unit, integration, Gymnasium parity).
+test: mujoco venv
+	$(CARGO) test --workspace --release
+
+build: mujoco
+	$(CARGO) build --workspace --release
+
+lint: mujoco
+	$(CARGO) fmt --all -- --check
+	$(CARGO) clippy --workspace --all-targets --release -- -D warnings
+
+bench: mujoco
+	$(CARGO) bench --bench env_step
+
+mujoco: system-deps $(MUJOCO_LIB) $(MJCF_FILES)
+
+$(MUJOCO_LIB):
+	@rm -rf $(MUJOCO_DIR)/download/mujoco && mkdir -p $(MUJOCO_DIR)/download $(MUJOCO_DIR)/lib
+	$(PIP_DOWNLOAD) -d $(MUJOCO_DIR)/download mujoco==$(MUJOCO_VERSION)
+	$(PYTHON) -m zipfile -e $(MUJOCO_DIR)/download/mujoco-$(MUJOCO_VERSION)-*.whl $(MUJOCO_DIR)/download/mujoco
+	cp $(MUJOCO_DIR)/download/mujoco/mujoco/libmujoco.so.$(MUJOCO_VERSION) $(MUJOCO_DIR)/lib/
+	ln -sf libmujoco.so.$(MUJOCO_VERSION) $@
+	@rm -rf $(MUJOCO_DIR)/download/mujoco
+
+$(MJCF_FILES) &:
+	@rm -rf $(MUJOCO_DIR)/download/gymnasium && mkdir -p $(MUJOCO_DIR)/download $(MJCF_DIR)
+	$(PIP_DOWNLOAD) -d $(MUJOCO_DIR)/download gymnasium==$(GYMNASIUM_VERSION)
+	$(PYTHON) -m zipfile -e $(MUJOCO_DIR)/download/gymnasium-$(GYMNASIUM_VERSION)-py3-none-any.whl $(MUJOCO_DIR)/download/gymnasium
+	cp $(addprefix $(MUJOCO_DIR)/download/gymnasium/gymnasium/envs/mujoco/assets/,$(notdir $(MJCF_FILES))) $(MJCF_DIR)/
+	@rm -rf $(MUJOCO_DIR)/download/gymnasium
+
+## system-deps: Debian packages the build needs, installed only when missing.
+system-deps:
+	@missing=""; \
+	$(PYTHON) -c 'import ensurepip' 2>/dev/null || missing="$$missing python3-venv"; \
+	$(PYTHON) -m pip --version >/dev/null 2>&1 || missing="$$missing python3-pip"; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages:$$missing"; \
+	  sudo=""; [ "$$(id -u)" = 0 ] || sudo=sudo; \
+	  $$sudo apt-get update -qq && $$sudo apt-get install -y -qq $$missing; \
+	fi
+
+## venv: the Python side of the tests (Gymnasium parity, h5py/safetensors read-backs).
+venv: system-deps $(VENV_STAMP)
+
+$(VENV_STAMP): tests/python/requirements.txt
+	$(PYTHON) -m venv $(VENV)
+	$(VENV)/bin/pip install --quiet --disable-pip-version-check -r tests/python/requirements.txt
+	touch $@
+
+clean-runtime:
+	rm -rf $(MUJOCO_DIR) $(VENV)

@@ -1,0 +1,44 @@
+//! The MuJoCo tasks NUNO is benchmarked on (hopper, halfcheetah, walker2d with
+//! D4RL-v2 semantics, and NeoRL's variant that observes root x), their D4RL
+//! normalised scores, and a parallel evaluator that runs a policy in them.
+
+mod evaluator;
+mod mujoco_task;
+mod score;
+mod task;
+
+pub use evaluator::{EvaluationConfig, EvaluationReport, evaluate};
+pub use mujoco_task::{MujocoTask, TaskConfig, Transition};
+pub use score::ScoreReference;
+pub use task::{HealthRule, ObservationLayout, ResetNoise, StateSplit, TaskName, TaskSpec};
+
+/// Everything that can go wrong in a task or an evaluation.
+#[derive(Debug, thiserror::Error)]
+pub enum EnvError {
+    #[error("unknown task `{0}` (expected one of: hopper, halfcheetah, walker2d)")]
+    UnknownTask(String),
+    #[error("MuJoCo could not build the {task} model: {message}")]
+    Model { task: TaskName, message: String },
+    #[error("{what} has {got} entries, the task expects {expected}")]
+    Dimension {
+        what: &'static str,
+        expected: usize,
+        got: usize,
+    },
+    #[error("{what}[{index}] is not a finite number")]
+    NonFinite { what: &'static str, index: usize },
+    #[error("the policy expects {policy} {what}, the task has {task}")]
+    PolicyMismatch {
+        what: &'static str,
+        policy: usize,
+        task: usize,
+    },
+    #[error("the policy returned {got} action values for {batch} states, expected {expected}")]
+    PolicyOutput {
+        batch: usize,
+        expected: usize,
+        got: usize,
+    },
+    #[error("an evaluation needs at least one episode")]
+    NoEpisodes,
+}

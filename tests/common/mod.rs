@@ -1,0 +1,34 @@
+//! Helpers shared by the integration tests: the Python peer from `make venv`.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The test venv's interpreter, created by `make venv` (part of `make test`).
+pub fn python() -> PathBuf {
+    let python = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python");
+    assert!(
+        python.is_file(),
+        "{} is missing: run `make venv` (or `make test`, which creates it)",
+        python.display()
+    );
+    python
+}
+
+/// Runs `tests/python/<script>` with `args` in the test venv; panics with its
+/// stderr if it fails.
+pub fn run_python(script: &str, args: &[&Path]) {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/python")
+        .join(script);
+    let output = Command::new(python())
+        .arg(&script)
+        .args(args)
+        .output()
+        .expect("could not start the test venv's python");
+    assert!(
+        output.status.success(),
+        "{} failed:\n{}",
+        script.display(),
+        String::from_utf8_lossy(&output.stderr)
+    );
+}

@@ -1,0 +1,259 @@
+//! The tasks' contracts beyond Gymnasium parity: state split, scores, seeding,
+//! the time limit, bad input, and the evaluator's determinism.
+
+use nuno::agent::{BatchPolicy, RandomPolicy};
+use nuno::envs::{
+    EnvError, EvaluationConfig, MujocoTask, ObservationLayout, StateSplit, TaskConfig, TaskName,
+    evaluate,
+};
+
+fn random_policy(task: &MujocoTask) -> RandomPolicy {
+    let (low, high) = task.action_bounds();
+    let f32s = |v: Vec<f64>| v.into_iter().map(|x| x as f32).collect();
+    RandomPolicy::new(task.obs_dim(), f32s(low), f32s(high))
+}
+
+#[test]
+fn dimensions_and_timesteps_are_d4rl_and_neorl() {
+    // (task, D4RL obs dim, NeoRL obs dim, act dim, dt)
+    for (name, d4rl, neorl, act, dt) in [
+        (TaskName::Hopper, 11, 12, 3, 0.008),
+        (TaskName::HalfCheetah, 17, 18, 6, 0.05),
+        (TaskName::Walker2d, 17, 18, 6, 0.008),
+    ] {
+        let task = MujocoTask::new(TaskConfig::d4rl(name)).unwrap();
+        assert_eq!((task.obs_dim(), task.act_dim()), (d4rl, act), "{name}");
+        assert!((task.dt() - dt).abs() < 1e-12, "{name} dt {}", task.dt());
+        assert_eq!(task.action_bounds(), (vec![-1.0; act], vec![1.0; act]));
+        let mut task = MujocoTask::new(TaskConfig::neorl(name)).unwrap();
+        assert_eq!(task.obs_dim(), neorl, "{name} NeoRL");
+        assert_eq!(task.reset(Some(0)).len(), neorl);
+    }
+}
+
+#[test]
+fn state_split_pairs_each_position_with_its_velocity() {
+    let hopper = StateSplit::planar(6, ObservationLayout::D4rl);
+    assert_eq!(hopper.positions, vec![0, 1, 2, 3, 4]);
+    assert_eq!(hopper.velocities, vec![5, 6, 7, 8, 9, 10]);
+    assert_eq!(hopper.position_velocity, vec![6, 7, 8, 9, 10]);
+    let neorl = StateSplit::planar(6, ObservationLayout::Neorl);
+    assert_eq!(neorl.position_velocity, vec![6, 7, 8, 9, 10, 11]);
+
+    // The pairing is physical: along a trajectory, each observed position's finite
+    // difference correlates best, and strongly, with its paired velocity.
+    for name in TaskName::ALL {
+        let mut task = MujocoTask::new(TaskConfig::d4rl(name)).unwrap();
+        let split = task.state_split();
+        let mut observations = vec![task.reset(Some(3))];
+        for t in 0..40 {
+            let action: Vec<f64> = (0..task.act_dim())
+                .map(|i| ((t + i) as f64).sin())
+                .collect();
+            observations.push(task.step(&action).unwrap().observation);
+        }
+        let steps = observations.windows(2);
+        for (&p, &paired) in split.positions.iter().zip(&split.position_velocity) {
+            let finite_difference: Vec<f64> = steps
+                .clone()
+                .map(|w| (w[1][p] - w[0][p]) / task.dt())
+                .collect();
+            let best = split
+                .velocities
+                .iter()
+                .map(|&v| {
+                    let velocity: Vec<f64> =
+                        steps.clone().map(|w| 0.5 * (w[0][v] + w[1][v])).collect();
+                    (v, correlation(&finite_difference, &velocity))
+                })
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .unwrap();
+            assert_eq!(
+                best.0, paired,
+                "{name}: position {p} tracks velocity {}",
+                best.0
+            );
+            assert!(best.1 > 0.9, "{name}: position {p} correlation {}", best.1);
+        }
+    }
+}
+
+fn correlation(a: &[f64], b: &[f64]) -> f64 {
+    let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;
+    let (ma, mb) = (mean(a), mean(b));
+    let cov: f64 = a.iter().zip(b).map(|(x, y)| (x - ma) * (y - mb)).sum();
+    let var = |x: &[f64], m: f64| x.iter().map(|v| (v - m).powi(2)).sum::<f64>();
+    cov / (var(a, ma) * var(b, mb)).sqrt()
+}
+
+#[test]
+fn normalised_scores_use_d4rl_reference_returns() {
+    for (name, random, expert) in [
+        (TaskName::Hopper, -20.272305, 3234.3),
+        (TaskName::HalfCheetah, -280.178953, 12135.0),
+        (TaskName::Walker2d, 1.629008, 4592.3),
+    ] {
+        let reference = TaskConfig::d4rl(name).score_reference();
+        assert_eq!(reference.normalize(random), 0.0);
+        assert!((reference.normalize(expert) - 100.0).abs() < 1e-12);
+        let midpoint = 0.5 * (random + expert);
+        assert!((reference.normalize(midpoint) - 50.0).abs() < 1e-9);
+    }
+    let neorl = TaskConfig::neorl(TaskName::Hopper).score_reference();
+    assert!((neorl.normalize(3294.0) - 100.0).abs() < 1e-12);
+}
+
+#[test]
+fn resets_are_seeded_and_noisy() {
+    let mut a = MujocoTask::new(TaskConfig::d4rl(TaskName::HalfCheetah)).unwrap();
+    let mut b = MujocoTask::new(TaskConfig::d4rl(TaskName::HalfCheetah)).unwrap();
+    assert_eq!(a.reset(Some(7)), b.reset(Some(7)));
+    assert_ne!(a.reset(Some(7)), a.reset(Some(8)));
+    // Without a seed the generator moves on.
+    assert_ne!(
+        a.reset(None),
+        b.reset(None).iter().map(|x| x + 1.0).collect::<Vec<_>>()
+    );
+    let (init_qpos, _) = a.initial_state();
+    let deviation = a
+        .qpos()
+        .iter()
+        .zip(init_qpos)
+        .map(|(q, q0)| (q - q0).abs())
+        .fold(0.0, f64::max);
+    assert!(
+        deviation > 0.0 && deviation <= 0.1,
+        "reset noise {deviation}"
+    );
+}
+
+#[test]
+fn time_limit_truncates_without_terminating() {
+    let mut task = MujocoTask::new(TaskConfig::d4rl(TaskName::HalfCheetah)).unwrap();
+    task.reset(Some(0));
+    let action = vec![0.1; task.act_dim()];
+    for step in 1..=1000 {
+        let t = task.step(&action).unwrap();
+        assert!(!t.terminated, "halfcheetah never terminates");
+        assert_eq!(t.truncated, step == 1000, "truncated at step {step}");
+    }
+}
+
+#[test]
+fn bad_actions_and_states_are_refused_with_what_was_wrong() {
+    let mut task = MujocoTask::new(TaskConfig::d4rl(TaskName::Hopper)).unwrap();
+    task.reset(Some(0));
+    let err = task.step(&[0.0, 0.0]).unwrap_err();
+    assert!(matches!(
+        err,
+        EnvError::Dimension {
+            what: "action",
+            expected: 3,
+            got: 2
+        }
+    ));
+    assert_eq!(err.to_string(), "action has 2 entries, the task expects 3");
+    let err = task.step(&[0.0, f64::NAN, 0.0]).unwrap_err();
+    assert!(matches!(
+        err,
+        EnvError::NonFinite {
+            what: "action",
+            index: 1
+        }
+    ));
+    let err = task.set_state(&[0.0; 5], &[0.0; 6]).unwrap_err();
+    assert!(matches!(
+        err,
+        EnvError::Dimension {
+            what: "qpos",
+            expected: 6,
+            got: 5
+        }
+    ));
+    let err = "ant".parse::<TaskName>().unwrap_err();
+    assert!(err.to_string().contains("unknown task `ant`"));
+    assert_eq!(
+        "HalfCheetah".parse::<TaskName>().unwrap(),
+        TaskName::HalfCheetah
+    );
+}
+
+#[test]
+fn evaluator_is_deterministic_and_independent_of_thread_count() {
+    let config = EvaluationConfig::new(TaskConfig::d4rl(TaskName::Hopper), 13, 5);
+    let task = MujocoTask::new(config.task).unwrap();
+    let policy = random_policy(&task);
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| evaluate(&policy, &config).unwrap())
+    };
+    let one = run(1);
+    let two = run(2);
+    assert_eq!(one, two);
+    assert_eq!(one.returns.len(), 13);
+    assert!(one.lengths.iter().all(|&l| (1..=1000).contains(&l)));
+    let reference = config.task.score_reference();
+    for (r, s) in one.returns.iter().zip(&one.normalized_scores) {
+        assert_eq!(*s, reference.normalize(*r));
+    }
+    let mean = one.returns.iter().sum::<f64>() / 13.0;
+    assert!((one.mean_return - mean).abs() < 1e-9);
+    // Random hopper scores about 1 (D4RL's hopper-random sits near 1.2).
+    assert!(one.mean_normalized_score > -1.0 && one.mean_normalized_score < 5.0);
+    let other_seed = evaluate(&policy, &EvaluationConfig { seed: 6, ..config }).unwrap();
+    assert_ne!(one.returns, other_seed.returns);
+}
+
+/// A policy whose output width is wrong, to check the evaluator refuses it.
+struct Broken;
+
+impl BatchPolicy for Broken {
+    fn obs_dim(&self) -> usize {
+        11
+    }
+    fn act_dim(&self) -> usize {
+        3
+    }
+    fn act(&self, observations: &[f32], _: &mut dyn rand::RngCore) -> Vec<f32> {
+        vec![0.0; observations.len() / 11]
+    }
+}
+
+#[test]
+fn evaluator_refuses_mismatched_policies() {
+    let hopper = TaskConfig::d4rl(TaskName::Hopper);
+    let walker = MujocoTask::new(TaskConfig::d4rl(TaskName::Walker2d)).unwrap();
+    let err = evaluate(
+        &random_policy(&walker),
+        &EvaluationConfig::new(hopper, 2, 0),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            EnvError::PolicyMismatch {
+                policy: 17,
+                task: 11,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    let err = evaluate(&Broken, &EvaluationConfig::new(hopper, 2, 0)).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            EnvError::PolicyOutput {
+                batch: 2,
+                expected: 6,
+                got: 2
+            }
+        ),
+        "{err}"
+    );
+    let err = evaluate(&Broken, &EvaluationConfig::new(hopper, 0, 0)).unwrap_err();
+    assert!(matches!(err, EnvError::NoEpisodes));
+}

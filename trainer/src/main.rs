@@ -1,0 +1,36 @@
+//! `nuno-trainer`: the offline command line. One file per subcommand, each a
+//! thin layer that parses flags, calls the library and reports; no algorithm
+//! code lives here.
+
+mod evaluate;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Debug, Parser)]
+#[command(name = "nuno-trainer", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run a policy in the real MuJoCo task and print returns and D4RL normalised scores.
+    Evaluate(evaluate::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Evaluate(args) => evaluate::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
