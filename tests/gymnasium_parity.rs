@@ -120,7 +120,7 @@ fn rust_tasks_match_gymnasium_v4() {
         .unwrap(),
     )
     .unwrap();
-    common::run_python("gymnasium_replay.py", &[&input, &output]);
+    common::run_python("gymnasium_replay.py", &[&input, &output], dir.path());
     let theirs: Episodes<Vec<Outcome>> =
         serde_json::from_slice(&std::fs::read(&output).unwrap()).unwrap();
 

@@ -14,15 +14,16 @@ pub fn python() -> PathBuf {
     python
 }
 
-/// Runs `tests/python/<script>` with `args` in the test venv; panics with its
-/// stderr if it fails.
-pub fn run_python(script: &str, args: &[&Path]) {
+/// Runs `tests/python/<script>` with `args` in the test venv, inside `workdir`
+/// (Python's MuJoCo writes MUJOCO_LOG.TXT there); panics with its stderr if it fails.
+pub fn run_python(script: &str, args: &[&Path], workdir: &Path) {
     let script = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/python")
         .join(script);
     let output = Command::new(python())
         .arg(&script)
         .args(args)
+        .current_dir(workdir)
         .output()
         .expect("could not start the test venv's python");
     assert!(
