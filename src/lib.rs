@@ -4,7 +4,12 @@
 //!
 //! One folder per concern:
 //! - [`envs`]: the MuJoCo tasks (D4RL-v2 semantics), D4RL scores, the parallel evaluator;
-//! - [`agent`]: policies behind the narrow batched `act` interface.
+//! - [`data`]: D4RL/NeoRL/Minari readers, the D4RL-layout writer, generators,
+//!   the normaliser and samplers;
+//! - [`agent`]: policies behind the narrow batched `act` interface;
+//! - [`artifact`]: atomic writes of everything nuno saves.
 
 pub mod agent;
+pub mod artifact;
+pub mod data;
 pub mod envs;

@@ -2,5 +2,7 @@
 //! and the policies behind it.
 
 mod policy;
+mod random_network;
 
 pub use policy::{BatchPolicy, RandomPolicy};
+pub use random_network::RandomNetworkPolicy;

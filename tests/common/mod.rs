@@ -1,5 +1,6 @@
 //! Helpers shared by the integration tests: the Python peer from `make venv`.
 
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -16,7 +17,7 @@ pub fn python() -> PathBuf {
 
 /// Runs `tests/python/<script>` with `args` in the test venv, inside `workdir`
 /// (Python's MuJoCo writes MUJOCO_LOG.TXT there); panics with its stderr if it fails.
-pub fn run_python(script: &str, args: &[&Path], workdir: &Path) {
+pub fn run_python<A: AsRef<OsStr>>(script: &str, args: &[A], workdir: &Path) {
     let script = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/python")
         .join(script);

@@ -2,6 +2,7 @@
 //! thin layer that parses flags, calls the library and reports; no algorithm
 //! code lives here.
 
+mod dataset;
 mod evaluate;
 
 use std::process::ExitCode;
@@ -17,6 +18,9 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Generate or inspect offline datasets.
+    #[command(subcommand)]
+    Dataset(dataset::Command),
     /// Run a policy in the real MuJoCo task and print returns and D4RL normalised scores.
     Evaluate(evaluate::Args),
 }
@@ -24,6 +28,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Dataset(command) => dataset::run(command),
         Command::Evaluate(args) => evaluate::run(args),
     };
     match result {

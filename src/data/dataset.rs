@@ -1,0 +1,264 @@
+//! The in-memory offline dataset: transitions `(s, a, r, s', terminal, timeout)`
+//! in D4RL's flat layout, validated on construction, with trajectory
+//! boundaries recovered from the flags and from state continuity.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use ndarray::{Array1, Array2, ArrayView2, Axis};
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+
+use super::DataError;
+use crate::envs::TaskConfig;
+
+/// Free-form provenance stored under D4RL's `metadata/` group (task, recipe,
+/// seed, policy, generator version, ...).
+pub type DatasetMetadata = BTreeMap<String, String>;
+
+/// One trajectory: transitions `start..end` of the dataset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Trajectory {
+    pub start: usize,
+    pub end: usize,
+}
+
+impl Trajectory {
+    pub fn len(&self) -> usize {
+        self.end - self.start
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.end == self.start
+    }
+}
+
+/// An offline dataset of `len()` transitions. Row `i` of every array belongs to
+/// transition `i`; `next_observations[i]` is the state after `actions[i]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dataset {
+    pub observations: Array2<f32>,
+    pub actions: Array2<f32>,
+    pub rewards: Array1<f32>,
+    pub next_observations: Array2<f32>,
+    /// The episode ended because the task terminated (no bootstrapping).
+    pub terminals: Vec<bool>,
+    /// The episode was cut (time limit, or a boundary recovered from continuity).
+    pub timeouts: Vec<bool>,
+    /// Full MuJoCo state at `observations[i]` (D4RL's `infos/qpos`, `infos/qvel`), when known.
+    pub qpos: Option<Array2<f32>>,
+    pub qvel: Option<Array2<f32>>,
+    pub metadata: DatasetMetadata,
+    trajectories: Vec<Trajectory>,
+}
+
+/// The raw arrays a reader (or a user) hands to [`Dataset::from_parts`].
+#[derive(Debug, Clone)]
+pub struct DatasetParts {
+    pub observations: Array2<f32>,
+    pub actions: Array2<f32>,
+    pub rewards: Array1<f32>,
+    pub next_observations: Array2<f32>,
+    pub terminals: Vec<bool>,
+    pub timeouts: Vec<bool>,
+    pub qpos: Option<Array2<f32>>,
+    pub qvel: Option<Array2<f32>>,
+    pub metadata: DatasetMetadata,
+}
+
+impl Dataset {
+    /// Validates the arrays (lengths, finiteness, non-emptiness) and recovers
+    /// trajectory boundaries: a trajectory ends where `terminals` or `timeouts`
+    /// is set, or where `next_observations[i] != observations[i + 1]` (a
+    /// boundary the flags missed, which is then marked as a timeout).
+    /// `file` names the source in errors.
+    pub fn from_parts(parts: DatasetParts, file: &Path) -> Result<Self, DataError> {
+        let DatasetParts {
+            observations,
+            actions,
+            rewards,
+            next_observations,
+            terminals,
+            mut timeouts,
+            qpos,
+            qvel,
+            metadata,
+        } = parts;
+        let n = observations.nrows();
+        if n == 0 {
+            return Err(DataError::Empty {
+                file: file.to_path_buf(),
+            });
+        }
+        let rows = [
+            ("actions", actions.nrows()),
+            ("rewards", rewards.len()),
+            ("next_observations", next_observations.nrows()),
+            ("terminals", terminals.len()),
+            ("timeouts", timeouts.len()),
+            ("infos/qpos", qpos.as_ref().map_or(n, |a| a.nrows())),
+            ("infos/qvel", qvel.as_ref().map_or(n, |a| a.nrows())),
+        ];
+        for (key, got) in rows {
+            if got != n {
+                return Err(DataError::LengthMismatch {
+                    file: file.to_path_buf(),
+                    key: key.into(),
+                    reference: "observations".into(),
+                    expected: n,
+                    got,
+                });
+            }
+        }
+        if next_observations.ncols() != observations.ncols() {
+            return Err(DataError::BadShape {
+                file: file.to_path_buf(),
+                key: "next_observations".into(),
+                shape: next_observations.shape().to_vec(),
+                expected: format!("[{n}, {}] like observations", observations.ncols()),
+            });
+        }
+        check_finite(file, "observations", observations.view())?;
+        check_finite(file, "actions", actions.view())?;
+        check_finite(file, "rewards", rewards.view().insert_axis(Axis(1)))?;
+        check_finite(file, "next_observations", next_observations.view())?;
+
+        let mut trajectories = Vec::new();
+        let mut start = 0;
+        for i in 0..n {
+            let last = i + 1 == n;
+            let discontinuous = !last && next_observations.row(i) != observations.row(i + 1);
+            if discontinuous && !terminals[i] {
+                timeouts[i] = true;
+            }
+            if last || terminals[i] || timeouts[i] {
+                trajectories.push(Trajectory { start, end: i + 1 });
+                start = i + 1;
+            }
+        }
+        Ok(Self {
+            observations,
+            actions,
+            rewards,
+            next_observations,
+            terminals,
+            timeouts,
+            qpos,
+            qvel,
+            metadata,
+            trajectories,
+        })
+    }
+
+    /// Number of transitions.
+    pub fn len(&self) -> usize {
+        self.observations.nrows()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    pub fn obs_dim(&self) -> usize {
+        self.observations.ncols()
+    }
+
+    pub fn act_dim(&self) -> usize {
+        self.actions.ncols()
+    }
+
+    /// The trajectories, in file order.
+    pub fn trajectories(&self) -> &[Trajectory] {
+        &self.trajectories
+    }
+
+    /// Checks that states and actions have `task`'s widths; `file` names the source.
+    pub fn check_task(&self, task: &TaskConfig, file: &Path) -> Result<(), DataError> {
+        let probe = crate::envs::MujocoTask::new(*task)?;
+        let what = format!("{} ({:?} layout)", task.name, task.layout);
+        for (key, got, expected) in [
+            ("observations", self.obs_dim(), probe.obs_dim()),
+            ("actions", self.act_dim(), probe.act_dim()),
+        ] {
+            if got != expected {
+                return Err(DataError::WrongDimension {
+                    file: file.to_path_buf(),
+                    key: key.into(),
+                    task: what,
+                    expected,
+                    got,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// A new dataset holding only the given trajectories (by index), in that order.
+    pub fn select_trajectories(&self, indices: &[usize]) -> Dataset {
+        let rows: Vec<usize> = indices
+            .iter()
+            .flat_map(|&t| self.trajectories[t].start..self.trajectories[t].end)
+            .collect();
+        let pick2 = |a: &Array2<f32>| a.select(Axis(0), &rows);
+        let pick_flags = |v: &[bool]| rows.iter().map(|&i| v[i]).collect::<Vec<_>>();
+        let mut trajectories = Vec::with_capacity(indices.len());
+        let mut start = 0;
+        for &t in indices {
+            let len = self.trajectories[t].len();
+            trajectories.push(Trajectory {
+                start,
+                end: start + len,
+            });
+            start += len;
+        }
+        Dataset {
+            observations: pick2(&self.observations),
+            actions: pick2(&self.actions),
+            rewards: self.rewards.select(Axis(0), &rows),
+            next_observations: pick2(&self.next_observations),
+            terminals: pick_flags(&self.terminals),
+            timeouts: pick_flags(&self.timeouts),
+            qpos: self.qpos.as_ref().map(pick2),
+            qvel: self.qvel.as_ref().map(pick2),
+            metadata: self.metadata.clone(),
+            trajectories,
+        }
+    }
+
+    /// Splits whole trajectories into (train, validation), about `valid_fraction`
+    /// of the trajectories going to validation (at least one each when there are
+    /// two or more). Deterministic for a seed.
+    pub fn split_by_trajectory(&self, valid_fraction: f64, seed: u64) -> (Dataset, Dataset) {
+        let mut order: Vec<usize> = (0..self.trajectories.len()).collect();
+        order.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
+        let n = order.len();
+        let n_valid = if n < 2 {
+            0
+        } else {
+            ((n as f64 * valid_fraction).round() as usize).clamp(1, n - 1)
+        };
+        let (valid, train) = order.split_at(n_valid);
+        let (mut train, mut valid) = (train.to_vec(), valid.to_vec());
+        train.sort_unstable();
+        valid.sort_unstable();
+        (
+            self.select_trajectories(&train),
+            self.select_trajectories(&valid),
+        )
+    }
+}
+
+fn check_finite(file: &Path, key: &str, values: ArrayView2<f32>) -> Result<(), DataError> {
+    match values
+        .outer_iter()
+        .position(|row| row.iter().any(|v| !v.is_finite()))
+    {
+        Some(row) => Err(DataError::NonFinite {
+            file: PathBuf::from(file),
+            key: key.into(),
+            row,
+        }),
+        None => Ok(()),
+    }
+}
