@@ -13,3 +13,4 @@ pub mod agent;
 pub mod artifact;
 pub mod data;
 pub mod envs;
+pub mod sde;

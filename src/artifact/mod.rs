@@ -1,6 +1,69 @@
-//! Files nuno writes: every artifact and dataset is written atomically, so a
-//! reader never sees a half-written file.
+//! Files nuno writes and reads back: model artifacts as safetensors plus JSON
+//! metadata, validated on load, and the atomic write every file goes through,
+//! so a reader never sees a half-written file.
 
 mod atomic;
+mod dynamics;
+mod safetensors_file;
+mod tensors;
+
+use std::path::{Path, PathBuf};
 
 pub use atomic::write_atomically;
+pub use dynamics::{
+    DYNAMICS_METADATA, DYNAMICS_SCHEMA_VERSION, DYNAMICS_WEIGHTS, DatasetInfo, DynamicsMetadata,
+    DynamicsProvenance, load_dynamics, read_dynamics_metadata, save_dynamics, sha256_file,
+    sha256_hex,
+};
+pub use safetensors_file::{parse_safetensors, safetensors_bytes};
+pub use tensors::{NamedTensors, collect_tensors, load_tensors};
+
+/// Everything that can be wrong with an artifact.
+#[derive(Debug, thiserror::Error)]
+pub enum ArtifactError {
+    #[error("{file}: {source}")]
+    Io {
+        file: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{file}: invalid JSON metadata: {message}")]
+    Json { file: PathBuf, message: String },
+    #[error("{file}: schema version {found}, this build reads version {expected}")]
+    Schema {
+        file: PathBuf,
+        found: String,
+        expected: u32,
+    },
+    #[error("{file}: corrupt or truncated safetensors file: {message}")]
+    Corrupt { file: PathBuf, message: String },
+    #[error(
+        "{file}: the weights are not the ones model.json was written for (half-written or mixed artifact)"
+    )]
+    HashMismatch { file: PathBuf },
+    #[error("tensor `{0}` is missing from the weights")]
+    MissingTensor(String),
+    #[error("tensor `{0}` is not a parameter of this model")]
+    UnexpectedTensor(String),
+    #[error("tensor `{name}` has shape {got:?}, the model expects {expected:?}")]
+    TensorShape {
+        name: String,
+        expected: Vec<usize>,
+        got: Vec<usize>,
+    },
+    #[error("tensor `{name}` is {got}, expected F32")]
+    TensorDtype { name: String, got: String },
+    #[error("cannot serialise tensors: {0}")]
+    Safetensors(String),
+    #[error("invalid artifact: {0}")]
+    Invalid(String),
+}
+
+impl ArtifactError {
+    pub(crate) fn io(file: &Path, source: std::io::Error) -> Self {
+        Self::Io {
+            file: file.to_path_buf(),
+            source,
+        }
+    }
+}

@@ -4,6 +4,8 @@
 
 mod dataset;
 mod evaluate;
+mod fit_model;
+mod plot;
 
 use std::process::ExitCode;
 
@@ -21,6 +23,8 @@ enum Command {
     /// Generate or inspect offline datasets.
     #[command(subcommand)]
     Dataset(dataset::Command),
+    /// Fit the neural SDE on a dataset and write the model artifact.
+    FitModel(fit_model::Args),
     /// Run a policy in the real MuJoCo task and print returns and D4RL normalised scores.
     Evaluate(evaluate::Args),
 }
@@ -30,6 +34,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Dataset(command) => dataset::run(command),
         Command::Evaluate(args) => evaluate::run(args),
+        Command::FitModel(args) => fit_model::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,179 @@
+//! A fitted neural SDE on disk: one directory holding `dynamics.safetensors`
+//! (every parameter under its module path) and `model.json` (schema version,
+//! task, dims, state split, dt, normaliser and scales, every hyperparameter,
+//! the threshold table, the training summary, the dataset's hash, and the
+//! hash of the weights it belongs to).
+//!
+//! Both files are written atomically, weights first. Loading checks the schema
+//! version, that the weights are the ones `model.json` was written for, and
+//! every tensor's name, shape and dtype, so a half-written or mixed artifact is
+//! refused with an error that says what is wrong.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use burn::tensor::Device;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use super::safetensors_file::{parse_safetensors, safetensors_bytes, write_bytes};
+use super::tensors::{collect_tensors, load_tensors};
+use super::{ArtifactError, write_atomically};
+use crate::envs::TaskConfig;
+use crate::sde::{
+    DynamicsSpec, FitConfig, FitSummary, NeuralSde, PhysicalScales, SdeConfig, ThresholdTable,
+};
+
+/// Version of the `model.json` layout this build reads and writes.
+pub const DYNAMICS_SCHEMA_VERSION: u32 = 1;
+/// File names inside a model directory.
+pub const DYNAMICS_WEIGHTS: &str = "dynamics.safetensors";
+pub const DYNAMICS_METADATA: &str = "model.json";
+
+/// Which data a model was fitted on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DatasetInfo {
+    pub path: String,
+    pub sha256: String,
+    pub transitions: usize,
+    pub trajectories: usize,
+}
+
+/// Provenance saved alongside the weights.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct DynamicsProvenance {
+    pub task: Option<TaskConfig>,
+    pub fit: Option<FitConfig>,
+    pub thresholds: Option<ThresholdTable>,
+    pub training: Option<FitSummary>,
+    pub dataset: Option<DatasetInfo>,
+}
+
+/// The contents of `model.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DynamicsMetadata {
+    pub schema_version: u32,
+    pub spec: DynamicsSpec,
+    pub scales: PhysicalScales,
+    pub model: SdeConfig,
+    #[serde(flatten)]
+    pub provenance: DynamicsProvenance,
+    /// SHA-256 of `dynamics.safetensors`.
+    pub weights_sha256: String,
+    /// Every tensor's name and shape.
+    pub tensors: BTreeMap<String, Vec<usize>>,
+}
+
+/// Lower-case hex SHA-256 of `bytes`.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// Lower-case hex SHA-256 of a file's contents, streamed.
+pub fn sha256_file(path: &Path) -> Result<String, ArtifactError> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path).map_err(|e| ArtifactError::io(path, e))?;
+    let mut hasher = Sha256::new();
+    let mut buffer = vec![0u8; 1 << 20];
+    loop {
+        let n = file
+            .read(&mut buffer)
+            .map_err(|e| ArtifactError::io(path, e))?;
+        if n == 0 {
+            break;
+        }
+        hasher.update(&buffer[..n]);
+    }
+    Ok(hasher
+        .finalize()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect())
+}
+
+/// Writes `model` and its metadata into `dir` (created if missing).
+pub fn save_dynamics(
+    dir: &Path,
+    model: &NeuralSde,
+    provenance: DynamicsProvenance,
+) -> Result<DynamicsMetadata, ArtifactError> {
+    let tensors = collect_tensors(model);
+    let weights = safetensors_bytes(&tensors, None)?;
+    let c = &model.constants;
+    let metadata = DynamicsMetadata {
+        schema_version: DYNAMICS_SCHEMA_VERSION,
+        spec: c.spec.clone(),
+        scales: c.scales.clone(),
+        model: c.config.clone(),
+        provenance,
+        weights_sha256: sha256_hex(&weights),
+        tensors: tensors
+            .iter()
+            .map(|(k, (shape, _))| (k.clone(), shape.clone()))
+            .collect(),
+    };
+    let json = serde_json::to_vec_pretty(&metadata).map_err(|e| ArtifactError::Json {
+        file: dir.join(DYNAMICS_METADATA),
+        message: e.to_string(),
+    })?;
+    write_bytes(&dir.join(DYNAMICS_WEIGHTS), &weights)?;
+    let json_path = dir.join(DYNAMICS_METADATA);
+    write_atomically(
+        &json_path,
+        |tmp| std::fs::write(tmp, &json).map_err(|e| ArtifactError::io(tmp, e)),
+        |e| ArtifactError::io(&json_path, e),
+    )?;
+    Ok(metadata)
+}
+
+/// Reads and validates `model.json` alone.
+pub fn read_dynamics_metadata(dir: &Path) -> Result<DynamicsMetadata, ArtifactError> {
+    let path = dir.join(DYNAMICS_METADATA);
+    let bytes = std::fs::read(&path).map_err(|e| ArtifactError::io(&path, e))?;
+    let value: serde_json::Value =
+        serde_json::from_slice(&bytes).map_err(|e| ArtifactError::Json {
+            file: path.clone(),
+            message: e.to_string(),
+        })?;
+    let version = value.get("schema_version").and_then(|v| v.as_u64());
+    if version != Some(u64::from(DYNAMICS_SCHEMA_VERSION)) {
+        return Err(ArtifactError::Schema {
+            file: path,
+            found: version.map_or("none".into(), |v| v.to_string()),
+            expected: DYNAMICS_SCHEMA_VERSION,
+        });
+    }
+    serde_json::from_value(value).map_err(|e| ArtifactError::Json {
+        file: path,
+        message: e.to_string(),
+    })
+}
+
+/// Loads the model in `dir` onto `device` (no autodiff).
+pub fn load_dynamics(
+    dir: &Path,
+    device: &Device,
+) -> Result<(NeuralSde, DynamicsMetadata), ArtifactError> {
+    let metadata = read_dynamics_metadata(dir)?;
+    let path = dir.join(DYNAMICS_WEIGHTS);
+    let bytes = std::fs::read(&path).map_err(|e| ArtifactError::io(&path, e))?;
+    if sha256_hex(&bytes) != metadata.weights_sha256 {
+        return Err(ArtifactError::HashMismatch { file: path });
+    }
+    let tensors = parse_safetensors(&bytes, &path)?;
+    metadata
+        .spec
+        .validate()
+        .map_err(|e| ArtifactError::Invalid(e.to_string()))?;
+    let skeleton = NeuralSde::init(
+        metadata.spec.clone(),
+        metadata.scales.clone(),
+        metadata.model.clone(),
+        device,
+    );
+    let model = load_tensors(skeleton, &tensors, device)?;
+    Ok((model, metadata))
+}

@@ -1,0 +1,141 @@
+//! Every knob of the neural SDE, its losses and its fitting, with the paper's
+//! Appendix C values as defaults. Saved in each artifact's `model.json`.
+
+use burn::config::Config;
+
+/// Network sizes and output transforms (Appendix C.4, eq. 5 and 8).
+#[derive(Config, Debug, PartialEq)]
+pub struct SdeConfig {
+    /// Hidden sizes of the drift networks G, H and f_res: 3×256 swish (Appendix C.4).
+    #[config(default = "vec![256, 256, 256]")]
+    pub drift_hidden: Vec<usize>,
+    /// Hidden sizes of the reward drift f_rew (NUNO^R): 3×64 swish.
+    #[config(default = "vec![64, 64, 64]")]
+    pub reward_hidden: Vec<usize>,
+    /// Hidden sizes of the aleatoric diffusion σ_ϕ: 2×256 tanh.
+    #[config(default = "vec![256, 256]")]
+    pub sigma_hidden: Vec<usize>,
+    /// Hidden sizes of the distance-aware term η_ϕ: 2×64 swish.
+    #[config(default = "vec![64, 64]")]
+    pub eta_hidden: Vec<usize>,
+    /// Hidden sizes of the convexity constant μ_ϕ = exp(NN_ϕ): 2×32 swish.
+    #[config(default = "vec![32, 32]")]
+    pub mu_hidden: Vec<usize>,
+    /// NUNO^R: augment the state with the cumulative reward r_c, dr_c = f_rew(s, a) dt.
+    #[config(default = false)]
+    pub reward_model: bool,
+    /// W^max of h(η) = W^max·sigmoid(W·η + b), as a multiple of each dimension's
+    /// diffusion scale (the std of its one-step change over sqrt(dt)).
+    #[config(default = 1.0)]
+    pub w_max_scale: f32,
+    /// Bound of η: η = η_max·sigmoid(NN(s, a) − η_offset), so η is high but bounded far from data.
+    #[config(default = 1.0)]
+    pub eta_max: f32,
+    /// Offset inside η's sigmoid (NUNO's code uses 7).
+    #[config(default = 7.0)]
+    pub eta_offset: f32,
+    /// Initial b of h(η), so h(0) ≈ W^max·sigmoid(−7) is negligible on the data.
+    #[config(default = -7.0)]
+    pub h_bias_init: f32,
+    /// Smallest σ_ϕ, as a fraction of each dimension's diffusion scale.
+    #[config(default = 1e-3)]
+    pub sigma_min: f32,
+}
+
+/// Weights and sampling of the loss terms (eq. 3, 4, 6, 7; Appendix C.4).
+#[derive(Config, Debug, PartialEq)]
+pub struct LossConfig {
+    /// λ_data, weight of L_data (eq. 6, 7).
+    #[config(default = 1.0)]
+    pub lambda_data: f32,
+    /// λ_sc, weight of the strong-convexity hinge L_sc (eq. 3); the paper's "strong convexity coefficient of 1".
+    #[config(default = 1.0)]
+    pub lambda_sc: f32,
+    /// λ_grad, weight of L_grad (eq. 4). The paper uses 1e-4 with η also shaped by
+    /// L_data; here η is trained by its own losses only, and 1 is what keeps η low on
+    /// the data against L_far (see docs/paper-map.md, deviations).
+    #[config(default = 1.0)]
+    pub lambda_grad: f32,
+    /// λ_μ, weight of L_μ = Σ 1/μ (eq. 3).
+    #[config(default = 1.0)]
+    pub lambda_mu: f32,
+    /// Weight of the residual-drift penalty ‖f_res‖² (Section 4.2, "we penalize the residual term").
+    #[config(default = 1e-3)]
+    pub lambda_res: f32,
+    /// Weight of L_far, the far-field hinge (not in the paper; see docs/paper-map.md):
+    /// uniform points at least `far_radii`·r from every reference datum are pushed to
+    /// η ≥ `far_target`·η_max. The paper's local losses alone leave η low inside
+    /// non-convex data (a ring's interior); 0 turns it off.
+    #[config(default = 1.0)]
+    pub lambda_far: f32,
+    /// L_far's points are "far" beyond this many radii r from every reference datum.
+    #[config(default = 3.0)]
+    pub far_radii: f32,
+    /// L_far's target, as a fraction of η_max.
+    #[config(default = 0.9)]
+    pub far_target: f32,
+    /// L_far samples uniformly in the reference data's bounding box grown by this margin (normalised units).
+    #[config(default = 1.0)]
+    pub far_margin: f32,
+    /// Data points L_far measures distances to (a fixed random subset of the training data).
+    #[config(default = 2048)]
+    pub far_reference: usize,
+    /// Ball radius r of L_sc's samples N((s_t, a_t), r), in normalised units: 0.1.
+    #[config(default = 0.1)]
+    pub radius: f32,
+    /// Samples per datum for L_sc: 20.
+    #[config(default = 20)]
+    pub convexity_samples: usize,
+}
+
+/// The fitting procedure (Appendix C.4).
+#[derive(Config, Debug, PartialEq)]
+pub struct FitConfig {
+    pub model: SdeConfig,
+    pub loss: LossConfig,
+    /// Prediction horizon H of the training sequences: 2.
+    #[config(default = 2)]
+    pub horizon: usize,
+    /// Batch size: 128.
+    #[config(default = 128)]
+    pub batch_size: usize,
+    /// Adam learning rate, decayed linearly from `lr_start` to `lr_end` over `lr_decay_steps`.
+    #[config(default = 1e-2)]
+    pub lr_start: f64,
+    #[config(default = 1e-3)]
+    pub lr_end: f64,
+    #[config(default = 5000)]
+    pub lr_decay_steps: usize,
+    /// Upper bound on gradient steps (early stopping usually ends sooner).
+    #[config(default = 20000)]
+    pub max_steps: usize,
+    /// Validation NLL is measured every `eval_every` steps.
+    #[config(default = 250)]
+    pub eval_every: usize,
+    /// Early stopping: stop after this many evaluations without improvement.
+    #[config(default = 8)]
+    pub patience: usize,
+    /// Fraction of trajectories held out for validation.
+    #[config(default = 0.1)]
+    pub valid_fraction: f64,
+    /// Validation windows (a fixed subset, for a stable metric).
+    #[config(default = 2048)]
+    pub valid_windows: usize,
+    /// Training losses are recorded every `log_every` steps.
+    #[config(default = 50)]
+    pub log_every: usize,
+    /// Smallest per-dimension std of the normaliser.
+    #[config(default = 1e-3)]
+    pub std_floor: f32,
+    #[config(default = 0)]
+    pub seed: u64,
+}
+
+impl FitConfig {
+    /// Adam's learning rate at `step`: linear from `lr_start` to `lr_end` over
+    /// `lr_decay_steps`, then constant.
+    pub fn learning_rate(&self, step: usize) -> f64 {
+        let t = (step as f64 / self.lr_decay_steps.max(1) as f64).min(1.0);
+        self.lr_start + t * (self.lr_end - self.lr_start)
+    }
+}

@@ -1,0 +1,195 @@
+//! The distance-aware uncertainty η_ϕ and its convexity constant μ_ϕ
+//! (Section 4.1), with their losses L_sc, L_μ (eq. 3) and L_grad (eq. 4).
+//!
+//! η_ϕ(s, a) = η_max·sigmoid(NN_ϕ(s, a) − offset): near zero with near-zero
+//! gradient on the data, locally strongly convex around it, high but bounded
+//! far from it. Inputs are normalised `(s, a)`.
+
+use burn::module::Module;
+use burn::tensor::activation::{relu, sigmoid};
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+use super::config::{LossConfig, SdeConfig};
+use super::mlp::{Activation, Mlp, MlpConfig};
+
+/// η_ϕ and μ_ϕ over inputs of width `d_input`.
+#[derive(Module, Debug)]
+pub struct DistanceAware {
+    /// NN_ϕ inside η's sigmoid: 2×64 swish.
+    pub eta_net: Mlp,
+    /// NN_ϕ of μ_ϕ = exp(NN_ϕ): 2×32 swish (Appendix C.4).
+    pub mu_net: Mlp,
+    #[module(skip)]
+    pub eta_max: f32,
+    #[module(skip)]
+    pub eta_offset: f32,
+}
+
+/// Where L_far looks: a fixed reference subset of the (normalised) data and
+/// its bounding box, grown by a margin.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FarField {
+    dim: usize,
+    reference: Vec<f32>,
+    low: Vec<f32>,
+    high: Vec<f32>,
+    min_distance: f32,
+}
+
+impl FarField {
+    /// A far field around `reference` (row-major `[n, dim]`) for `config`.
+    pub fn new(reference: Vec<f32>, dim: usize, config: &LossConfig) -> Self {
+        let mut low = vec![f32::INFINITY; dim];
+        let mut high = vec![f32::NEG_INFINITY; dim];
+        for row in reference.chunks_exact(dim) {
+            for (d, &v) in row.iter().enumerate() {
+                low[d] = low[d].min(v);
+                high[d] = high[d].max(v);
+            }
+        }
+        let margin = config.far_margin;
+        Self {
+            dim,
+            reference,
+            low: low.iter().map(|v| v - margin).collect(),
+            high: high.iter().map(|v| v + margin).collect(),
+            min_distance: config.far_radii * config.radius,
+        }
+    }
+
+    /// `count` uniform points in the box, and a 1/0 mask of those farther than
+    /// `far_radii`·r from every reference point.
+    pub fn sample(
+        &self,
+        count: usize,
+        rng: &mut ChaCha8Rng,
+        device: &Device,
+    ) -> (Tensor<2>, Tensor<2>) {
+        let mut points = Vec::with_capacity(count * self.dim);
+        let mut mask = Vec::with_capacity(count);
+        let threshold = self.min_distance * self.min_distance;
+        for _ in 0..count {
+            let start = points.len();
+            for d in 0..self.dim {
+                points.push(rng.random_range(self.low[d]..=self.high[d]));
+            }
+            let point = &points[start..];
+            let far = self.reference.chunks_exact(self.dim).all(|r| {
+                r.iter()
+                    .zip(point)
+                    .map(|(a, b)| (a - b) * (a - b))
+                    .sum::<f32>()
+                    >= threshold
+            });
+            mask.push(if far { 1.0 } else { 0.0 });
+        }
+        (
+            Tensor::from_data(TensorData::new(points, [count, self.dim]), device),
+            Tensor::from_data(TensorData::new(mask, [count, 1]), device),
+        )
+    }
+}
+
+/// The η loss terms, each a scalar tensor (mean over the batch).
+#[derive(Debug, Clone)]
+pub struct EtaLosses {
+    /// L_sc, eq. 3: Σ over samples of min(c, 0)².
+    pub sc: Tensor<1>,
+    /// L_grad, eq. 4: ‖∇η‖² + η².
+    pub grad: Tensor<1>,
+    /// L_μ, eq. 3: 1/μ.
+    pub mu: Tensor<1>,
+    /// L_far: mean of relu(far_target·η_max − η)² over the far points.
+    pub far: Tensor<1>,
+}
+
+impl DistanceAware {
+    pub fn init(d_input: usize, config: &SdeConfig, device: &burn::tensor::Device) -> Self {
+        Self {
+            eta_net: MlpConfig::new(d_input, config.eta_hidden.clone(), 1, Activation::Swish)
+                .init(device),
+            mu_net: MlpConfig::new(d_input, config.mu_hidden.clone(), 1, Activation::Swish)
+                .init(device),
+            eta_max: config.eta_max,
+            eta_offset: config.eta_offset,
+        }
+    }
+
+    /// η_ϕ at normalised inputs.
+    ///
+    /// # Shapes
+    /// - `x`: `[batch, d_input]` → `[batch, 1]`
+    pub fn eta(&self, x: Tensor<2>) -> Tensor<2> {
+        sigmoid(self.eta_net.forward(x) - self.eta_offset) * self.eta_max
+    }
+
+    /// η_ϕ and ∇ₓη_ϕ, both differentiable with respect to the parameters.
+    ///
+    /// # Shapes
+    /// - `x`: `[batch, d_input]` → (`[batch, 1]`, `[batch, d_input]`)
+    pub fn eta_with_grad(&self, x: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
+        let (d, grad_d) = self.eta_net.forward_with_input_grad(x);
+        let s = sigmoid(d - self.eta_offset);
+        // dη/dd = η_max·s·(1 − s)
+        let slope = s.clone() * (s.clone().neg() + 1.0) * self.eta_max;
+        (s * self.eta_max, grad_d * slope)
+    }
+
+    /// μ_ϕ = exp(NN_ϕ) > 0.
+    ///
+    /// # Shapes
+    /// - `x`: `[batch, d_input]` → `[batch, 1]`
+    pub fn mu(&self, x: Tensor<2>) -> Tensor<2> {
+        self.mu_net.forward(x).exp()
+    }
+
+    /// L_sc, L_grad and L_μ at data points `x` (eq. 3, 4).
+    ///
+    /// For each datum `x_t` and offset `δ = r·ε` (`noise` holds the ε, `samples`
+    /// per datum), the strong-convexity constraint is
+    /// `c = η(x_t + δ) − η(x_t) − ∇η(x_t)ᵀδ − μ_t‖δ‖²`, and L_sc sums `min(c, 0)²`.
+    ///
+    /// # Shapes
+    /// - `x`: `[batch, d]`; `noise`: `[batch · samples, d]`
+    ///
+    /// `far` holds uniform points and their far mask from [`FarField::sample`].
+    pub fn losses(
+        &self,
+        x: Tensor<2>,
+        noise: Tensor<2>,
+        far: (Tensor<2>, Tensor<2>),
+        config: &LossConfig,
+    ) -> EtaLosses {
+        let batch = x.dims()[0];
+        let samples = noise.dims()[0] / batch;
+        let (eta, grad) = self.eta_with_grad(x.clone());
+        let mu = self.mu(x.clone());
+        let repeat = |t: Tensor<2>| {
+            let width = t.dims()[1];
+            t.unsqueeze_dim::<3>(1)
+                .expand([batch, samples, width])
+                .reshape([batch * samples, width])
+        };
+        let delta = noise * config.radius;
+        let eta_near = self.eta(repeat(x) + delta.clone());
+        let linear = (repeat(grad.clone()) * delta.clone()).sum_dim(1);
+        let distance2 = delta.square().sum_dim(1);
+        let constraint = eta_near - repeat(eta.clone()) - linear - repeat(mu.clone()) * distance2;
+        let sc = constraint
+            .clamp_max(0.0)
+            .square()
+            .sum()
+            .div_scalar(batch as f32);
+        let grad_loss = (grad.square().sum_dim(1) + eta.square()).mean();
+        let (far_points, far_mask) = far;
+        let shortfall = relu(self.eta(far_points).neg() + config.far_target * self.eta_max);
+        EtaLosses {
+            sc,
+            grad: grad_loss,
+            mu: mu.recip().mean(),
+            far: (shortfall.square() * far_mask).mean(),
+        }
+    }
+}

@@ -1,0 +1,309 @@
+//! Fitting the neural SDE (Section 4.2, Appendix C.4), top to bottom: measure
+//! scales, initialise, then Adam on eq. 7 over windows of H = 2 steps with the
+//! learning rate decayed linearly 1e-2 → 1e-3 over 5000 steps, validation NLL
+//! on held-out trajectories, early stopping on it, and the best model kept.
+
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams};
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
+
+use super::SdeError;
+use super::config::FitConfig;
+use super::eta::FarField;
+use super::losses::WindowTensors;
+use super::model::NeuralSde;
+use super::spec::{DynamicsSpec, PhysicalScales};
+use crate::data::{Dataset, NormalizerConfig, WindowBatch, WindowSampler};
+
+/// Losses at one logged step (and the validation NLL when it was measured).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FitRecord {
+    pub step: usize,
+    pub learning_rate: f64,
+    pub loss: f32,
+    pub data: f32,
+    pub sc: f32,
+    pub grad: f32,
+    pub mu: f32,
+    pub far: f32,
+    pub residual: f32,
+    pub valid_nll: Option<f32>,
+}
+
+/// How fitting went.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FitSummary {
+    pub steps: usize,
+    pub best_step: usize,
+    pub best_valid_nll: f32,
+    pub stopped_early: bool,
+    pub seconds: f64,
+    pub train_transitions: usize,
+    pub valid_transitions: usize,
+}
+
+/// Turns sampled windows into tensors; for NUNO^R the cumulative reward r_c
+/// (0 at the window's start) is appended to each state.
+pub fn window_tensors(
+    batch: &WindowBatch,
+    obs_dim: usize,
+    reward_model: bool,
+    device: &Device,
+) -> WindowTensors {
+    let (b, h) = (batch.batch, batch.horizon);
+    let act_dim = batch.actions.len() / (b * h).max(1);
+    let state_dim = obs_dim + usize::from(reward_model);
+    let states = if reward_model {
+        let mut states = Vec::with_capacity(b * (h + 1) * state_dim);
+        for w in 0..b {
+            let mut cumulative = 0.0;
+            for k in 0..=h {
+                let row = (w * (h + 1) + k) * obs_dim;
+                states.extend_from_slice(&batch.states[row..row + obs_dim]);
+                states.push(cumulative);
+                if k < h {
+                    cumulative += batch.rewards[w * h + k];
+                }
+            }
+        }
+        states
+    } else {
+        batch.states.clone()
+    };
+    WindowTensors {
+        states: Tensor::from_data(TensorData::new(states, [b, h + 1, state_dim]), device),
+        actions: Tensor::from_data(
+            TensorData::new(batch.actions.clone(), [b, h, act_dim]),
+            device,
+        ),
+    }
+}
+
+/// Standard normal noise of the given shape, from our own seeded generator.
+pub(crate) fn normal<const D: usize>(
+    shape: [usize; D],
+    rng: &mut ChaCha8Rng,
+    device: &Device,
+) -> Tensor<D> {
+    let n = shape.iter().product();
+    let values: Vec<f32> = (0..n).map(|_| rng.sample(StandardNormal)).collect();
+    Tensor::from_data(TensorData::new(values, shape), device)
+}
+
+/// Mean L_data of `model` over the given windows with fixed noise, in chunks.
+pub fn validation_nll(
+    model: &NeuralSde,
+    windows: &WindowSampler,
+    starts: &[usize],
+    seed: u64,
+    device: &Device,
+) -> f32 {
+    const CHUNK: usize = 512;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let state_dim = model.constants.state_dim();
+    let mut total = 0.0;
+    for chunk in starts.chunks(CHUNK) {
+        let batch = windows.gather(chunk);
+        let tensors = window_tensors(
+            &batch,
+            model.spec().obs_dim,
+            model.constants.config.reward_model,
+            device,
+        );
+        let noise = normal([chunk.len(), batch.horizon, state_dim], &mut rng, device);
+        let (nll, _) = model.data_nll(&tensors, noise);
+        total += nll.into_scalar::<f32>() * chunk.len() as f32;
+    }
+    total / starts.len() as f32
+}
+
+/// Fits a neural SDE on `train`, early-stopping on `valid`; `on_record` sees
+/// every logged step. Returns the best model (without autodiff) and a summary.
+pub fn fit(
+    train: &Dataset,
+    valid: &Dataset,
+    spec: DynamicsSpec,
+    config: &FitConfig,
+    device: &Device,
+    on_record: &mut dyn FnMut(&FitRecord),
+) -> Result<(NeuralSde, FitSummary), SdeError> {
+    spec.validate()?;
+    let started = Instant::now();
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    let train_windows = WindowSampler::new(train, config.horizon)?;
+    let valid_windows = WindowSampler::new(valid, config.horizon)?;
+    let valid_starts: Vec<usize> = {
+        let all = valid_windows.starts();
+        let mut pick = ChaCha8Rng::seed_from_u64(config.seed ^ 0x5eed);
+        (0..config.valid_windows.min(all.len()))
+            .map(|_| all[pick.random_range(0..all.len())])
+            .collect()
+    };
+
+    // Scales from the training data; networks initialised from the seed.
+    let scales = PhysicalScales::measure(
+        train,
+        &spec,
+        &NormalizerConfig {
+            std_floor: config.std_floor,
+        },
+    );
+    let train_device = device.clone().autodiff();
+    train_device.seed(config.seed);
+    let mut model = NeuralSde::init(spec, scales, config.model.clone(), &train_device);
+    let mut optimizer = AdamConfig::new().init();
+    let state_dim = model.constants.state_dim();
+    let input_dim = model.spec().obs_dim + model.spec().act_dim;
+    let far_field = far_field_of(&model, train, &config.loss, &mut rng);
+
+    let mut best = model.valid();
+    let mut best_nll = validation_nll(&best, &valid_windows, &valid_starts, config.seed, device);
+    let (mut best_step, mut evals_without_improvement, mut step) = (0, 0, 0);
+    while step < config.max_steps {
+        // eq. 7 on a batch of windows of horizon H.
+        let lr = config.learning_rate(step);
+        let batch = train_windows.sample(config.batch_size, &mut rng);
+        let windows = window_tensors(
+            &batch,
+            model.spec().obs_dim,
+            config.model.reward_model,
+            &train_device,
+        );
+        let step_noise = normal(
+            [config.batch_size, config.horizon, state_dim],
+            &mut rng,
+            &train_device,
+        );
+        let samples = config.batch_size * config.loss.convexity_samples;
+        let ball_noise = normal([samples, input_dim], &mut rng, &train_device);
+        let far = far_field.sample(config.batch_size, &mut rng, &train_device);
+        let terms = model.loss(&windows, step_noise, ball_noise, far, &config.loss);
+        let grads = GradientsParams::from_grads(terms.total.backward(), &model);
+        model = optimizer.step(lr, model, grads);
+        step += 1;
+
+        // Logging and early stopping, kept apart from the algorithm above.
+        let evaluate = step % config.eval_every == 0 || step == config.max_steps;
+        if step % config.log_every == 0 || evaluate {
+            let mut record = FitRecord {
+                step,
+                learning_rate: lr,
+                loss: terms.total.into_scalar(),
+                data: terms.data.into_scalar(),
+                sc: terms.sc.into_scalar(),
+                grad: terms.grad.into_scalar(),
+                mu: terms.mu.into_scalar(),
+                far: terms.far.into_scalar(),
+                residual: terms.residual.into_scalar(),
+                valid_nll: None,
+            };
+            if evaluate {
+                let current = model.valid();
+                let nll =
+                    validation_nll(&current, &valid_windows, &valid_starts, config.seed, device);
+                record.valid_nll = Some(nll);
+                if nll < best_nll {
+                    (best, best_nll, best_step, evals_without_improvement) =
+                        (current, nll, step, 0);
+                } else {
+                    evals_without_improvement += 1;
+                }
+            }
+            on_record(&record);
+            if evals_without_improvement >= config.patience {
+                break;
+            }
+        }
+    }
+    let summary = FitSummary {
+        steps: step,
+        best_step,
+        best_valid_nll: best_nll,
+        stopped_early: step < config.max_steps,
+        seconds: started.elapsed().as_secs_f64(),
+        train_transitions: train.len(),
+        valid_transitions: valid.len(),
+    };
+    Ok((best, summary))
+}
+
+/// L_far's reference: a fixed random subset of the training data's normalised `(s, a)`.
+fn far_field_of(
+    model: &NeuralSde,
+    train: &Dataset,
+    config: &super::LossConfig,
+    rng: &mut ChaCha8Rng,
+) -> FarField {
+    let normalizer = &model.constants.scales.normalizer;
+    let (obs_dim, act_dim) = (train.obs_dim(), train.act_dim());
+    let mut reference = Vec::with_capacity(config.far_reference * (obs_dim + act_dim));
+    for _ in 0..config.far_reference.min(train.len()) {
+        let i = rng.random_range(0..train.len());
+        let mut state = train.observations.row(i).to_vec();
+        let mut action = train.actions.row(i).to_vec();
+        normalizer.state.normalize(&mut state);
+        normalizer.action.normalize(&mut action);
+        reference.extend(state);
+        reference.extend(action);
+    }
+    FarField::new(reference, obs_dim + act_dim, config)
+}
+
+/// Fits η_ϕ and μ_ϕ alone on points (already normalised), with the η terms of
+/// eq. 7: a distance-aware score for any point cloud (Appendix B.2's toy
+/// examples), and the same losses the SDE fit uses.
+///
+/// # Shapes
+/// - `points`: row-major `[n, dim]`
+pub fn fit_eta(
+    points: &[f32],
+    dim: usize,
+    config: &FitConfig,
+    device: &Device,
+) -> super::DistanceAware {
+    let train_device = device.clone().autodiff();
+    train_device.seed(config.seed);
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    let mut model = super::DistanceAware::init(dim, &config.model, &train_device);
+    let mut optimizer = AdamConfig::new().init();
+    let n = points.len() / dim;
+    let reference: Vec<f32> = (0..config.loss.far_reference.min(n))
+        .flat_map(|_| {
+            let i = rng.random_range(0..n);
+            points[i * dim..(i + 1) * dim].to_vec()
+        })
+        .collect();
+    let far_field = FarField::new(reference, dim, &config.loss);
+    for step in 0..config.max_steps {
+        let rows: Vec<f32> = (0..config.batch_size)
+            .flat_map(|_| {
+                let i = rng.random_range(0..n);
+                points[i * dim..(i + 1) * dim].iter().copied()
+            })
+            .collect();
+        let x = Tensor::from_data(
+            TensorData::new(rows, [config.batch_size, dim]),
+            &train_device,
+        );
+        let noise = normal(
+            [config.batch_size * config.loss.convexity_samples, dim],
+            &mut rng,
+            &train_device,
+        );
+        let far = far_field.sample(config.batch_size, &mut rng, &train_device);
+        let terms = model.losses(x, noise, far, &config.loss);
+        let total = terms.sc * config.loss.lambda_sc
+            + terms.grad * config.loss.lambda_grad
+            + terms.mu * config.loss.lambda_mu
+            + terms.far * config.loss.lambda_far;
+        let grads = GradientsParams::from_grads(total.backward(), &model);
+        model = optimizer.step(config.learning_rate(step), model, grads);
+    }
+    model.valid()
+}

@@ -1,0 +1,436 @@
+//! The neural SDE: kinematic prior, η on toy data (Appendix B.2), fit quality
+//! on hopper against the constant-velocity predictor, thresholds, and the
+//! artifact round trip (Rust and Python's safetensors).
+
+mod common;
+
+use std::path::Path;
+
+use burn::module::{Module, ModuleMapper, Param};
+use burn::tensor::{Device, Tensor, TensorData};
+use nuno::agent::{BatchPolicy, RandomNetworkPolicy};
+use nuno::artifact::{
+    ArtifactError, DynamicsProvenance, collect_tensors, load_dynamics, save_dynamics,
+};
+use nuno::data::{Dataset, GenerateConfig, generate};
+use nuno::envs::{MujocoTask, TaskConfig, TaskName};
+use nuno::sde::{
+    DynamicsSpec, FitConfig, LossConfig, NeuralSde, PhysicalScales, SdeConfig, ThresholdConfig,
+    compute_thresholds, cvar, fit, fit_eta, prediction_error,
+};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn hopper_spec() -> DynamicsSpec {
+    let task = MujocoTask::new(TaskConfig::d4rl(TaskName::Hopper)).unwrap();
+    DynamicsSpec {
+        obs_dim: task.obs_dim(),
+        act_dim: task.act_dim(),
+        split: task.state_split(),
+        dt: task.dt(),
+    }
+}
+
+fn hopper_dataset(transitions: usize, seed: u64) -> Dataset {
+    let task = TaskConfig::d4rl(TaskName::Hopper);
+    let policy = RandomNetworkPolicy::new(11, 3, &[64, 64], seed);
+    generate(
+        &GenerateConfig::new(task, "random", transitions, seed),
+        &policy,
+        "test",
+        &|_| {},
+    )
+    .unwrap()
+}
+
+/// A behaviour policy with a narrow action distribution (a fixed push plus a
+/// little noise), so that uniform random actions are out of distribution.
+struct NarrowPolicy;
+
+impl BatchPolicy for NarrowPolicy {
+    fn obs_dim(&self) -> usize {
+        11
+    }
+    fn act_dim(&self) -> usize {
+        3
+    }
+    fn act(&self, observations: &[f32], rng: &mut dyn rand::RngCore) -> Vec<f32> {
+        let rows = observations.len() / 11;
+        (0..rows * 3)
+            .map(|i| [0.4, -0.3, 0.2][i % 3] + 0.1 * rng.random_range(-1.0f32..1.0))
+            .collect()
+    }
+}
+
+/// Small networks so fits finish in seconds on two cores.
+fn small_config(steps: usize) -> FitConfig {
+    let mut model = SdeConfig::new();
+    model.drift_hidden = vec![64, 64];
+    model.sigma_hidden = vec![64, 64];
+    let mut config = FitConfig::new(model, LossConfig::new());
+    config.max_steps = steps;
+    config.eval_every = 100;
+    config.patience = 100;
+    config.valid_windows = 512;
+    config
+}
+
+fn tensor(values: Vec<f32>, shape: [usize; 2]) -> Tensor<2> {
+    Tensor::from_data(TensorData::new(values, shape), &Device::flex())
+}
+
+fn to_vec(t: Tensor<2>) -> Vec<f32> {
+    t.into_data().convert::<f32>().try_to_vec().unwrap()
+}
+
+/// Zeroes every parameter under the drift networks G, H and f_res.
+struct ZeroDrift {
+    path: Vec<String>,
+}
+
+impl ModuleMapper for ZeroDrift {
+    fn enter_module(&mut self, name: &str, _: &str) {
+        self.path.push(name.into());
+    }
+    fn exit_module(&mut self, _: &str, _: &str) {
+        self.path.pop();
+    }
+    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        if ["g_net", "h_net", "res_net"].contains(&self.path[0].as_str()) {
+            param.map(|t| t.zeros_like())
+        } else {
+            param
+        }
+    }
+}
+
+#[test]
+fn kinematic_prior_holds_exactly_in_physical_units() {
+    let dataset = hopper_dataset(2000, 0);
+    let spec = hopper_spec();
+    let scales = PhysicalScales::measure(&dataset, &spec, &Default::default());
+    let model = NeuralSde::init(spec.clone(), scales, SdeConfig::new(), &Device::flex())
+        .map(&mut ZeroDrift { path: vec![] });
+    let rows: Vec<usize> = (0..64).map(|i| i * 31).collect();
+    let states: Vec<f32> = rows
+        .iter()
+        .flat_map(|&i| dataset.observations.row(i).to_vec())
+        .collect();
+    let actions: Vec<f32> = rows
+        .iter()
+        .flat_map(|&i| dataset.actions.row(i).to_vec())
+        .collect();
+    let zero_noise = tensor(vec![0.0; 64 * 11], [64, 11]);
+    let (next, terms) = model.step(
+        tensor(states.clone(), [64, 11]),
+        tensor(actions, [64, 3]),
+        zero_noise,
+    );
+    let next = to_vec(next);
+    let dt = spec.dt as f32;
+    for b in 0..64 {
+        let s = &states[b * 11..(b + 1) * 11];
+        let n = &next[b * 11..(b + 1) * 11];
+        for (&p, &v) in spec
+            .split
+            .positions
+            .iter()
+            .zip(&spec.split.position_velocity)
+        {
+            assert_eq!(n[p], s[p] + s[v] * dt, "row {b} position {p}");
+        }
+        for &v in &spec.split.velocities {
+            assert_eq!(n[v], s[v], "row {b} velocity {v}");
+        }
+    }
+    // The diffusion is positive and η lies in (0, η_max).
+    assert!(to_vec(terms.diffusion()).iter().all(|&d| d > 0.0));
+    assert!(to_vec(terms.eta).iter().all(|&e| e > 0.0 && e < 1.0));
+}
+
+/// Area under the ROC curve of `score` separating `positives` (should score high) from `negatives`.
+fn auroc(positives: &[f32], negatives: &[f32]) -> f64 {
+    let mut wins = 0.0;
+    for p in positives {
+        for n in negatives {
+            wins += if p > n {
+                1.0
+            } else if p == n {
+                0.5
+            } else {
+                0.0
+            };
+        }
+    }
+    wins / (positives.len() * negatives.len()) as f64
+}
+
+#[test]
+fn eta_separates_toy_data_from_far_points() {
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let clusters: Vec<[f32; 2]> = (0..300)
+        .map(|i| {
+            let c = [[-2.0, -2.0], [2.0, -1.0], [0.0, 2.5]][i % 3];
+            [
+                c[0] + rng.random_range(-0.15..0.15),
+                c[1] + rng.random_range(-0.15..0.15),
+            ]
+        })
+        .collect();
+    let ring: Vec<[f32; 2]> = (0..300)
+        .map(|i| {
+            let a = i as f32 / 300.0 * std::f32::consts::TAU;
+            let r = 2.0 + rng.random_range(-0.05..0.05);
+            [r * a.cos(), r * a.sin()]
+        })
+        .collect();
+    let line: Vec<[f32; 2]> = (0..300)
+        .map(|i| {
+            let t = i as f32 / 299.0 * 4.0 - 2.0;
+            [t, 0.5 * t + rng.random_range(-0.05..0.05)]
+        })
+        .collect();
+    let device = Device::flex();
+    let config = FitConfig {
+        max_steps: 800,
+        batch_size: 64,
+        ..FitConfig::new(SdeConfig::new(), LossConfig::new())
+    };
+    let radius = config.loss.radius;
+    // The ring's interior is not separated yet (docs/paper-map.md, known gaps): the
+    // ring is checked outside its radius.
+    let outside_ring = |q: &[f32; 2]| (q[0] * q[0] + q[1] * q[1]).sqrt() > 2.0;
+    let everywhere = |_: &[f32; 2]| true;
+    type Region<'a> = &'a dyn Fn(&[f32; 2]) -> bool;
+    let cases: [(&str, Vec<[f32; 2]>, Region); 3] = [
+        ("clusters", clusters, &everywhere),
+        ("ring", ring, &outside_ring),
+        ("line", line, &everywhere),
+    ];
+    for (name, points, region) in cases {
+        let flat: Vec<f32> = points.iter().flatten().copied().collect();
+        let eta = fit_eta(&flat, 2, &config, &device);
+        // Points at least 3r from every datum, on a grid over the data's surroundings.
+        let far: Vec<f32> = (0..41 * 41)
+            .map(|i| [(i % 41) as f32 * 0.2 - 4.0, (i / 41) as f32 * 0.2 - 4.0])
+            .filter(|q| region(q))
+            .filter(|q| {
+                points
+                    .iter()
+                    .all(|p| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt() >= 3.0 * radius)
+            })
+            .flatten()
+            .collect();
+        let on_data = to_vec(eta.eta(tensor(flat.clone(), [points.len(), 2])));
+        let off_data = to_vec(eta.eta(tensor(far.clone(), [far.len() / 2, 2])));
+        let score = auroc(&off_data, &on_data);
+        assert!(score >= 0.99, "{name}: AUROC {score}");
+        let mean_on = on_data.iter().sum::<f32>() / on_data.len() as f32;
+        let max_off = off_data.iter().copied().fold(0.0, f32::max);
+        assert!(mean_on < 0.35, "{name}: η on data {mean_on}");
+        assert!(
+            max_off <= 1.0 && max_off > 0.9,
+            "{name}: η far away {max_off} (bounded by η_max = 1)"
+        );
+    }
+}
+
+#[test]
+fn hopper_fit_beats_constant_velocity_and_flags_random_actions() {
+    let task = TaskConfig::d4rl(TaskName::Hopper);
+    let dataset = generate(
+        &GenerateConfig::new(task, "narrow", 20_000, 1),
+        &NarrowPolicy,
+        "narrow",
+        &|_| {},
+    )
+    .unwrap();
+    let (train, valid) = dataset.split_by_trajectory(0.2, 0);
+    let device = Device::flex();
+    let config = small_config(1500);
+    let mut records = Vec::new();
+    let (model, summary) = fit(&train, &valid, hopper_spec(), &config, &device, &mut |r| {
+        records.push(r.clone())
+    })
+    .unwrap();
+    assert_eq!(summary.steps, 1500);
+    assert!(
+        summary.best_valid_nll < records[0].data,
+        "validation NLL never improved on the first loss"
+    );
+    assert_eq!(records.len(), 1500 / config.log_every);
+
+    let errors = prediction_error(&model, &valid, 10, 512, 0, &device);
+    let at = |h: usize| errors.iter().find(|e| e.horizon == h).unwrap();
+    for h in [1, 10] {
+        let e = at(h);
+        assert!(
+            e.model_rmse < e.constant_velocity_rmse,
+            "horizon {h}: model RMSE {} vs constant velocity {}",
+            e.model_rmse,
+            e.constant_velocity_rmse
+        );
+    }
+
+    // Figure 3's property: η is higher for random actions than for the dataset's.
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    let rows: Vec<usize> = (0..512).map(|_| rng.random_range(0..valid.len())).collect();
+    let states: Vec<f32> = rows
+        .iter()
+        .flat_map(|&i| valid.observations.row(i).to_vec())
+        .collect();
+    let data_actions: Vec<f32> = rows
+        .iter()
+        .flat_map(|&i| valid.actions.row(i).to_vec())
+        .collect();
+    let random_actions: Vec<f32> = (0..512 * 3).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let mean_eta = |actions: Vec<f32>| {
+        let input =
+            model.normalized_input(tensor(states.clone(), [512, 11]), tensor(actions, [512, 3]));
+        let eta = to_vec(model.distance.eta(input));
+        eta.iter().sum::<f32>() / eta.len() as f32
+    };
+    let (on_data, random) = (mean_eta(data_actions), mean_eta(random_actions));
+    assert!(random > on_data, "η random {random} vs dataset {on_data}");
+
+    // Thresholds: non-decreasing in α, and the maximum at α = 1.
+    let thresholds = compute_thresholds(
+        &model,
+        &valid,
+        &ThresholdConfig {
+            max_windows: 128,
+            ..ThresholdConfig::new()
+        },
+        &device,
+    )
+    .unwrap();
+    assert!(
+        thresholds.get(5, 0.9).is_some(),
+        "h = 5 windows exist in the validation data"
+    );
+    for (i, &h) in thresholds.horizons.iter().enumerate() {
+        // Horizons longer than every trajectory have no window, hence no threshold.
+        let Some(row) = thresholds.values[i]
+            .iter()
+            .copied()
+            .collect::<Option<Vec<f32>>>()
+        else {
+            assert_eq!(thresholds.windows[i], 0);
+            continue;
+        };
+        assert!(
+            row.windows(2).all(|w| w[0] <= w[1] + 1e-6),
+            "h {h}: {row:?}"
+        );
+        assert!(
+            row[row.len() - 1] <= h as f32,
+            "accumulated η is bounded by h·η_max"
+        );
+    }
+    assert_eq!(thresholds.get(5, 1.0), thresholds.values[0][4]);
+}
+
+#[test]
+fn cvar_is_the_mean_of_the_upper_tail() {
+    let values: Vec<f32> = (1..=10).map(|v| v as f32).collect();
+    assert_eq!(cvar(&values, 1.0), 10.0);
+    // α = 0.9 over 10 values: VaR index floor(0.9·9) = 8, tail {9, 10}.
+    assert_eq!(cvar(&values, 0.9), 9.5);
+    assert_eq!(cvar(&values, 0.0), 5.5);
+}
+
+#[test]
+fn artifacts_round_trip_bit_exactly_and_refuse_damage() {
+    let dataset = hopper_dataset(3000, 3);
+    let (train, valid) = dataset.split_by_trajectory(0.2, 0);
+    let device = Device::flex();
+    let mut config = small_config(20);
+    config.model.reward_model = true;
+    let (model, summary) =
+        fit(&train, &valid, hopper_spec(), &config, &device, &mut |_| {}).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("hopper");
+    let provenance = DynamicsProvenance {
+        task: Some(TaskConfig::d4rl(TaskName::Hopper)),
+        training: Some(summary),
+        ..Default::default()
+    };
+    let saved = save_dynamics(&out, &model, provenance).unwrap();
+    let (loaded, metadata) = load_dynamics(&out, &device).unwrap();
+    assert_eq!(metadata, saved);
+    assert_eq!(collect_tensors(&loaded), collect_tensors(&model));
+    assert!(metadata.tensors.contains_key("reward_net.layers.0.weight"));
+    assert_eq!(metadata.tensors["g_net.layers.0.weight"], vec![6, 64]);
+
+    // Python's safetensors reads every tensor with the same name, shape and values.
+    let report = dir.path().join("report.json");
+    common::run_python(
+        "safetensors_check.py",
+        &[
+            out.join("dynamics.safetensors").as_os_str(),
+            report.as_os_str(),
+        ],
+        dir.path(),
+    );
+    let python: std::collections::BTreeMap<String, (Vec<usize>, f64)> =
+        serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    let ours = collect_tensors(&model);
+    assert_eq!(python.len(), ours.len());
+    for (name, (shape, values)) in &ours {
+        let sum: f64 = values.iter().map(|&v| f64::from(v)).sum();
+        assert_eq!(&python[name].0, shape, "{name}");
+        assert!(
+            (python[name].1 - sum).abs() <= 1e-9 * (1.0 + sum.abs()),
+            "{name}"
+        );
+    }
+
+    // Damage: truncated weights, other weights, flipped byte, bad schema, missing file.
+    let weights = out.join("dynamics.safetensors");
+    let bytes = std::fs::read(&weights).unwrap();
+    let expect = |what: &str, check: &dyn Fn(&ArtifactError) -> bool| {
+        let err = load_dynamics(&out, &device).unwrap_err();
+        assert!(check(&err), "{what}: {err}");
+    };
+    std::fs::write(&weights, &bytes[..bytes.len() / 2]).unwrap();
+    expect("truncated", &|e| {
+        matches!(e, ArtifactError::HashMismatch { .. })
+    });
+    let mut flipped = bytes.clone();
+    let last = flipped.len() - 1;
+    flipped[last] ^= 0x40;
+    std::fs::write(&weights, &flipped).unwrap();
+    expect("flipped", &|e| {
+        matches!(e, ArtifactError::HashMismatch { .. })
+    });
+    std::fs::write(&weights, &bytes).unwrap();
+    let json_path = out.join("model.json");
+    let json = std::fs::read_to_string(&json_path).unwrap();
+    std::fs::write(
+        &json_path,
+        json.replace("\"schema_version\": 1", "\"schema_version\": 99"),
+    )
+    .unwrap();
+    expect("schema", &|e| {
+        matches!(e, ArtifactError::Schema { .. }) && e.to_string().contains("schema version 99")
+    });
+    std::fs::write(&json_path, &json[..json.len() / 2]).unwrap();
+    expect("half json", &|e| matches!(e, ArtifactError::Json { .. }));
+    std::fs::write(&json_path, &json).unwrap();
+    // Weights whose hash matches but whose header is garbage are refused as corrupt.
+    let garbage = b"\xff\xff\xff\xff\xff\xff\xff\xffnot a header".to_vec();
+    let fake = json.replace(
+        &metadata.weights_sha256,
+        &nuno::artifact::sha256_hex(&garbage),
+    );
+    std::fs::write(&json_path, fake).unwrap();
+    std::fs::write(&weights, &garbage).unwrap();
+    expect("corrupt header", &|e| {
+        matches!(e, ArtifactError::Corrupt { .. })
+    });
+    std::fs::remove_file(&weights).unwrap();
+    expect("missing", &|e| {
+        matches!(e, ArtifactError::Io { .. }) && e.to_string().contains("dynamics.safetensors")
+    });
+    assert!(load_dynamics(Path::new("/nonexistent/model"), &device).is_err());
+}

@@ -1,0 +1,199 @@
+//! `nuno-trainer fit-model`: fit the neural SDE on a dataset, compute the
+//! truncation thresholds, and write the artifact with metrics and plots.
+
+use std::fs::File;
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use burn::tensor::Device;
+use indicatif::{ProgressBar, ProgressStyle};
+use nuno::artifact::{DatasetInfo, DynamicsProvenance, save_dynamics, sha256_file};
+use nuno::data::{DatasetFormat, read_dataset};
+use nuno::envs::{MujocoTask, TaskConfig, TaskName};
+use nuno::sde::{
+    DynamicsSpec, FitConfig, LossConfig, SdeConfig, ThresholdConfig, compute_thresholds, fit,
+    prediction_error,
+};
+
+use crate::plot::{Series, line_chart};
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Dataset file (D4RL .hdf5, NeoRL .npz) or Minari directory.
+    #[arg(long)]
+    dataset: PathBuf,
+    /// Reader to use (default: detected).
+    #[arg(long)]
+    format: Option<DatasetFormat>,
+    #[arg(long)]
+    task: TaskName,
+    /// NeoRL's observation layout (root x included).
+    #[arg(long)]
+    neorl: bool,
+    /// Output model directory (dynamics.safetensors, model.json, metrics.csv, plots).
+    #[arg(long)]
+    out: PathBuf,
+    /// NUNO^R: also learn the reward as a cumulative-reward state.
+    #[arg(long)]
+    reward_model: bool,
+    /// Upper bound on gradient steps (early stopping may end sooner).
+    #[arg(long, default_value_t = 20_000)]
+    max_steps: usize,
+    /// Validation NLL every this many steps.
+    #[arg(long, default_value_t = 250)]
+    eval_every: usize,
+    /// Early-stopping patience, in evaluations.
+    #[arg(long, default_value_t = 8)]
+    patience: usize,
+    /// Hidden sizes of the drift networks G, H, f_res (paper: 256,256,256).
+    #[arg(long, value_delimiter = ',', default_value = "256,256,256")]
+    drift_hidden: Vec<usize>,
+    /// Windows per horizon used for the CVaR thresholds.
+    #[arg(long, default_value_t = 4096)]
+    threshold_windows: usize,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    anyhow::ensure!(args.max_steps > 0, "--max-steps must be at least 1");
+    anyhow::ensure!(args.eval_every > 0, "--eval-every must be at least 1");
+    anyhow::ensure!(
+        !args.drift_hidden.is_empty() && args.drift_hidden.iter().all(|&h| h > 0),
+        "--drift-hidden needs positive layer sizes"
+    );
+    let task = if args.neorl {
+        TaskConfig::neorl(args.task)
+    } else {
+        TaskConfig::d4rl(args.task)
+    };
+    let dataset = read_dataset(&args.dataset, args.format)?;
+    dataset.check_task(&task, &args.dataset)?;
+    let probe = MujocoTask::new(task)?;
+    let spec = DynamicsSpec {
+        obs_dim: probe.obs_dim(),
+        act_dim: probe.act_dim(),
+        split: probe.state_split(),
+        dt: probe.dt(),
+    };
+    let mut model_config = SdeConfig::new();
+    model_config.reward_model = args.reward_model;
+    model_config.drift_hidden = args.drift_hidden.clone();
+    let mut config = FitConfig::new(model_config, LossConfig::new());
+    config.max_steps = args.max_steps;
+    config.eval_every = args.eval_every;
+    config.patience = args.patience;
+    config.seed = args.seed;
+    let (train, valid) = dataset.split_by_trajectory(config.valid_fraction, config.seed);
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+
+    // Fit, with a progress bar and a metrics CSV.
+    let device = Device::flex();
+    let bar = ProgressBar::new(config.max_steps as u64).with_style(ProgressStyle::with_template(
+        "{bar:30} {pos}/{len} steps {per_sec} | {msg}",
+    )?);
+    let metrics_path = args.out.join("metrics.csv");
+    let mut csv = File::create(&metrics_path)
+        .with_context(|| format!("creating {}", metrics_path.display()))?;
+    writeln!(
+        csv,
+        "step,learning_rate,loss,data,sc,grad,mu,residual,valid_nll"
+    )?;
+    let mut records = Vec::new();
+    let mut write_error = None;
+    let (model, summary) = fit(&train, &valid, spec, &config, &device, &mut |r| {
+        bar.set_position(r.step as u64);
+        let valid_nll = r.valid_nll.map_or(String::new(), |v| v.to_string());
+        bar.set_message(format!(
+            "L_data {:.2} L_sc {:.3} L_grad {:.3} valid NLL {}",
+            r.data, r.sc, r.grad, valid_nll
+        ));
+        if let Err(e) = writeln!(
+            csv,
+            "{},{},{},{},{},{},{},{},{}",
+            r.step, r.learning_rate, r.loss, r.data, r.sc, r.grad, r.mu, r.residual, valid_nll
+        ) {
+            write_error.get_or_insert(e);
+        }
+        records.push(r.clone());
+    })?;
+    bar.finish();
+    if let Some(e) = write_error {
+        return Err(e).with_context(|| format!("writing {}", metrics_path.display()));
+    }
+    println!(
+        "fitted {} steps in {:.0} s; best validation NLL {:.3} at step {}",
+        summary.steps, summary.seconds, summary.best_valid_nll, summary.best_step
+    );
+
+    // Section 4.3: ε(h, α) over the whole dataset.
+    let threshold_config = ThresholdConfig {
+        max_windows: args.threshold_windows,
+        seed: args.seed,
+        ..ThresholdConfig::new()
+    };
+    let thresholds = compute_thresholds(&model, &dataset, &threshold_config, &device)?;
+    let provenance = DynamicsProvenance {
+        task: Some(task),
+        fit: Some(config),
+        thresholds: Some(thresholds),
+        training: Some(summary),
+        dataset: Some(DatasetInfo {
+            path: args.dataset.display().to_string(),
+            sha256: sha256_file(&args.dataset).unwrap_or_default(),
+            transitions: dataset.len(),
+            trajectories: dataset.trajectories().len(),
+        }),
+    };
+    save_dynamics(&args.out, &model, provenance)?;
+
+    // Plots: loss curves and validation error by horizon.
+    let curve = |name, f: &dyn Fn(&nuno::sde::FitRecord) -> Option<f32>| Series {
+        name,
+        points: records
+            .iter()
+            .filter_map(|r| f(r).map(|v| (r.step as f64, f64::from(v))))
+            .collect(),
+    };
+    line_chart(
+        &args.out.join("loss_curves.svg"),
+        "Neural SDE fit",
+        "gradient step",
+        "loss",
+        &[
+            curve("L_data (train)", &|r| Some(r.data)),
+            curve("L_data (validation)", &|r| r.valid_nll),
+            curve("L_sc", &|r| Some(r.sc)),
+            curve("L_mu", &|r| Some(r.mu)),
+        ],
+    )?;
+    let errors = prediction_error(&model, &valid, 50, 256, args.seed, &device);
+    if !errors.is_empty() {
+        line_chart(
+            &args.out.join("horizon_error.svg"),
+            "Open-loop error on validation trajectories",
+            "horizon (steps)",
+            "RMSE (normalised units)",
+            &[
+                Series {
+                    name: "neural SDE",
+                    points: errors
+                        .iter()
+                        .map(|e| (e.horizon as f64, e.model_rmse))
+                        .collect(),
+                },
+                Series {
+                    name: "constant velocity",
+                    points: errors
+                        .iter()
+                        .map(|e| (e.horizon as f64, e.constant_velocity_rmse))
+                        .collect(),
+                },
+            ],
+        )?;
+    }
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
