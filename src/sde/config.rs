@@ -51,10 +51,8 @@ pub struct LossConfig {
     /// λ_sc, weight of the strong-convexity hinge L_sc (eq. 3); the paper's "strong convexity coefficient of 1".
     #[config(default = 1.0)]
     pub lambda_sc: f32,
-    /// λ_grad, weight of L_grad (eq. 4). The paper uses 1e-4 with η also shaped by
-    /// L_data; here η is trained by its own losses only, and 1 is what keeps η low on
-    /// the data against L_far (see docs/paper-map.md, deviations).
-    #[config(default = 1.0)]
+    /// λ_grad, weight of L_grad (eq. 4): 1e-4.
+    #[config(default = 1e-4)]
     pub lambda_grad: f32,
     /// λ_μ, weight of L_μ = Σ 1/μ (eq. 3).
     #[config(default = 1.0)]
@@ -64,9 +62,10 @@ pub struct LossConfig {
     pub lambda_res: f32,
     /// Weight of L_far, the far-field hinge (not in the paper; see docs/paper-map.md):
     /// uniform points at least `far_radii`·r from every reference datum are pushed to
-    /// η ≥ `far_target`·η_max. The paper's local losses alone leave η low inside
-    /// non-convex data (a ring's interior); 0 turns it off.
-    #[config(default = 1.0)]
+    /// η ≥ `far_target`·η_max. Off by default (the paper's losses only); it lifts η
+    /// inside non-convex low-dimensional data (a ring's interior), but in high
+    /// dimensions a reference subset is too sparse to tell "far" from "between data".
+    #[config(default = 0.0)]
     pub lambda_far: f32,
     /// L_far's points are "far" beyond this many radii r from every reference datum.
     #[config(default = 3.0)]
@@ -106,6 +105,11 @@ pub struct FitConfig {
     pub lr_end: f64,
     #[config(default = 5000)]
     pub lr_decay_steps: usize,
+    /// Each parameter's gradient is clipped to this L2 norm before Adam's update.
+    /// Not in the paper: the NLL's 1/Σ² makes early steps explode once Σ shrinks
+    /// on near-deterministic dimensions (positions), and Adam at lr 1e-2 then diverges.
+    #[config(default = 10.0)]
+    pub grad_clip_norm: f32,
     /// Upper bound on gradient steps (early stopping usually ends sooner).
     #[config(default = 20000)]
     pub max_steps: usize,

@@ -6,6 +6,7 @@
 use std::time::Instant;
 
 use burn::module::Module;
+use burn::optim::grad_clipping::GradientClippingConfig;
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Device, Tensor, TensorData};
 use rand::{Rng, SeedableRng};
@@ -157,7 +158,9 @@ pub fn fit(
     let train_device = device.clone().autodiff();
     train_device.seed(config.seed);
     let mut model = NeuralSde::init(spec, scales, config.model.clone(), &train_device);
-    let mut optimizer = AdamConfig::new().init();
+    let mut optimizer = AdamConfig::new()
+        .with_grad_clipping(Some(GradientClippingConfig::Norm(config.grad_clip_norm)))
+        .init();
     let state_dim = model.constants.state_dim();
     let input_dim = model.spec().obs_dim + model.spec().act_dim;
     let far_field = far_field_of(&model, train, &config.loss, &mut rng);

@@ -99,7 +99,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("creating {}", metrics_path.display()))?;
     writeln!(
         csv,
-        "step,learning_rate,loss,data,sc,grad,mu,residual,valid_nll"
+        "step,learning_rate,loss,data,sc,grad,mu,far,residual,valid_nll"
     )?;
     let mut records = Vec::new();
     let mut write_error = None;
@@ -112,8 +112,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ));
         if let Err(e) = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{},{}",
-            r.step, r.learning_rate, r.loss, r.data, r.sc, r.grad, r.mu, r.residual, valid_nll
+            "{},{},{},{},{},{},{},{},{},{}",
+            r.step,
+            r.learning_rate,
+            r.loss,
+            r.data,
+            r.sc,
+            r.grad,
+            r.mu,
+            r.far,
+            r.residual,
+            valid_nll
         ) {
             write_error.get_or_insert(e);
         }
