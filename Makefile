@@ -18,7 +18,7 @@ PIP_DOWNLOAD      := $(PYTHON) -m pip download --quiet --no-deps --only-binary=:
 SERVE_TASK     ?= hopper
 SERVE_EPISODES ?= 10
 
-.PHONY: serve test mujoco venv system-deps build lint bench clean-runtime
+.PHONY: serve test mujoco venv system-deps build lint bench check-wgpu clean-runtime
 
 ## serve: fetch what is missing, build, and run the main job.
 serve: mujoco
@@ -37,6 +37,13 @@ lint: mujoco
 
 bench: mujoco
 	$(CARGO) bench --bench env_step
+
+## check-wgpu: build burn's wgpu backend and run the GPU smoke test. Without a GPU,
+## Mesa's lavapipe (Debian's mesa-vulkan-drivers) provides a Vulkan device on the CPU.
+check-wgpu: mujoco
+	@ldconfig -p | grep -q libvulkan.so.1 || { sudo=""; [ "$$(id -u)" = 0 ] || sudo=sudo; \
+	  $$sudo apt-get update -qq && $$sudo apt-get install -y -qq libvulkan1 mesa-vulkan-drivers; }
+	$(CARGO) test --release --features wgpu --test wgpu_smoke
 
 mujoco: system-deps $(MUJOCO_LIB) $(MJCF_FILES)
 

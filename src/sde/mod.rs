@@ -3,6 +3,7 @@
 //! NLL of Euler–Maruyama rollouts, and the CVaR truncation thresholds.
 
 mod config;
+mod device;
 mod eta;
 mod evaluation;
 mod fit;
@@ -14,6 +15,7 @@ mod spec;
 mod threshold;
 
 pub use config::{FitConfig, LossConfig, SdeConfig};
+pub use device::ComputeDevice;
 pub use eta::{DistanceAware, EtaLosses, FarField};
 pub use evaluation::{HorizonError, prediction_error};
 pub use fit::{FitRecord, FitSummary, fit, fit_eta, validation_nll, window_tensors};

@@ -6,14 +6,13 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use burn::tensor::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::artifact::{DatasetInfo, DynamicsProvenance, save_dynamics, sha256_file};
 use nuno::data::{DatasetFormat, read_dataset};
 use nuno::envs::{MujocoTask, TaskConfig, TaskName};
 use nuno::sde::{
-    DynamicsSpec, FitConfig, LossConfig, SdeConfig, ThresholdConfig, compute_thresholds, fit,
-    prediction_error,
+    ComputeDevice, DynamicsSpec, FitConfig, LossConfig, SdeConfig, ThresholdConfig,
+    compute_thresholds, fit, prediction_error,
 };
 
 use crate::plot::{Series, line_chart};
@@ -54,6 +53,9 @@ pub struct Args {
     threshold_windows: usize,
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Compute device: cpu, or wgpu in a build with the `wgpu` feature.
+    #[arg(long, default_value_t = ComputeDevice::Cpu)]
+    device: ComputeDevice,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -90,7 +92,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("creating {}", args.out.display()))?;
 
     // Fit, with a progress bar and a metrics CSV.
-    let device = Device::flex();
+    let device = args.device.device().map_err(anyhow::Error::msg)?;
     let bar = ProgressBar::new(config.max_steps as u64).with_style(ProgressStyle::with_template(
         "{bar:30} {pos}/{len} steps {per_sec} | {msg}",
     )?);
