@@ -551,3 +551,25 @@ fn fitted_drift_and_diffusion_recover_a_known_linear_sde() {
         "position diffusion {mean_position_sigma} (noise-free)"
     );
 }
+
+#[test]
+fn shipped_default_model_loads_with_its_thresholds() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/hopper-random");
+    let (model, metadata) = load_dynamics(&dir, &Device::flex()).unwrap();
+    assert_eq!(model.spec(), &hopper_spec());
+    let thresholds = metadata.provenance.thresholds.as_ref().unwrap();
+    assert_eq!(thresholds.horizons, vec![5, 10, 15, 20]);
+    assert!(
+        thresholds
+            .get(10, 1.0)
+            .is_some_and(|e| e > 0.0 && e <= 10.0)
+    );
+    assert_eq!(
+        metadata.provenance.task,
+        Some(TaskConfig::d4rl(TaskName::Hopper))
+    );
+    assert_eq!(
+        metadata.provenance.dataset.as_ref().unwrap().transitions,
+        1_000_000
+    );
+}
