@@ -18,6 +18,11 @@ use nuno::sde::{
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+/// The first `n` values of `values`, repeated as often as needed.
+fn cycled(values: &ndarray::Array2<f32>, n: usize) -> Vec<f32> {
+    values.iter().cycle().take(n).copied().collect()
+}
+
 fn main() {
     let task = MujocoTask::new(TaskConfig::d4rl(TaskName::Hopper)).expect("task");
     let spec = DynamicsSpec {
@@ -36,20 +41,8 @@ fn main() {
     println!("| benchmark (hopper, flex backend) | batch | nuno |");
     println!("|---|---|---|");
     for batch in [1usize, 256, 4096, 50_000] {
-        let states: Vec<f32> = dataset
-            .observations
-            .iter()
-            .cycle()
-            .take(batch * 11)
-            .copied()
-            .collect();
-        let actions: Vec<f32> = dataset
-            .actions
-            .iter()
-            .cycle()
-            .take(batch * 3)
-            .copied()
-            .collect();
+        let states = cycled(&dataset.observations, batch * 11);
+        let actions = cycled(&dataset.actions, batch * 3);
         let s = Tensor::<2>::from_data(TensorData::new(states, [batch, 11]), &device);
         let a = Tensor::<2>::from_data(TensorData::new(actions, [batch, 3]), &device);
         let repeats = (200_000 / batch).clamp(3, 2000);
@@ -70,20 +63,8 @@ fn main() {
     }
 
     let batch = 50_000;
-    let starts: Vec<f32> = dataset
-        .observations
-        .iter()
-        .cycle()
-        .take(batch * 11)
-        .copied()
-        .collect();
-    let actions: Vec<f32> = dataset
-        .actions
-        .iter()
-        .cycle()
-        .take(batch * 10 * 3)
-        .copied()
-        .collect();
+    let starts = cycled(&dataset.observations, batch * 11);
+    let actions = cycled(&dataset.actions, batch * 10 * 3);
     let plan = OpenLoop {
         horizon: 10,
         particles: 1,

@@ -34,10 +34,11 @@ impl Trajectory {
     }
 }
 
-/// An offline dataset of `len()` transitions. Row `i` of every array belongs to
+/// The arrays of an offline dataset: row `i` of every array belongs to
 /// transition `i`; `next_observations[i]` is the state after `actions[i]`.
+/// What a reader (or a user) hands to [`Dataset::from_parts`].
 #[derive(Debug, Clone, PartialEq)]
-pub struct Dataset {
+pub struct DatasetParts {
     pub observations: Array2<f32>,
     pub actions: Array2<f32>,
     pub rewards: Array1<f32>,
@@ -50,21 +51,23 @@ pub struct Dataset {
     pub qpos: Option<Array2<f32>>,
     pub qvel: Option<Array2<f32>>,
     pub metadata: DatasetMetadata,
+}
+
+/// A validated offline dataset of `len()` transitions with its trajectory
+/// boundaries. Its arrays are read through [`DatasetParts`] (`dataset.observations`, ...)
+/// and cannot be changed, so the boundaries always match them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dataset {
+    parts: DatasetParts,
     trajectories: Vec<Trajectory>,
 }
 
-/// The raw arrays a reader (or a user) hands to [`Dataset::from_parts`].
-#[derive(Debug, Clone)]
-pub struct DatasetParts {
-    pub observations: Array2<f32>,
-    pub actions: Array2<f32>,
-    pub rewards: Array1<f32>,
-    pub next_observations: Array2<f32>,
-    pub terminals: Vec<bool>,
-    pub timeouts: Vec<bool>,
-    pub qpos: Option<Array2<f32>>,
-    pub qvel: Option<Array2<f32>>,
-    pub metadata: DatasetMetadata,
+impl std::ops::Deref for Dataset {
+    type Target = DatasetParts;
+
+    fn deref(&self) -> &DatasetParts {
+        &self.parts
+    }
 }
 
 impl Dataset {
@@ -73,18 +76,18 @@ impl Dataset {
     /// is set, or where `next_observations[i] != observations[i + 1]` (a
     /// boundary the flags missed, which is then marked as a timeout).
     /// `file` names the source in errors.
-    pub fn from_parts(parts: DatasetParts, file: &Path) -> Result<Self, DataError> {
+    pub fn from_parts(mut parts: DatasetParts, file: &Path) -> Result<Self, DataError> {
         let DatasetParts {
             observations,
             actions,
             rewards,
             next_observations,
             terminals,
-            mut timeouts,
+            timeouts,
             qpos,
             qvel,
-            metadata,
-        } = parts;
+            ..
+        } = &mut parts;
         let n = observations.nrows();
         if n == 0 {
             return Err(DataError::Empty {
@@ -138,15 +141,7 @@ impl Dataset {
             }
         }
         Ok(Self {
-            observations,
-            actions,
-            rewards,
-            next_observations,
-            terminals,
-            timeouts,
-            qpos,
-            qvel,
-            metadata,
+            parts,
             trajectories,
         })
     }
@@ -212,7 +207,7 @@ impl Dataset {
             });
             start += len;
         }
-        Dataset {
+        let parts = DatasetParts {
             observations: pick2(&self.observations),
             actions: pick2(&self.actions),
             rewards: self.rewards.select(Axis(0), &rows),
@@ -222,6 +217,9 @@ impl Dataset {
             qpos: self.qpos.as_ref().map(pick2),
             qvel: self.qvel.as_ref().map(pick2),
             metadata: self.metadata.clone(),
+        };
+        Dataset {
+            parts,
             trajectories,
         }
     }
