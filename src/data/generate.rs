@@ -105,21 +105,25 @@ pub fn generate(
         format!("nuno {}", env!("CARGO_PKG_VERSION")),
     );
     let n = all.rewards.len();
+    let generated = std::path::Path::new("<generated>");
     let matrix = |v: Vec<f32>, width: usize| {
-        Array2::from_shape_vec((n, width), v).expect("rows were recorded with the task's widths")
+        Array2::from_shape_vec((n, width), v).map_err(|e| DataError::Invalid {
+            file: generated.to_path_buf(),
+            message: format!("recorded rows do not form [{n}, {width}]: {e}"),
+        })
     };
     let parts = DatasetParts {
-        observations: matrix(all.observations, obs_dim),
-        actions: matrix(all.actions, act_dim),
+        observations: matrix(all.observations, obs_dim)?,
+        actions: matrix(all.actions, act_dim)?,
         rewards: Array1::from(all.rewards),
-        next_observations: matrix(all.next_observations, obs_dim),
+        next_observations: matrix(all.next_observations, obs_dim)?,
         terminals: all.terminals,
         timeouts: all.timeouts,
-        qpos: Some(matrix(all.qpos, nq)),
-        qvel: Some(matrix(all.qvel, nv)),
+        qpos: Some(matrix(all.qpos, nq)?),
+        qvel: Some(matrix(all.qvel, nv)?),
         metadata,
     };
-    Dataset::from_parts(parts, std::path::Path::new("<generated>"))
+    Dataset::from_parts(parts, generated)
 }
 
 /// One full episode of `policy`, seeded by `(config.seed, episode)`.
