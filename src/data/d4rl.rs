@@ -8,7 +8,7 @@ use std::path::Path;
 use hdf5::types::VarLenUnicode;
 use ndarray::{Array1, Array2, Axis, s};
 
-use super::dataset::DatasetParts;
+use super::dataset::{DatasetParts, check_rows};
 use super::{DataError, Dataset, DatasetMetadata};
 use crate::artifact::write_atomically;
 
@@ -146,21 +146,16 @@ fn next_states_from_successors(
     path: &Path,
 ) -> Result<DatasetParts, DataError> {
     let n = parts.observations.nrows();
-    for (key, len) in [
-        ("actions", parts.actions.nrows()),
-        ("terminals", parts.terminals.len()),
-        ("timeouts", parts.timeouts.len()),
-    ] {
-        if len != n {
-            return Err(DataError::LengthMismatch {
-                file: path.to_path_buf(),
-                key: key.into(),
-                reference: "observations".into(),
-                expected: n,
-                got: len,
-            });
-        }
-    }
+    // Checked here as well as in `Dataset::from_parts`: the rows are indexed below.
+    check_rows(
+        path,
+        n,
+        &[
+            ("actions", parts.actions.nrows()),
+            ("terminals", parts.terminals.len()),
+            ("timeouts", parts.timeouts.len()),
+        ],
+    )?;
     let ends = |i: usize| i + 1 == n || parts.terminals[i] || parts.timeouts[i];
     let keep: Vec<usize> = (0..n).filter(|&i| !ends(i)).collect();
     let next_rows: Vec<usize> = keep.iter().map(|&i| i + 1).collect();

@@ -103,17 +103,7 @@ impl Dataset {
             ("infos/qpos", qpos.as_ref().map_or(n, |a| a.nrows())),
             ("infos/qvel", qvel.as_ref().map_or(n, |a| a.nrows())),
         ];
-        for (key, got) in rows {
-            if got != n {
-                return Err(DataError::LengthMismatch {
-                    file: file.to_path_buf(),
-                    key: key.into(),
-                    reference: "observations".into(),
-                    expected: n,
-                    got,
-                });
-            }
-        }
+        check_rows(file, n, &rows)?;
         if next_observations.ncols() != observations.ncols() {
             return Err(DataError::BadShape {
                 file: file.to_path_buf(),
@@ -244,6 +234,20 @@ impl Dataset {
             self.select_trajectories(&train),
             self.select_trajectories(&valid),
         )
+    }
+}
+
+/// Checks that every `(key, rows)` has `n` rows, like `observations`.
+pub(crate) fn check_rows(file: &Path, n: usize, rows: &[(&str, usize)]) -> Result<(), DataError> {
+    match rows.iter().find(|(_, got)| *got != n) {
+        Some(&(key, got)) => Err(DataError::LengthMismatch {
+            file: file.to_path_buf(),
+            key: key.into(),
+            reference: "observations".into(),
+            expected: n,
+            got,
+        }),
+        None => Ok(()),
     }
 }
 
