@@ -6,11 +6,15 @@
 //! - [`envs`]: the MuJoCo tasks (D4RL-v2 semantics), D4RL scores, the parallel evaluator;
 //! - [`data`]: D4RL/NeoRL/Minari readers, the D4RL-layout writer, generators,
 //!   the normaliser and samplers;
-//! - [`agent`]: policies behind the narrow batched `act` interface;
+//! - [`sde`]: the neural SDE, its losses, fitting and truncation thresholds;
+//! - [`agent`]: SAC on penalised, truncated model rollouts, behind the narrow
+//!   batched `act` and `step` interfaces;
+//! - [`nn`]: the MLP both use;
 //! - [`artifact`]: atomic writes of everything nuno saves.
 
 pub mod agent;
 pub mod artifact;
 pub mod data;
 pub mod envs;
+pub mod nn;
 pub mod sde;

@@ -5,7 +5,7 @@
 
 use burn::tensor::{Device, FloatDType, Tensor, TensorData};
 use nuno::artifact::{collect_tensors, load_tensors};
-use nuno::sde::{Activation, Mlp, MlpConfig};
+use nuno::nn::{Activation, Mlp, MlpConfig};
 
 fn device_f64() -> Device {
     static DEVICE: std::sync::OnceLock<Device> = std::sync::OnceLock::new();

@@ -1,8 +1,41 @@
-//! Policies: the batched `act` interface that evaluation and model rollouts call,
-//! and the policies behind it.
+//! Policies and NUNO's offline policy optimisation (Section 4.3, Appendix
+//! C.2–C.3): SAC trained on penalised, truncated neural-SDE rollouts mixed
+//! with real data. Everything that runs a policy goes through [`BatchPolicy`];
+//! model rollouts step the dynamics through [`crate::sde::BatchDynamics`].
 
+mod actor;
+mod buffer;
+mod critic;
+mod model_rollout;
 mod policy;
+mod policy_loop;
+mod presets;
 mod random_network;
+mod sac;
 
+pub use actor::{ActionMode, Actor, ActorConfig, ActorPolicy, ActorSample};
+pub use buffer::ReplayBuffer;
+pub use critic::{Temperature, TwinCritic};
+pub use model_rollout::{
+    ModelRollout, RolloutConfig, RolloutStats, RolloutTrace, StepOutcome, rollout_model,
+};
 pub use policy::{BatchPolicy, RandomPolicy};
+pub use policy_loop::{
+    EpochRecord, EtaProbe, EvalSummary, LoopContext, PolicyLoopConfig, PolicyTraining,
+};
+pub use presets::{PRESETS, Preset, preset};
 pub use random_network::RandomNetworkPolicy;
+pub use sac::{Sac, SacConfig, SacLosses, SacOptimizers};
+
+/// Everything that can go wrong setting up or running policy optimisation.
+#[derive(Debug, thiserror::Error)]
+pub enum AgentError {
+    #[error("unknown preset `{name}` (known: {known})")]
+    UnknownPreset { name: String, known: String },
+    #[error("{0}")]
+    Mismatch(String),
+    #[error("truncation threshold: {0}")]
+    Threshold(String),
+    #[error(transparent)]
+    Env(#[from] crate::envs::EnvError),
+}

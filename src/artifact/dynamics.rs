@@ -16,9 +16,10 @@ use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use super::safetensors_file::{parse_safetensors, safetensors_bytes, write_bytes};
+use super::ArtifactError;
+use super::json_file::{read_checked_weights, read_versioned_json, write_json};
+use super::safetensors_file::{safetensors_bytes, write_bytes};
 use super::tensors::{collect_tensors, load_tensors};
-use super::{ArtifactError, write_atomically};
 use crate::envs::TaskConfig;
 use crate::sde::{
     DynamicsSpec, FitConfig, FitSummary, NeuralSde, PhysicalScales, SdeConfig, ThresholdTable,
@@ -115,41 +116,14 @@ pub fn save_dynamics(
             .map(|(k, (shape, _))| (k.clone(), shape.clone()))
             .collect(),
     };
-    let json = serde_json::to_vec_pretty(&metadata).map_err(|e| ArtifactError::Json {
-        file: dir.join(DYNAMICS_METADATA),
-        message: e.to_string(),
-    })?;
     write_bytes(&dir.join(DYNAMICS_WEIGHTS), &weights)?;
-    let json_path = dir.join(DYNAMICS_METADATA);
-    write_atomically(
-        &json_path,
-        |tmp| std::fs::write(tmp, &json).map_err(|e| ArtifactError::io(tmp, e)),
-        |e| ArtifactError::io(&json_path, e),
-    )?;
+    write_json(&dir.join(DYNAMICS_METADATA), &metadata)?;
     Ok(metadata)
 }
 
 /// Reads and validates `model.json` alone.
 pub fn read_dynamics_metadata(dir: &Path) -> Result<DynamicsMetadata, ArtifactError> {
-    let path = dir.join(DYNAMICS_METADATA);
-    let bytes = std::fs::read(&path).map_err(|e| ArtifactError::io(&path, e))?;
-    let value: serde_json::Value =
-        serde_json::from_slice(&bytes).map_err(|e| ArtifactError::Json {
-            file: path.clone(),
-            message: e.to_string(),
-        })?;
-    let version = value.get("schema_version").and_then(|v| v.as_u64());
-    if version != Some(u64::from(DYNAMICS_SCHEMA_VERSION)) {
-        return Err(ArtifactError::Schema {
-            file: path,
-            found: version.map_or("none".into(), |v| v.to_string()),
-            expected: DYNAMICS_SCHEMA_VERSION,
-        });
-    }
-    serde_json::from_value(value).map_err(|e| ArtifactError::Json {
-        file: path,
-        message: e.to_string(),
-    })
+    read_versioned_json(&dir.join(DYNAMICS_METADATA), DYNAMICS_SCHEMA_VERSION)
 }
 
 /// Loads the model in `dir` onto `device` (no autodiff).
@@ -158,12 +132,7 @@ pub fn load_dynamics(
     device: &Device,
 ) -> Result<(NeuralSde, DynamicsMetadata), ArtifactError> {
     let metadata = read_dynamics_metadata(dir)?;
-    let path = dir.join(DYNAMICS_WEIGHTS);
-    let bytes = std::fs::read(&path).map_err(|e| ArtifactError::io(&path, e))?;
-    if sha256_hex(&bytes) != metadata.weights_sha256 {
-        return Err(ArtifactError::HashMismatch { file: path });
-    }
-    let tensors = parse_safetensors(&bytes, &path)?;
+    let tensors = read_checked_weights(&dir.join(DYNAMICS_WEIGHTS), &metadata.weights_sha256)?;
     metadata
         .spec
         .validate()

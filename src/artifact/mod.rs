@@ -3,20 +3,33 @@
 //! so a reader never sees a half-written file.
 
 mod atomic;
+mod checkpoint;
 mod dynamics;
+mod json_file;
+mod policy;
 mod safetensors_file;
 mod tensors;
 
 use std::path::{Path, PathBuf};
 
 pub use atomic::write_atomically;
+pub use checkpoint::{
+    CHECKPOINT_SCHEMA_VERSION, latest_checkpoint, load_checkpoint, save_checkpoint,
+};
 pub use dynamics::{
     DYNAMICS_METADATA, DYNAMICS_SCHEMA_VERSION, DYNAMICS_WEIGHTS, DatasetInfo, DynamicsMetadata,
     DynamicsProvenance, load_dynamics, read_dynamics_metadata, save_dynamics, sha256_file,
     sha256_hex,
 };
+pub use json_file::{read_checked_weights, read_versioned_json, write_json};
+pub use policy::{
+    BEST_POLICY, LAST_POLICY, POLICY_SCHEMA_VERSION, PolicyMetadata, PolicyProvenance, has_policy,
+    load_policy, save_policy,
+};
 pub use safetensors_file::{parse_safetensors, safetensors_bytes};
-pub use tensors::{NamedTensors, collect_tensors, load_tensors};
+pub use tensors::{
+    NamedTensors, collect_param_ids, collect_tensors, load_tensors, load_tensors_with_ids,
+};
 
 /// Everything that can be wrong with an artifact.
 #[derive(Debug, thiserror::Error)]

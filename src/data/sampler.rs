@@ -126,6 +126,38 @@ pub struct TransitionBatch {
     pub terminals: Vec<f32>,
 }
 
+impl TransitionBatch {
+    /// An empty batch with room for `rows` transitions.
+    pub fn with_capacity(rows: usize, obs_dim: usize, act_dim: usize) -> Self {
+        Self {
+            observations: Vec::with_capacity(rows * obs_dim),
+            actions: Vec::with_capacity(rows * act_dim),
+            rewards: Vec::with_capacity(rows),
+            next_observations: Vec::with_capacity(rows * obs_dim),
+            terminals: Vec::with_capacity(rows),
+        }
+    }
+
+    /// Number of transitions.
+    pub fn len(&self) -> usize {
+        self.rewards.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.rewards.is_empty()
+    }
+
+    /// Appends `other`'s transitions after this batch's.
+    pub fn append(&mut self, other: &TransitionBatch) {
+        self.observations.extend_from_slice(&other.observations);
+        self.actions.extend_from_slice(&other.actions);
+        self.rewards.extend_from_slice(&other.rewards);
+        self.next_observations
+            .extend_from_slice(&other.next_observations);
+        self.terminals.extend_from_slice(&other.terminals);
+    }
+}
+
 /// Uniform sampling of single transitions.
 #[derive(Debug, Clone, Copy)]
 pub struct TransitionSampler<'a> {
@@ -140,13 +172,7 @@ impl<'a> TransitionSampler<'a> {
     /// `batch` transitions drawn uniformly with replacement.
     pub fn sample(&self, batch: usize, rng: &mut impl Rng) -> TransitionBatch {
         let d = self.dataset;
-        let mut out = TransitionBatch {
-            observations: Vec::with_capacity(batch * d.obs_dim()),
-            actions: Vec::with_capacity(batch * d.act_dim()),
-            rewards: Vec::with_capacity(batch),
-            next_observations: Vec::with_capacity(batch * d.obs_dim()),
-            terminals: Vec::with_capacity(batch),
-        };
+        let mut out = TransitionBatch::with_capacity(batch, d.obs_dim(), d.act_dim());
         for _ in 0..batch {
             let i = rng.random_range(0..d.len());
             out.observations.extend(d.observations.row(i).iter());

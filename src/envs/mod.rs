@@ -4,11 +4,13 @@
 
 mod evaluator;
 mod mujoco_task;
+mod rules;
 mod score;
 mod task;
 
 pub use evaluator::{EvaluationConfig, EvaluationReport, evaluate};
 pub use mujoco_task::{MujocoTask, TaskConfig, Transition};
+pub use rules::TaskRules;
 pub use score::ScoreReference;
 pub use task::{HealthRule, ObservationLayout, ResetNoise, StateSplit, TaskName, TaskSpec};
 

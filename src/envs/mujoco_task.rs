@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use super::EnvError;
 use super::score::ScoreReference;
-use super::task::{HealthRule, ObservationLayout, ResetNoise, StateSplit, TaskName, TaskSpec};
+use super::task::{ObservationLayout, ResetNoise, StateSplit, TaskName, TaskSpec};
 
 /// Which task to run, in which variant.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -276,20 +276,12 @@ impl MujocoTask {
     /// Gymnasium's `is_healthy` on the simulator state.
     pub fn is_healthy(&self) -> bool {
         let qpos = self.data.qpos();
-        let qvel = self.data.qvel();
-        match self.spec.health {
-            HealthRule::AlwaysHealthy => true,
-            HealthRule::Upright {
-                z_range,
-                angle_range,
-                state_range,
-            } => {
-                let inside = |x: f64, (lo, hi): (f64, f64)| lo < x && x < hi;
-                let state_ok = state_range
-                    .is_none_or(|range| qpos[2..].iter().chain(qvel).all(|&x| inside(x, range)));
-                inside(qpos[1], z_range) && inside(qpos[2], angle_range) && state_ok
-            }
-        }
+        let rest = qpos
+            .get(2..)
+            .unwrap_or_default()
+            .iter()
+            .chain(self.data.qvel());
+        self.spec.health.is_healthy(qpos[1], qpos[2], rest.copied())
     }
 }
 

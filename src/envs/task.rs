@@ -74,6 +74,25 @@ pub enum HealthRule {
     },
 }
 
+impl HealthRule {
+    /// Whether a robot with root height `z`, root angle `angle` and the rest of
+    /// `concat(qpos, qvel)[2..]` in `rest` is healthy.
+    pub fn is_healthy(&self, z: f64, angle: f64, mut rest: impl Iterator<Item = f64>) -> bool {
+        match *self {
+            HealthRule::AlwaysHealthy => true,
+            HealthRule::Upright {
+                z_range,
+                angle_range,
+                state_range,
+            } => {
+                let inside = |x: f64, (lo, hi): (f64, f64)| lo < x && x < hi;
+                let state_ok = state_range.is_none_or(|range| rest.all(|x| inside(x, range)));
+                inside(z, z_range) && inside(angle, angle_range) && state_ok
+            }
+        }
+    }
+}
+
 /// How `reset` perturbs the model's initial state (`reset_noise_scale` in Gymnasium).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ResetNoise {

@@ -12,7 +12,7 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
 use super::config::{LossConfig, SdeConfig};
-use super::mlp::{Activation, Mlp, MlpConfig};
+use crate::nn::{Activation, Mlp, MlpConfig};
 
 /// η_ϕ and μ_ϕ over inputs of width `d_input`.
 #[derive(Module, Debug)]

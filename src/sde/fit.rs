@@ -11,7 +11,6 @@ use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Device, Tensor, TensorData};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
 use super::SdeError;
@@ -21,6 +20,7 @@ use super::losses::WindowTensors;
 use super::model::NeuralSde;
 use super::spec::{DynamicsSpec, PhysicalScales};
 use crate::data::{Dataset, NormalizerConfig, WindowBatch, WindowSampler};
+use crate::nn::normal;
 
 /// Losses at one logged step (and the validation NLL when it was measured).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -84,17 +84,6 @@ pub fn window_tensors(
             device,
         ),
     }
-}
-
-/// Standard normal noise of the given shape, from our own seeded generator.
-pub(crate) fn normal<const D: usize>(
-    shape: [usize; D],
-    rng: &mut ChaCha8Rng,
-    device: &Device,
-) -> Tensor<D> {
-    let n = shape.iter().product();
-    let values: Vec<f32> = (0..n).map(|_| rng.sample(StandardNormal)).collect();
-    Tensor::from_data(TensorData::new(values, shape), device)
 }
 
 /// Mean L_data of `model` over the given windows with fixed noise, in chunks.

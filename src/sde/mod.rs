@@ -2,25 +2,25 @@
 //! drift, aleatoric plus distance-aware diffusion, the η losses, fitting by the
 //! NLL of Euler–Maruyama rollouts, and the CVaR truncation thresholds.
 
+mod batch;
 mod config;
 mod device;
 mod eta;
 mod evaluation;
 mod fit;
 mod losses;
-mod mlp;
 mod model;
 mod rollout;
 mod spec;
 mod threshold;
 
+pub use batch::{BatchDynamics, ModelStep};
 pub use config::{FitConfig, LossConfig, SdeConfig};
 pub use device::ComputeDevice;
 pub use eta::{DistanceAware, EtaLosses, FarField};
 pub use evaluation::{HorizonError, prediction_error};
 pub use fit::{FitRecord, FitSummary, fit, fit_eta, validation_nll, window_tensors};
 pub use losses::{LossTerms, WindowTensors};
-pub use mlp::{Activation, Mlp, MlpConfig};
 pub use model::{NeuralSde, SdeConstants, SdeTerms};
 pub use rollout::{OpenLoop, OpenLoopRollout};
 pub use spec::{DynamicsSpec, PhysicalScales};

@@ -17,8 +17,8 @@ use burn::tensor::{Device, Int, Tensor, TensorData};
 
 use super::config::SdeConfig;
 use super::eta::DistanceAware;
-use super::mlp::{Activation, Mlp, MlpConfig};
 use super::spec::{DynamicsSpec, PhysicalScales};
+use crate::nn::{Activation, Mlp, MlpConfig};
 
 /// What the model does not learn: the system and the data's scales.
 #[derive(Debug, Clone, PartialEq)]
@@ -80,16 +80,6 @@ pub struct NeuralSde {
     pub h_bias: Param<Tensor<1>>,
     #[module(skip)]
     pub constants: SdeConstants,
-}
-
-/// A tensor's values as f32, row-major (converting from the device's float type).
-pub(crate) fn to_f32_vec<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
-    // After `convert::<f32>` the element type matches, so `to_vec` cannot fail.
-    tensor
-        .into_data()
-        .convert::<f32>()
-        .try_to_vec()
-        .unwrap_or_default()
 }
 
 /// A 1-D constant tensor.

@@ -5,8 +5,9 @@
 use burn::tensor::{Device, Tensor, TensorData};
 use rand_chacha::ChaCha8Rng;
 
-use super::fit::normal;
-use super::model::{NeuralSde, to_f32_vec};
+use super::model::NeuralSde;
+use crate::nn::normal;
+use crate::nn::to_f32_vec;
 
 /// States and η along open-loop rollouts, row-major.
 #[derive(Debug, Clone, PartialEq)]

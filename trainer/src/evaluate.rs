@@ -1,24 +1,27 @@
 //! `nuno-trainer evaluate`: episodes of a policy in the real MuJoCo task.
 
-use anyhow::Context;
-use clap::ValueEnum;
-use nuno::agent::RandomPolicy;
-use nuno::envs::{EvaluationConfig, MujocoTask, TaskConfig, TaskName, evaluate};
+use std::path::PathBuf;
 
-#[derive(Debug, Clone, Copy, ValueEnum)]
-pub enum PolicyChoice {
-    /// Uniform random actions in the task's action box.
-    Random,
-}
+use anyhow::Context;
+use nuno::agent::{ActionMode, ActorPolicy, BatchPolicy, RandomPolicy};
+use nuno::artifact::{BEST_POLICY, load_policy};
+use nuno::envs::{EvaluationConfig, MujocoTask, TaskConfig, TaskName, evaluate};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Which policy to run.
-    #[arg(long, value_enum)]
-    policy: PolicyChoice,
-    /// Task: hopper, halfcheetah or walker2d.
+    /// `random` (uniform actions in the task's box), or a model directory
+    /// holding a trained policy (see --policy-name).
     #[arg(long)]
-    task: TaskName,
+    policy: String,
+    /// Which saved policy in that directory: `policy` (best) or `policy-last`.
+    #[arg(long, default_value = BEST_POLICY)]
+    policy_name: String,
+    /// Sample actions from π instead of taking its mean.
+    #[arg(long)]
+    sampled: bool,
+    /// Task: hopper, halfcheetah or walker2d (default: the policy's own task).
+    #[arg(long)]
+    task: Option<TaskName>,
     /// Number of episodes.
     #[arg(long, default_value_t = 10)]
     episodes: usize,
@@ -34,22 +37,44 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let task = if args.neorl {
-        TaskConfig::neorl(args.task)
-    } else {
-        TaskConfig::d4rl(args.task)
-    };
-    let probe = MujocoTask::new(task)?;
-    let policy = match args.policy {
-        PolicyChoice::Random => {
-            let (low, high) = probe.action_bounds();
-            let to_f32 = |v: Vec<f64>| v.into_iter().map(|x| x as f32).collect();
-            RandomPolicy::new(probe.obs_dim(), to_f32(low), to_f32(high))
+    let variant = |name| {
+        if args.neorl {
+            TaskConfig::neorl(name)
+        } else {
+            TaskConfig::d4rl(name)
         }
     };
+    let (policy, task): (Box<dyn BatchPolicy>, TaskConfig) = if args.policy == "random" {
+        let name = args
+            .task
+            .context("--task is required with --policy random")?;
+        let task = variant(name);
+        let probe = MujocoTask::new(task)?;
+        let (low, high) = probe.action_bounds();
+        let to_f32 = |v: Vec<f64>| v.into_iter().map(|x| x as f32).collect();
+        let random = RandomPolicy::new(probe.obs_dim(), to_f32(low), to_f32(high));
+        (Box::new(random), task)
+    } else {
+        let dir = PathBuf::from(&args.policy);
+        let (actor, metadata) = load_policy(&dir, &args.policy_name, &burn::tensor::Device::flex())
+            .with_context(|| {
+                format!(
+                    "loading policy `{}` from {}",
+                    args.policy_name,
+                    dir.display()
+                )
+            })?;
+        let task = args.task.map_or(metadata.task, variant);
+        let mode = if args.sampled {
+            ActionMode::Sampled
+        } else {
+            ActionMode::Deterministic
+        };
+        (Box::new(ActorPolicy { actor, mode }), task)
+    };
     let config = EvaluationConfig::new(task, args.episodes, args.seed);
-    let report = evaluate(&policy, &config)
-        .with_context(|| format!("evaluating {:?} on {}", args.policy, args.task))?;
+    let report = evaluate(policy.as_ref(), &config)
+        .with_context(|| format!("evaluating {} on {}", args.policy, task.name))?;
 
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -66,8 +91,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("{i:>7} {r:>11.2} {len:>7} {score:>11.2}");
     }
     println!(
-        "{} {:?} policy, {} episodes: return {:.2} ± {:.2}, normalised score {:.2} ± {:.2}",
-        args.task,
+        "{} {} policy, {} episodes: return {:.2} ± {:.2}, normalised score {:.2} ± {:.2}",
+        task.name,
         args.policy,
         args.episodes,
         report.mean_return,

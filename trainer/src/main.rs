@@ -5,6 +5,7 @@
 mod dataset;
 mod evaluate;
 mod fit_model;
+mod fit_policy;
 mod plot;
 
 use std::process::ExitCode;
@@ -25,6 +26,8 @@ enum Command {
     Dataset(dataset::Command),
     /// Fit the neural SDE on a dataset and write the model artifact.
     FitModel(fit_model::Args),
+    /// Train a NUNO policy with SAC on the model's penalised, truncated rollouts.
+    FitPolicy(fit_policy::Args),
     /// Run a policy in the real MuJoCo task and print returns and D4RL normalised scores.
     Evaluate(evaluate::Args),
 }
@@ -35,6 +38,7 @@ fn main() -> ExitCode {
         Command::Dataset(command) => dataset::run(command),
         Command::Evaluate(args) => evaluate::run(args),
         Command::FitModel(args) => fit_model::run(args),
+        Command::FitPolicy(args) => fit_policy::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

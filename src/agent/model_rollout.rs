@@ -1,0 +1,210 @@
+//! Model rollouts with NUNO's penalty and truncation (Section 4.3): from
+//! dataset states, the policy acts and the neural SDE steps; each transition's
+//! reward is r − λ_pen·η(s, a), and a rollout stops at a terminal state (the
+//! task's rules) or once its accumulated η Σ_k η(s_k, a_k) exceeds ε(h, α).
+//!
+//! Particles are folded into the batch: each start state is rolled
+//! `particles` times, each particle its own trajectory with its own
+//! accumulated η.
+
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
+
+use super::BatchPolicy;
+use crate::data::TransitionBatch;
+use crate::envs::TaskRules;
+use crate::sde::BatchDynamics;
+
+/// How model rollouts run.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RolloutConfig {
+    /// h, the rollout length (Table 3).
+    pub horizon: usize,
+    /// Trajectories per start state.
+    pub particles: usize,
+    /// λ_pen, the weight of η in the penalised reward (Table 3).
+    pub penalty: f64,
+    /// ε(h, α): a rollout stops before the step that takes its accumulated η
+    /// above this; `None` never truncates.
+    pub threshold: Option<f32>,
+    /// Multiplies ε: 1 samples the SDE, 0 follows the drift.
+    pub noise_scale: f32,
+}
+
+/// What happened to one trajectory at one step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum StepOutcome {
+    Continued,
+    /// The task's rules say the robot fell; the transition is kept as terminal.
+    Terminal,
+    /// Accumulated η passed ε(h, α); the transition is dropped.
+    Truncated,
+}
+
+/// Per-step records of a batch of rollouts, row-major `[rows, horizon]`
+/// where `rows = starts · particles` (particle p of start b is row b·particles + p);
+/// entries after a trajectory ended are absent (`steps[row]` says how many exist).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct RolloutTrace {
+    pub rows: usize,
+    pub horizon: usize,
+    /// Steps each trajectory kept.
+    pub kept: Vec<usize>,
+    /// η at each step taken (including a truncating one): `[rows][..]`.
+    pub eta: Vec<Vec<f32>>,
+    /// Accumulated η after each step taken.
+    pub accumulated_eta: Vec<Vec<f32>>,
+    /// The reward before the penalty, per step taken.
+    pub rewards: Vec<Vec<f32>>,
+    /// How each trajectory ended, if it did before h.
+    pub outcome: Vec<StepOutcome>,
+}
+
+/// Summary of a batch of rollouts, for logging.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct RolloutStats {
+    pub trajectories: usize,
+    pub transitions: usize,
+    pub mean_length: f32,
+    pub mean_eta: f32,
+    pub mean_reward: f32,
+    pub mean_penalized_reward: f32,
+    pub truncated: usize,
+    pub terminated: usize,
+}
+
+/// The transitions kept and the trace of every trajectory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelRollout {
+    /// Kept transitions, rewards penalised.
+    pub transitions: TransitionBatch,
+    pub trace: RolloutTrace,
+    pub stats: RolloutStats,
+}
+
+/// Rolls `policy` through `dynamics` from `starts` (`[batch, obs_dim]` observations).
+pub fn rollout_model(
+    dynamics: &dyn BatchDynamics,
+    policy: &dyn BatchPolicy,
+    rules: &TaskRules,
+    starts: &[f32],
+    config: &RolloutConfig,
+    rng: &mut ChaCha8Rng,
+) -> ModelRollout {
+    let spec = dynamics.spec();
+    let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
+    let state_dim = dynamics.state_dim();
+    let learned_reward = dynamics.learns_reward();
+    let rows = starts.len() / obs_dim * config.particles;
+    let mut observations: Vec<f32> = starts
+        .chunks_exact(obs_dim)
+        .flat_map(|row| {
+            std::iter::repeat_n(row, config.particles)
+                .flatten()
+                .copied()
+        })
+        .collect();
+    let mut trace = RolloutTrace {
+        rows,
+        horizon: config.horizon,
+        kept: vec![0; rows],
+        eta: vec![Vec::new(); rows],
+        accumulated_eta: vec![Vec::new(); rows],
+        rewards: vec![Vec::new(); rows],
+        outcome: vec![StepOutcome::Continued; rows],
+    };
+    let mut transitions = TransitionBatch::with_capacity(rows * config.horizon, obs_dim, act_dim);
+    let mut accumulated = vec![0.0f32; rows];
+    let mut active: Vec<usize> = (0..rows).collect();
+
+    for _ in 0..config.horizon {
+        if active.is_empty() {
+            break;
+        }
+        let obs: Vec<f32> = active
+            .iter()
+            .flat_map(|&r| observations[r * obs_dim..(r + 1) * obs_dim].iter().copied())
+            .collect();
+        let actions = policy.act(&obs, rng);
+        // NUNO^R integrates r_c from 0 each step, so its increment is the reward.
+        let states: Vec<f32> = if learned_reward {
+            obs.chunks_exact(obs_dim)
+                .flat_map(|o| o.iter().copied().chain([0.0]))
+                .collect()
+        } else {
+            obs.clone()
+        };
+        let noise: Vec<f32> = (0..states.len())
+            .map(|_| rng.sample::<f32, _>(StandardNormal) * config.noise_scale)
+            .collect();
+        let step = dynamics.step(&states, &actions, &noise);
+
+        let mut still_active = Vec::with_capacity(active.len());
+        for (i, &r) in active.iter().enumerate() {
+            let next_state = &step.next_states[i * state_dim..(i + 1) * state_dim];
+            let next_obs = &next_state[..obs_dim];
+            let action = &actions[i * act_dim..(i + 1) * act_dim];
+            let reward = if learned_reward {
+                next_state[obs_dim]
+            } else {
+                rules.reward(action, next_obs)
+            };
+            let eta = step.eta[i];
+            accumulated[r] += eta;
+            trace.eta[r].push(eta);
+            trace.accumulated_eta[r].push(accumulated[r]);
+            trace.rewards[r].push(reward);
+            // Truncation: Σ_k η(s_k, a_k) > ε(h, α) drops this step and ends the rollout.
+            if config.threshold.is_some_and(|e| accumulated[r] > e) {
+                trace.outcome[r] = StepOutcome::Truncated;
+                continue;
+            }
+            let terminal = rules.terminal(next_obs);
+            transitions
+                .observations
+                .extend_from_slice(&obs[i * obs_dim..(i + 1) * obs_dim]);
+            transitions.actions.extend_from_slice(action);
+            // Penalised reward r − λ_pen·η(s, a).
+            transitions
+                .rewards
+                .push(reward - (config.penalty * f64::from(eta)) as f32);
+            transitions.next_observations.extend_from_slice(next_obs);
+            transitions.terminals.push(if terminal { 1.0 } else { 0.0 });
+            trace.kept[r] += 1;
+            observations[r * obs_dim..(r + 1) * obs_dim].copy_from_slice(next_obs);
+            if terminal {
+                trace.outcome[r] = StepOutcome::Terminal;
+            } else {
+                still_active.push(r);
+            }
+        }
+        active = still_active;
+    }
+
+    let stats = summarize(&trace, &transitions);
+    ModelRollout {
+        transitions,
+        trace,
+        stats,
+    }
+}
+
+fn summarize(trace: &RolloutTrace, transitions: &TransitionBatch) -> RolloutStats {
+    let mean = |values: &mut dyn Iterator<Item = f32>| {
+        let (sum, n) = values.fold((0.0f64, 0usize), |(s, n), v| (s + f64::from(v), n + 1));
+        if n == 0 { 0.0 } else { (sum / n as f64) as f32 }
+    };
+    let count = |o: StepOutcome| trace.outcome.iter().filter(|&&x| x == o).count();
+    RolloutStats {
+        trajectories: trace.rows,
+        transitions: transitions.len(),
+        mean_length: mean(&mut trace.kept.iter().map(|&k| k as f32)),
+        mean_eta: mean(&mut trace.eta.iter().flatten().copied()),
+        mean_reward: mean(&mut trace.rewards.iter().flatten().copied()),
+        mean_penalized_reward: mean(&mut transitions.rewards.iter().copied()),
+        truncated: count(StepOutcome::Truncated),
+        terminated: count(StepOutcome::Terminal),
+    }
+}

@@ -1,0 +1,364 @@
+//! NUNO's policy optimisation loop (Section 4.3; MOPO + TATU + NUNO), one epoch
+//! at a time so a caller can checkpoint between epochs:
+//!
+//! ```text
+//! every rollout_freq steps: B starts ~ D; roll π through the SDE for h steps,
+//!     r̃ = r − λ_pen·η, stop once Σ η > ε(h, α); push into D_model (last 5 rollouts)
+//! every step: batch = β·256 from D ∪ (1 − β)·256 from D_model; one SAC update
+//! every epoch: evaluate π in MuJoCo; η of policy/dataset/random actions on dataset states
+//! ```
+
+use std::time::Instant;
+
+use burn::config::Config;
+use burn::module::Module;
+use burn::tensor::Device;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::actor::{ActionMode, ActorConfig, ActorPolicy};
+use super::buffer::ReplayBuffer;
+use super::model_rollout::{RolloutConfig, RolloutStats, rollout_model};
+use super::presets::Preset;
+use super::sac::{Sac, SacConfig, SacLosses};
+use super::{AgentError, BatchPolicy};
+use crate::data::{Dataset, StartStateSampler, TransitionBatch, TransitionSampler};
+use crate::envs::{EvaluationConfig, TaskConfig, TaskRules, evaluate};
+use crate::sde::{BatchDynamics, ThresholdTable};
+
+/// Every knob of the loop; defaults are Appendix C.2–C.3's.
+#[derive(Config, Debug, PartialEq)]
+pub struct PolicyLoopConfig {
+    pub sac: SacConfig,
+    /// h, the model rollout length (Table 3).
+    pub horizon: usize,
+    /// α, the CVaR level of the truncation threshold ε(h, α) (Table 3).
+    pub cvar_alpha: f64,
+    /// λ_pen, the η penalty weight (Table 3).
+    pub penalty: f64,
+    /// Truncate rollouts at ε(h, α) (NUNO); off keeps the penalty alone.
+    #[config(default = true)]
+    pub truncate: bool,
+    /// Gradient steps between model rollouts.
+    #[config(default = 1000)]
+    pub rollout_freq: usize,
+    /// Start states per model rollout (TATU+MOPO: 50000).
+    #[config(default = 50000)]
+    pub rollout_batch: usize,
+    /// SDE trajectories per start state.
+    #[config(default = 1)]
+    pub particles: usize,
+    /// Rollouts the model buffer retains.
+    #[config(default = 5)]
+    pub retain_epochs: usize,
+    /// β, the fraction of each SAC batch drawn from the real data.
+    #[config(default = 0.05)]
+    pub real_ratio: f64,
+    /// Gradient steps per epoch.
+    #[config(default = 1000)]
+    pub steps_per_epoch: usize,
+    /// Epochs (1000 × 1000 steps = the paper's 1M).
+    #[config(default = 1000)]
+    pub epochs: usize,
+    /// MuJoCo evaluation episodes per epoch.
+    #[config(default = 10)]
+    pub eval_episodes: usize,
+    /// Dataset states on which η of policy, dataset and random actions is compared.
+    #[config(default = 1000)]
+    pub eta_probe_states: usize,
+    #[config(default = 0)]
+    pub seed: u64,
+}
+
+impl PolicyLoopConfig {
+    /// The loop with a preset's h, α and λ_pen.
+    pub fn from_preset(preset: &Preset, sac: SacConfig) -> Self {
+        Self::new(sac, preset.horizon, preset.cvar_alpha, preset.penalty)
+    }
+
+    fn rollout(&self, threshold: Option<f32>) -> RolloutConfig {
+        RolloutConfig {
+            horizon: self.horizon,
+            particles: self.particles,
+            penalty: self.penalty,
+            threshold,
+            noise_scale: 1.0,
+        }
+    }
+}
+
+/// Mean η of three kinds of actions on the same dataset states (Figure 3).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct EtaProbe {
+    pub policy: f32,
+    pub dataset: f32,
+    pub random: f32,
+}
+
+/// The MuJoCo evaluation of one epoch.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct EvalSummary {
+    pub mean_return: f64,
+    pub std_return: f64,
+    /// `charts/normalized_score` (D4RL × 100).
+    pub normalized_score: f64,
+    pub std_normalized_score: f64,
+}
+
+/// What one epoch did.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpochRecord {
+    pub epoch: usize,
+    pub step: usize,
+    /// Mean SAC losses over the epoch.
+    pub losses: SacLosses,
+    /// The last model rollout of the epoch.
+    pub rollout: RolloutStats,
+    pub model_buffer: usize,
+    /// `charts/SPS`: gradient steps per second (rollouts included, evaluation not).
+    pub sps: f64,
+    pub eval: EvalSummary,
+    pub eta: EtaProbe,
+}
+
+/// What the loop reads but does not own.
+pub struct LoopContext<'a> {
+    pub dataset: &'a Dataset,
+    pub dynamics: &'a dyn BatchDynamics,
+    pub task: TaskConfig,
+    pub rules: TaskRules,
+}
+
+/// The loop's whole state: what a checkpoint saves.
+pub struct PolicyTraining {
+    pub config: PolicyLoopConfig,
+    pub sac: Sac,
+    pub model_buffer: ReplayBuffer,
+    pub rng: ChaCha8Rng,
+    /// Gradient steps taken.
+    pub step: usize,
+    /// Epochs finished.
+    pub epoch: usize,
+    /// ε(h, α), when truncating.
+    pub threshold: Option<f32>,
+    pub history: Vec<EpochRecord>,
+}
+
+impl PolicyTraining {
+    /// A fresh run: checks the dataset, dynamics and task agree, and looks up ε(h, α).
+    pub fn new(
+        config: PolicyLoopConfig,
+        ctx: &LoopContext,
+        thresholds: Option<&ThresholdTable>,
+        device: &Device,
+    ) -> Result<Self, AgentError> {
+        let spec = ctx.dynamics.spec();
+        if ctx.dataset.obs_dim() != spec.obs_dim || ctx.dataset.act_dim() != spec.act_dim {
+            return Err(AgentError::Mismatch(format!(
+                "the dataset has observations of width {} and actions of width {}, \
+                 the dynamics model expects {} and {}",
+                ctx.dataset.obs_dim(),
+                ctx.dataset.act_dim(),
+                spec.obs_dim,
+                spec.act_dim
+            )));
+        }
+        let threshold =
+            if config.truncate {
+                let table = thresholds.ok_or_else(|| {
+                    AgentError::Threshold("the dynamics artifact has no threshold table".into())
+                })?;
+                Some(table.get(config.horizon, config.cvar_alpha).ok_or_else(|| {
+                AgentError::Threshold(format!(
+                    "ε(h = {}, α = {}) is not in the model's table (h ∈ {:?}, α ∈ {:?})",
+                    config.horizon, config.cvar_alpha, table.horizons, table.alphas
+                ))
+            })?)
+            } else {
+                None
+            };
+        let task = crate::envs::MujocoTask::new(ctx.task)?;
+        let (low, high) = task.action_bounds();
+        let actor = ActorConfig::new(
+            spec.obs_dim,
+            spec.act_dim,
+            low.iter().map(|&x| x as f32).collect(),
+            high.iter().map(|&x| x as f32).collect(),
+        );
+        device.seed(config.seed);
+        let sac = Sac::new(actor, config.sac.clone(), device);
+        let capacity =
+            config.rollout_batch * config.horizon * config.particles * config.retain_epochs;
+        Ok(Self {
+            model_buffer: ReplayBuffer::new(capacity, spec.obs_dim, spec.act_dim),
+            rng: ChaCha8Rng::seed_from_u64(config.seed),
+            step: 0,
+            epoch: 0,
+            threshold,
+            history: Vec::new(),
+            sac,
+            config,
+        })
+    }
+
+    /// The current actor as a policy on the plain device.
+    pub fn policy(&self, mode: ActionMode) -> ActorPolicy {
+        ActorPolicy {
+            actor: self.sac.actor.valid(),
+            mode,
+        }
+    }
+
+    /// One epoch: `steps_per_epoch` SAC updates with model rollouts every
+    /// `rollout_freq` steps, then evaluation and the η probe.
+    pub fn run_epoch(&mut self, ctx: &LoopContext) -> Result<EpochRecord, AgentError> {
+        let started = Instant::now();
+        let mut losses = Vec::with_capacity(self.config.steps_per_epoch);
+        let mut rollout = RolloutStats::default();
+        for _ in 0..self.config.steps_per_epoch {
+            if self.step.is_multiple_of(self.config.rollout_freq.max(1)) {
+                rollout = self.model_rollout(ctx);
+            }
+            let batch = self.mixed_batch(ctx.dataset);
+            losses.push(self.sac.update(&batch, &mut self.rng));
+            self.step += 1;
+        }
+        let sps = losses.len() as f64 / started.elapsed().as_secs_f64();
+        self.epoch += 1;
+
+        let eval = self.evaluate(ctx)?;
+        let eta = self.eta_probe(ctx);
+        let record = EpochRecord {
+            epoch: self.epoch,
+            step: self.step,
+            losses: mean_losses(&losses),
+            rollout,
+            model_buffer: self.model_buffer.len(),
+            sps,
+            eval,
+            eta,
+        };
+        self.history.push(record.clone());
+        Ok(record)
+    }
+
+    /// Rolls the sampled policy through the model from dataset states into the model buffer.
+    fn model_rollout(&mut self, ctx: &LoopContext) -> RolloutStats {
+        let starts =
+            StartStateSampler::new(ctx.dataset).sample(self.config.rollout_batch, &mut self.rng);
+        let policy = self.policy(ActionMode::Sampled);
+        let config = self.config.rollout(self.threshold);
+        let result = rollout_model(
+            ctx.dynamics,
+            &policy,
+            &ctx.rules,
+            &starts,
+            &config,
+            &mut self.rng,
+        );
+        self.model_buffer.push(&result.transitions);
+        result.stats
+    }
+
+    /// A SAC batch: round(β·batch) real transitions first, then the rest
+    /// from the model buffer (all real while the model buffer is empty).
+    pub fn mixed_batch(&mut self, dataset: &Dataset) -> TransitionBatch {
+        let batch_size = self.config.sac.batch_size;
+        let real_count = if self.model_buffer.is_empty() {
+            batch_size
+        } else {
+            ((self.config.real_ratio * batch_size as f64).round() as usize).min(batch_size)
+        };
+        let mut batch = TransitionSampler::new(dataset).sample(real_count, &mut self.rng);
+        batch.append(
+            &self
+                .model_buffer
+                .sample(batch_size - real_count, &mut self.rng),
+        );
+        batch
+    }
+
+    /// The deterministic policy in the real task; episode seeds differ per epoch.
+    fn evaluate(&self, ctx: &LoopContext) -> Result<EvalSummary, AgentError> {
+        if self.config.eval_episodes == 0 {
+            return Ok(EvalSummary::default());
+        }
+        let seed = self.config.seed.wrapping_add(1_000_003 * self.epoch as u64);
+        let config = EvaluationConfig::new(ctx.task, self.config.eval_episodes, seed);
+        let report = evaluate(&self.policy(ActionMode::Deterministic), &config)?;
+        Ok(EvalSummary {
+            mean_return: report.mean_return,
+            std_return: report.std_return,
+            normalized_score: report.mean_normalized_score,
+            std_normalized_score: report.std_normalized_score,
+        })
+    }
+
+    /// η of policy, dataset and uniformly random actions on the same dataset
+    /// states (fixed per run, so epochs compare).
+    fn eta_probe(&self, ctx: &LoopContext) -> EtaProbe {
+        let n = self.config.eta_probe_states.min(ctx.dataset.len());
+        if n == 0 {
+            return EtaProbe::default();
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(self.config.seed ^ 0xe7a);
+        let d = ctx.dataset;
+        let rows: Vec<usize> = (0..n).map(|_| rng.random_range(0..d.len())).collect();
+        let obs: Vec<f32> = rows
+            .iter()
+            .flat_map(|&i| d.observations.row(i).to_vec())
+            .collect();
+        let dataset_actions: Vec<f32> = rows
+            .iter()
+            .flat_map(|&i| d.actions.row(i).to_vec())
+            .collect();
+        let policy = self.policy(ActionMode::Deterministic);
+        let policy_actions = policy.act(&obs, &mut rng);
+        let c = &policy.actor.config;
+        let random_actions: Vec<f32> = (0..n)
+            .flat_map(|_| {
+                c.action_low
+                    .iter()
+                    .zip(&c.action_high)
+                    .map(|(l, h)| l + (h - l) * rng.random::<f32>())
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        let mean_eta = |actions: &[f32]| mean_eta(ctx.dynamics, &obs, actions);
+        EtaProbe {
+            policy: mean_eta(&policy_actions),
+            dataset: mean_eta(&dataset_actions),
+            random: mean_eta(&random_actions),
+        }
+    }
+}
+
+/// Mean η(s, a) over rows.
+fn mean_eta(dynamics: &dyn BatchDynamics, obs: &[f32], actions: &[f32]) -> f32 {
+    let obs_dim = dynamics.spec().obs_dim;
+    let states: Vec<f32> = if dynamics.learns_reward() {
+        obs.chunks_exact(obs_dim)
+            .flat_map(|o| o.iter().copied().chain([0.0]))
+            .collect()
+    } else {
+        obs.to_vec()
+    };
+    let noise = vec![0.0; states.len()];
+    let eta = dynamics.step(&states, actions, &noise).eta;
+    eta.iter().sum::<f32>() / eta.len().max(1) as f32
+}
+
+fn mean_losses(losses: &[SacLosses]) -> SacLosses {
+    let n = losses.len().max(1) as f32;
+    let sum = |f: fn(&SacLosses) -> f32| losses.iter().map(f).sum::<f32>() / n;
+    SacLosses {
+        qf1_values: sum(|l| l.qf1_values),
+        qf1_loss: sum(|l| l.qf1_loss),
+        qf2_loss: sum(|l| l.qf2_loss),
+        actor_loss: sum(|l| l.actor_loss),
+        alpha: sum(|l| l.alpha),
+        alpha_loss: sum(|l| l.alpha_loss),
+        entropy: sum(|l| l.entropy),
+    }
+}

@@ -1,0 +1,98 @@
+//! NUNO's per-task hyperparameters, Table 3 of the paper: rollout length h,
+//! CVaR level α of the truncation threshold, and penalty weight λ_pen (the
+//! real-data ratio β = 0.05 is shared, Appendix C.3).
+
+use serde::Serialize;
+
+use super::AgentError;
+use crate::envs::{ObservationLayout, TaskName};
+
+/// One row of Table 3.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Preset {
+    /// `hopper-random` for D4RL, `neorl-hopper-low` for NeoRL.
+    pub name: &'static str,
+    pub task: TaskName,
+    pub layout: ObservationLayout,
+    /// h
+    pub horizon: usize,
+    /// α of ε(h, α)
+    pub cvar_alpha: f64,
+    /// λ_pen
+    pub penalty: f64,
+}
+
+const fn row(
+    name: &'static str,
+    task: TaskName,
+    layout: ObservationLayout,
+    horizon: usize,
+    cvar_alpha: f64,
+    penalty: f64,
+) -> Preset {
+    Preset {
+        name,
+        task,
+        layout,
+        horizon,
+        cvar_alpha,
+        penalty,
+    }
+}
+
+use ObservationLayout::{D4rl, Neorl};
+use TaskName::{HalfCheetah, Hopper, Walker2d};
+
+/// Table 3, in the paper's order: 12 D4RL rows, then 9 NeoRL rows.
+pub const PRESETS: [Preset; 21] = [
+    row("halfcheetah-random", HalfCheetah, D4rl, 20, 1.0, 0.001),
+    row("hopper-random", Hopper, D4rl, 10, 1.0, 0.001),
+    row("walker2d-random", Walker2d, D4rl, 10, 0.99, 0.001),
+    row("halfcheetah-medium", HalfCheetah, D4rl, 5, 0.99, 1.0),
+    row("hopper-medium", Hopper, D4rl, 10, 0.99, 1.0),
+    row("walker2d-medium", Walker2d, D4rl, 10, 0.98, 1.0),
+    row("halfcheetah-medium-replay", HalfCheetah, D4rl, 5, 0.9, 1.0),
+    row("hopper-medium-replay", Hopper, D4rl, 10, 0.99, 1.0),
+    row("walker2d-medium-replay", Walker2d, D4rl, 10, 0.95, 1.0),
+    row(
+        "halfcheetah-medium-expert",
+        HalfCheetah,
+        D4rl,
+        10,
+        0.95,
+        1.0,
+    ),
+    row("hopper-medium-expert", Hopper, D4rl, 10, 0.99, 1.0),
+    row("walker2d-medium-expert", Walker2d, D4rl, 10, 0.98, 1.0),
+    row("neorl-halfcheetah-low", HalfCheetah, Neorl, 10, 1.0, 1.0),
+    row("neorl-hopper-low", Hopper, Neorl, 10, 0.99, 0.001),
+    row("neorl-walker2d-low", Walker2d, Neorl, 5, 0.99, 0.001),
+    row(
+        "neorl-halfcheetah-medium",
+        HalfCheetah,
+        Neorl,
+        10,
+        0.99,
+        1.0,
+    ),
+    row("neorl-hopper-medium", Hopper, Neorl, 5, 0.9, 0.1),
+    row("neorl-walker2d-medium", Walker2d, Neorl, 5, 0.99, 0.001),
+    row("neorl-halfcheetah-high", HalfCheetah, Neorl, 5, 0.99, 1.0),
+    row("neorl-hopper-high", Hopper, Neorl, 5, 0.9, 0.1),
+    row("neorl-walker2d-high", Walker2d, Neorl, 5, 0.99, 1.0),
+];
+
+/// The preset called `name`.
+pub fn preset(name: &str) -> Result<&'static Preset, AgentError> {
+    PRESETS
+        .iter()
+        .find(|p| p.name == name)
+        .ok_or_else(|| AgentError::UnknownPreset {
+            name: name.to_string(),
+            known: PRESETS
+                .iter()
+                .map(|p| p.name)
+                .collect::<Vec<_>>()
+                .join(", "),
+        })
+}

@@ -1,0 +1,219 @@
+//! Soft actor-critic (Haarnoja et al., 2018), one update read top to bottom:
+//! critic target, critic step, actor step, temperature step, Polyak targets.
+//! Defaults are NUNO's (Appendix C.2, from TATU+MOPO): learning rates 3e-4,
+//! γ = 0.99, τ = 0.005, batch 256, 2×256 networks, automatic α.
+
+use burn::config::Config;
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::tensor::{Device, Tensor, TensorData};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::actor::{Actor, ActorConfig};
+use super::critic::{Temperature, TwinCritic};
+use crate::data::TransitionBatch;
+use crate::nn::{normal, polyak_update};
+
+/// SAC's hyperparameters.
+#[derive(Config, Debug, PartialEq)]
+pub struct SacConfig {
+    /// Actor hidden layers (ReLU).
+    #[config(default = "vec![256, 256]")]
+    pub actor_hidden: Vec<usize>,
+    /// Critic hidden layers (ReLU).
+    #[config(default = "vec![256, 256]")]
+    pub critic_hidden: Vec<usize>,
+    /// γ, the discount.
+    #[config(default = 0.99)]
+    pub gamma: f64,
+    /// τ, the Polyak rate of the target critics.
+    #[config(default = 0.005)]
+    pub tau: f64,
+    #[config(default = 3e-4)]
+    pub actor_lr: f64,
+    #[config(default = 3e-4)]
+    pub critic_lr: f64,
+    /// Learning rate of log α.
+    #[config(default = 3e-4)]
+    pub alpha_lr: f64,
+    /// Transitions per update.
+    #[config(default = 256)]
+    pub batch_size: usize,
+    /// H̄, the target entropy; `None` gives −|A| (NUNO's code uses −3 for every
+    /// task through an argparse quirk; −|A| is SAC's rule).
+    pub target_entropy: Option<f64>,
+    /// α before any update (NUNO's code: 0.2, then learned).
+    #[config(default = 0.2)]
+    pub initial_alpha: f64,
+    #[config(default = -5.0)]
+    pub log_std_min: f32,
+    #[config(default = 2.0)]
+    pub log_std_max: f32,
+}
+
+/// One update's losses, under CleanRL's metric names.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct SacLosses {
+    /// `losses/qf1_values`: mean Q₁(s, a).
+    pub qf1_values: f32,
+    /// `losses/qf1_loss`, `losses/qf2_loss`: mean (Q_i(s, a) − y)².
+    pub qf1_loss: f32,
+    pub qf2_loss: f32,
+    /// `losses/actor_loss`: mean α·log π(ã|s) − min Q(s, ã).
+    pub actor_loss: f32,
+    /// `losses/alpha`
+    pub alpha: f32,
+    /// `losses/alpha_loss`
+    pub alpha_loss: f32,
+    /// Mean −log π(ã|s), the policy's entropy estimate.
+    pub entropy: f32,
+}
+
+/// The optimisers, kept apart so a checkpoint can save their state.
+#[derive(Clone)]
+pub struct SacOptimizers {
+    pub actor: ModuleOptimizer,
+    pub critic: ModuleOptimizer,
+    pub alpha: ModuleOptimizer,
+}
+
+/// The agent: networks on the autodiff device, target critics off it.
+pub struct Sac {
+    pub config: SacConfig,
+    pub actor: Actor,
+    pub critic: TwinCritic,
+    /// Q̄₁, Q̄₂: Polyak averages of the critics, never differentiated.
+    pub target_critic: TwinCritic,
+    pub temperature: Temperature,
+    pub optimizers: SacOptimizers,
+    /// H̄
+    pub target_entropy: f64,
+    device: Device,
+}
+
+impl Sac {
+    /// A new agent for `actor`'s state and action box; `device` is the plain
+    /// device, the networks train on its autodiff version.
+    pub fn new(actor: ActorConfig, config: SacConfig, device: &Device) -> Self {
+        let device = device.clone().autodiff();
+        let actor_config = ActorConfig {
+            hidden: config.actor_hidden.clone(),
+            log_std_min: config.log_std_min,
+            log_std_max: config.log_std_max,
+            ..actor
+        };
+        let (obs_dim, act_dim) = (actor_config.obs_dim, actor_config.act_dim);
+        let critic = TwinCritic::init(obs_dim, act_dim, &config.critic_hidden, &device);
+        Self {
+            target_critic: critic.valid(),
+            actor: actor_config.init(&device),
+            critic,
+            temperature: Temperature::init(config.initial_alpha, &device),
+            optimizers: SacOptimizers {
+                actor: AdamConfig::new().init(),
+                critic: AdamConfig::new().init(),
+                alpha: AdamConfig::new().init(),
+            },
+            target_entropy: config.target_entropy.unwrap_or(-(act_dim as f64)),
+            config,
+            device,
+        }
+    }
+
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The critic target, off the graph:
+    /// y = r + γ(1 − d)(min_i Q̄_i(s', ã') − α·log π(ã'|s')),  ã' ~ π(·|s') drawn with `noise`.
+    ///
+    /// # Shapes
+    /// - `next_obs`: `[batch, obs_dim]`, `rewards`, `terminals`: `[batch, 1]`,
+    ///   `noise`: `[batch, act_dim]` → `[batch, 1]`
+    pub fn critic_target(
+        &self,
+        next_obs: Tensor<2>,
+        rewards: Tensor<2>,
+        terminals: Tensor<2>,
+        noise: Tensor<2>,
+    ) -> Tensor<2> {
+        let alpha = self.temperature.alpha().inner();
+        let next = self.actor.valid().sample(next_obs.clone(), noise);
+        let next_value = self.target_critic.min_q(next_obs, next.action) - next.log_prob * alpha;
+        rewards + (terminals.neg() + 1.0) * next_value * self.config.gamma
+    }
+
+    /// One SAC update on `batch`, drawing the policy's ε from `rng`.
+    pub fn update(&mut self, batch: &TransitionBatch, rng: &mut ChaCha8Rng) -> SacLosses {
+        let c = &self.actor.config;
+        let (obs_dim, act_dim) = (c.obs_dim, c.act_dim);
+        let b = batch.rewards.len();
+        let device = self.device.clone();
+        let plain = device.clone().inner();
+        let tensor = |values: &[f32], width: usize, device: &Device| {
+            Tensor::<2>::from_data(TensorData::new(values.to_vec(), [b, width]), device)
+        };
+        let obs = tensor(&batch.observations, obs_dim, &device);
+        let actions = tensor(&batch.actions, act_dim, &device);
+
+        let next_obs = tensor(&batch.next_observations, obs_dim, &plain);
+        let y = self.critic_target(
+            next_obs,
+            tensor(&batch.rewards, 1, &plain),
+            tensor(&batch.terminals, 1, &plain),
+            normal([b, act_dim], rng, &plain),
+        );
+        let alpha = self.temperature.alpha().inner();
+
+        // Critic step: L_Q = mean (Q₁(s, a) − y)² + mean (Q₂(s, a) − y)².
+        let (q1, q2) = self.critic.forward(obs.clone(), actions);
+        let qf1_values = q1.clone().mean().into_scalar::<f32>();
+        let qf1_loss = (q1 - y.clone()).powi_scalar(2).mean();
+        let qf2_loss = (q2 - y).powi_scalar(2).mean();
+        let qf_loss = qf1_loss.clone() + qf2_loss.clone();
+        let grads = GradientsParams::from_grads(qf_loss.backward(), &self.critic);
+        self.critic =
+            self.optimizers
+                .critic
+                .step(self.config.critic_lr, self.critic.clone(), grads);
+
+        // Actor step: L_π = mean α·log π(ã|s) − min_i Q_i(s, ã),  ã ~ π(·|s).
+        let sample = self
+            .actor
+            .sample(obs.clone(), normal([b, act_dim], rng, &device));
+        let log_prob = sample.log_prob.clone();
+        let min_q = self.critic.min_q(obs, sample.action);
+        let actor_loss = (sample.log_prob * alpha.clone() - min_q).mean();
+        let grads = GradientsParams::from_grads(actor_loss.backward(), &self.actor);
+        self.actor = self
+            .optimizers
+            .actor
+            .step(self.config.actor_lr, self.actor.clone(), grads);
+
+        // Temperature step: L_α = mean −log α·(log π(ã|s) + H̄).
+        let log_prob = log_prob.inner();
+        let entropy = -log_prob.clone().mean().into_scalar::<f32>();
+        let log_alpha = self.temperature.log_alpha.val().unsqueeze::<2>();
+        let alpha_loss = (log_alpha.neg() * (log_prob + self.target_entropy)).mean();
+        let grads = GradientsParams::from_grads(alpha_loss.backward(), &self.temperature);
+        self.temperature =
+            self.optimizers
+                .alpha
+                .step(self.config.alpha_lr, self.temperature.clone(), grads);
+
+        // Targets: Q̄ ← τ·Q + (1 − τ)·Q̄.
+        self.target_critic =
+            polyak_update(self.target_critic.clone(), &self.critic, self.config.tau);
+
+        SacLosses {
+            qf1_values,
+            qf1_loss: qf1_loss.into_scalar(),
+            qf2_loss: qf2_loss.into_scalar(),
+            actor_loss: actor_loss.into_scalar(),
+            alpha: alpha.into_scalar(),
+            alpha_loss: alpha_loss.into_scalar(),
+            entropy,
+        }
+    }
+}

@@ -1,0 +1,106 @@
+//! A trained policy on disk, next to the dynamics it was trained in:
+//! `{stem}.safetensors` (the actor's parameters by module path) and
+//! `{stem}.json` (schema version, actor sizes and action box, task, training
+//! provenance, the weights' hash). The best policy is `policy`, the last
+//! `policy-last`.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use burn::tensor::Device;
+use serde::{Deserialize, Serialize};
+
+use super::json_file::{read_checked_weights, read_versioned_json, write_json};
+use super::safetensors_file::{safetensors_bytes, write_bytes};
+use super::tensors::{collect_tensors, load_tensors};
+use super::{ArtifactError, sha256_hex};
+use crate::agent::{Actor, ActorConfig, PolicyLoopConfig};
+use crate::envs::TaskConfig;
+
+pub const POLICY_SCHEMA_VERSION: u32 = 1;
+/// File stem of the best policy (by evaluation score).
+pub const BEST_POLICY: &str = "policy";
+/// File stem of the policy after the last finished epoch.
+pub const LAST_POLICY: &str = "policy-last";
+
+/// Where a policy came from.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct PolicyProvenance {
+    pub preset: Option<String>,
+    /// SHA-256 of the `dynamics.safetensors` it was trained in.
+    pub dynamics_sha256: Option<String>,
+    pub dataset_sha256: Option<String>,
+    pub training: Option<PolicyLoopConfig>,
+    pub epoch: usize,
+    pub step: usize,
+    /// D4RL normalised score at that epoch's evaluation.
+    pub normalized_score: Option<f64>,
+}
+
+/// The contents of `{stem}.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PolicyMetadata {
+    pub schema_version: u32,
+    pub actor: ActorConfig,
+    pub task: TaskConfig,
+    #[serde(flatten)]
+    pub provenance: PolicyProvenance,
+    pub weights_sha256: String,
+    pub tensors: BTreeMap<String, Vec<usize>>,
+}
+
+/// Writes `actor` as `{stem}.safetensors` + `{stem}.json` in `dir`, weights first.
+pub fn save_policy(
+    dir: &Path,
+    stem: &str,
+    actor: &Actor,
+    task: TaskConfig,
+    provenance: PolicyProvenance,
+) -> Result<PolicyMetadata, ArtifactError> {
+    let tensors = collect_tensors(actor);
+    let weights = safetensors_bytes(&tensors, None)?;
+    let metadata = PolicyMetadata {
+        schema_version: POLICY_SCHEMA_VERSION,
+        actor: actor.config.clone(),
+        task,
+        provenance,
+        weights_sha256: sha256_hex(&weights),
+        tensors: tensors
+            .iter()
+            .map(|(k, (shape, _))| (k.clone(), shape.clone()))
+            .collect(),
+    };
+    write_bytes(&dir.join(format!("{stem}.safetensors")), &weights)?;
+    write_json(&dir.join(format!("{stem}.json")), &metadata)?;
+    Ok(metadata)
+}
+
+/// Whether `dir` holds a policy under `stem`.
+pub fn has_policy(dir: &Path, stem: &str) -> bool {
+    dir.join(format!("{stem}.json")).is_file()
+}
+
+/// Loads the policy `{stem}` in `dir` onto `device`, validating everything.
+pub fn load_policy(
+    dir: &Path,
+    stem: &str,
+    device: &Device,
+) -> Result<(Actor, PolicyMetadata), ArtifactError> {
+    let metadata: PolicyMetadata =
+        read_versioned_json(&dir.join(format!("{stem}.json")), POLICY_SCHEMA_VERSION)?;
+    let a = &metadata.actor;
+    if a.action_low.len() != a.act_dim || a.action_high.len() != a.act_dim {
+        return Err(ArtifactError::Invalid(format!(
+            "{stem}.json: the action box has {} / {} bounds for {} actions",
+            a.action_low.len(),
+            a.action_high.len(),
+            a.act_dim
+        )));
+    }
+    let tensors = read_checked_weights(
+        &dir.join(format!("{stem}.safetensors")),
+        &metadata.weights_sha256,
+    )?;
+    let actor = load_tensors(a.init(device), &tensors, device)?;
+    Ok((actor, metadata))
+}

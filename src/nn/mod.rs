@@ -1,0 +1,61 @@
+//! Network building blocks shared by the neural SDE and the SAC agent.
+
+mod mlp;
+
+pub use mlp::{Activation, Mlp, MlpConfig};
+
+use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::Rng;
+use rand_distr::StandardNormal;
+
+/// Standard normal noise of the given shape, from our own seeded generator
+/// (burn's random tensors would not follow the caller's seed).
+pub fn normal<const D: usize>(shape: [usize; D], rng: &mut impl Rng, device: &Device) -> Tensor<D> {
+    let n = shape.iter().product();
+    let values: Vec<f32> = (0..n).map(|_| rng.sample(StandardNormal)).collect();
+    Tensor::from_data(TensorData::new(values, shape), device)
+}
+
+/// A tensor's values as f32, row-major (converting from the device's float type).
+pub fn to_f32_vec<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
+    // After `convert::<f32>` the element type matches, so `to_vec` cannot fail.
+    tensor
+        .into_data()
+        .convert::<f32>()
+        .try_to_vec()
+        .unwrap_or_default()
+}
+
+/// Polyak averaging `θ̄ ← τ·θ + (1 − τ)·θ̄` of `target` towards `online`
+/// (same module structure), on `target`'s device and off the autodiff graph.
+pub fn polyak_update<M: Module>(target: M, online: &M, tau: f64) -> M {
+    struct Collect(Vec<Tensor<1>>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            self.0.push(param.val().inner().flatten(0, D - 1));
+        }
+    }
+    struct Blend {
+        online: std::vec::IntoIter<Tensor<1>>,
+        tau: f64,
+    }
+    impl ModuleMapper for Blend {
+        fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+            let Some(online) = self.online.next() else {
+                return param;
+            };
+            let (id, old) = (param.id, param.val());
+            let device = old.device();
+            let online: Tensor<D> = online.to_device(&device).reshape(old.dims());
+            let blended = online * self.tau + old.detach() * (1.0 - self.tau);
+            Param::initialized(id, blended)
+        }
+    }
+    let mut online_params = Collect(Vec::new());
+    online.visit(&mut online_params);
+    target.map(&mut Blend {
+        online: online_params.0.into_iter(),
+        tau,
+    })
+}

@@ -1,0 +1,533 @@
+//! SAC and NUNO's policy loop: the math against hand computations, the
+//! truncation rule, the real/model batch mix, and a tiny end-to-end run that
+//! checkpoints and resumes bit-exactly.
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor, TensorData};
+use nuno::agent::{
+    ActorConfig, BatchPolicy, LoopContext, PRESETS, PolicyLoopConfig, PolicyTraining,
+    RandomNetworkPolicy, RolloutConfig, Sac, SacConfig, StepOutcome, preset, rollout_model,
+};
+use nuno::artifact::{
+    collect_tensors, latest_checkpoint, load_checkpoint, load_dynamics, save_checkpoint,
+};
+use nuno::data::{Dataset, GenerateConfig, TransitionBatch, generate};
+use nuno::envs::{MujocoTask, ObservationLayout, TaskConfig, TaskName, TaskRules};
+use nuno::nn::{polyak_update, to_f32_vec};
+use nuno::sde::{BatchDynamics, DynamicsSpec, ModelStep};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+fn tensor(values: Vec<f32>, shape: [usize; 2], device: &Device) -> Tensor<2> {
+    Tensor::from_data(TensorData::new(values, shape), device)
+}
+
+fn small_actor(obs_dim: usize, act_dim: usize, low: f32, high: f32) -> ActorConfig {
+    ActorConfig::new(obs_dim, act_dim, vec![low; act_dim], vec![high; act_dim])
+        .with_hidden(vec![16, 16])
+}
+
+#[test]
+fn tanh_gaussian_log_prob_matches_the_change_of_variables_by_hand() {
+    let device = Device::flex();
+    device.seed(3);
+    // A box [-2, 4]: half-width 3, centre 1.
+    let actor = small_actor(4, 3, -2.0, 4.0).init(&device);
+    let obs: Vec<f32> = (0..5 * 4).map(|i| (i as f32 * 0.37).sin()).collect();
+    let noise: Vec<f32> = (0..5 * 3).map(|i| (i as f32 * 0.91).cos() * 1.5).collect();
+    let sample = actor.sample(
+        tensor(obs.clone(), [5, 4], &device),
+        tensor(noise.clone(), [5, 3], &device),
+    );
+    let (mean, log_std) = actor.mean_log_std(tensor(obs, [5, 4], &device));
+    let (mean, log_std) = (to_f32_vec(mean), to_f32_vec(log_std));
+    let actions = to_f32_vec(sample.action);
+    let log_probs = to_f32_vec(sample.log_prob);
+    for (row, &log_prob) in log_probs.iter().enumerate() {
+        let mut expected = 0.0f64;
+        for j in 0..3 {
+            let k = row * 3 + j;
+            let (mu, ls, eps) = (
+                f64::from(mean[k]),
+                f64::from(log_std[k]),
+                f64::from(noise[k]),
+            );
+            let u = mu + ls.exp() * eps;
+            // log N(u; μ, σ) − log(1 − tanh²u) − log(half-width)
+            expected += -0.5 * eps * eps
+                - ls
+                - 0.5 * (2.0 * std::f64::consts::PI).ln()
+                - (1.0 - u.tanh().powi(2)).ln()
+                - 3.0f64.ln();
+            let action = 1.0 + 3.0 * u.tanh();
+            assert!((f64::from(actions[k]) - action).abs() < 1e-5, "action {k}");
+            assert!((-2.0..=4.0).contains(&actions[k]));
+        }
+        assert!(
+            (f64::from(log_prob) - expected).abs() < 1e-3,
+            "row {row}: {log_prob} vs {expected}"
+        );
+    }
+    // Far in the tail tanh²(u) rounds to 1 in f32; the stable form stays finite.
+    let far = actor.sample(
+        tensor(vec![0.0; 4], [1, 4], &device),
+        tensor(vec![1e4; 3], [1, 3], &device),
+    );
+    assert!(to_f32_vec(far.log_prob)[0].is_finite());
+}
+
+fn sac_batch(n: usize, obs_dim: usize, act_dim: usize, terminal: f32) -> TransitionBatch {
+    TransitionBatch {
+        observations: (0..n * obs_dim).map(|i| (i as f32 * 0.13).sin()).collect(),
+        actions: (0..n * act_dim)
+            .map(|i| (i as f32 * 0.29).cos() * 0.9)
+            .collect(),
+        rewards: (0..n).map(|i| i as f32 * 0.5 - 1.0).collect(),
+        next_observations: (0..n * obs_dim).map(|i| (i as f32 * 0.17).cos()).collect(),
+        terminals: vec![terminal; n],
+    }
+}
+
+#[test]
+fn twin_q_target_uses_the_smaller_target_critic_and_stops_at_terminals() {
+    let device = Device::flex();
+    device.seed(5);
+    let sac = Sac::new(
+        small_actor(3, 2, -1.0, 1.0),
+        SacConfig::new()
+            .with_critic_hidden(vec![16, 16])
+            .with_initial_alpha(0.5),
+        &device,
+    );
+    let (n, plain) = (6, device.clone());
+    let next_obs = tensor(
+        (0..n * 3).map(|i| (i as f32).sin()).collect(),
+        [n, 3],
+        &plain,
+    );
+    let rewards: Vec<f32> = (0..n).map(|i| i as f32).collect();
+    let noise = tensor(vec![0.3; n * 2], [n, 2], &plain);
+
+    let y = |terminal: f32| {
+        to_f32_vec(sac.critic_target(
+            next_obs.clone(),
+            tensor(rewards.clone(), [n, 1], &plain),
+            tensor(vec![terminal; n], [n, 1], &plain),
+            noise.clone(),
+        ))
+    };
+    // By hand: ã' from the same ε, then r + γ(min(Q̄₁, Q̄₂) − α log π).
+    let next = sac.actor.valid().sample(next_obs.clone(), noise.clone());
+    let (q1, q2) = sac.target_critic.forward(next_obs.clone(), next.action);
+    let (q1, q2, logp) = (to_f32_vec(q1), to_f32_vec(q2), to_f32_vec(next.log_prob));
+    let live = y(0.0);
+    for i in 0..n {
+        let expected = rewards[i] + 0.99 * (q1[i].min(q2[i]) - 0.5 * logp[i]);
+        assert!(
+            (live[i] - expected).abs() < 1e-4,
+            "{i}: {} vs {expected}",
+            live[i]
+        );
+    }
+    assert_eq!(y(1.0), rewards, "terminal transitions bootstrap nothing");
+}
+
+#[test]
+fn temperature_moves_toward_the_target_entropy() {
+    let device = Device::flex();
+    let batch = sac_batch(32, 3, 2, 0.0);
+    for (target_entropy, rises) in [(100.0, true), (-100.0, false)] {
+        device.seed(7);
+        let config = SacConfig::new()
+            .with_actor_hidden(vec![16, 16])
+            .with_critic_hidden(vec![16, 16])
+            .with_target_entropy(Some(target_entropy))
+            .with_alpha_lr(0.05);
+        let mut sac = Sac::new(small_actor(3, 2, -1.0, 1.0), config, &device);
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let before = sac.update(&batch, &mut rng).alpha;
+        let mut after = before;
+        for _ in 0..5 {
+            after = sac.update(&batch, &mut rng).alpha;
+        }
+        assert_eq!(
+            after > before,
+            rises,
+            "H̄ = {target_entropy}: α {before} → {after}"
+        );
+        assert_eq!(sac.target_entropy, target_entropy);
+    }
+    // Default H̄ = −|A|.
+    let sac = Sac::new(small_actor(3, 2, -1.0, 1.0), SacConfig::new(), &device);
+    assert_eq!(sac.target_entropy, -2.0);
+}
+
+#[test]
+fn polyak_update_blends_every_parameter() {
+    let device = Device::flex();
+    let a = small_actor(3, 2, -1.0, 1.0).init(&device);
+    let b = small_actor(3, 2, -1.0, 1.0).init(&device);
+    let (ta, tb) = (collect_tensors(&a), collect_tensors(&b));
+    let blended = collect_tensors(&polyak_update(a, &b, 0.25));
+    assert_eq!(blended.len(), 6);
+    for (name, (_, values)) in &blended {
+        for ((v, old), new) in values.iter().zip(&ta[name].1).zip(&tb[name].1) {
+            assert!((v - (0.75 * old + 0.25 * new)).abs() < 1e-6, "{name}");
+        }
+    }
+}
+
+/// Dynamics with a known answer: s' = s + 0.01·(a, a, ...), η = 0.3 everywhere.
+struct ConstantEta {
+    spec: DynamicsSpec,
+}
+
+impl BatchDynamics for ConstantEta {
+    fn spec(&self) -> &DynamicsSpec {
+        &self.spec
+    }
+    fn state_dim(&self) -> usize {
+        self.spec.obs_dim
+    }
+    fn learns_reward(&self) -> bool {
+        false
+    }
+    fn step(&self, states: &[f32], actions: &[f32], _noise: &[f32]) -> ModelStep {
+        let (o, a) = (self.spec.obs_dim, self.spec.act_dim);
+        let n = states.len() / o;
+        let next: Vec<f32> = (0..n * o)
+            .map(|i| states[i] + 0.01 * actions[(i / o) * a])
+            .collect();
+        ModelStep {
+            next_states: next.clone(),
+            means: next,
+            sigma: vec![0.0; n * o],
+            h_eta: vec![0.0; n * o],
+            eta: vec![0.3; n],
+        }
+    }
+}
+
+struct Constant(Vec<f32>, usize);
+
+impl BatchPolicy for Constant {
+    fn obs_dim(&self) -> usize {
+        self.1
+    }
+    fn act_dim(&self) -> usize {
+        self.0.len()
+    }
+    fn act(&self, observations: &[f32], _rng: &mut dyn rand::RngCore) -> Vec<f32> {
+        let n = observations.len() / self.1;
+        self.0.repeat(n)
+    }
+}
+
+fn hopper() -> (TaskConfig, DynamicsSpec) {
+    let task = TaskConfig::d4rl(TaskName::Hopper);
+    let probe = MujocoTask::new(task).unwrap();
+    let spec = DynamicsSpec {
+        obs_dim: probe.obs_dim(),
+        act_dim: probe.act_dim(),
+        split: probe.state_split(),
+        dt: probe.dt(),
+    };
+    (task, spec)
+}
+
+#[test]
+fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
+    let (task, spec) = hopper();
+    let rules = TaskRules::new(task, &spec.split);
+    let dynamics = ConstantEta { spec: spec.clone() };
+    let policy = Constant(vec![0.5, -0.5, 0.25], spec.obs_dim);
+    // An upright hopper: z = 1.25, everything else 0.
+    let mut start = vec![0.0f32; spec.obs_dim];
+    start[0] = 1.25;
+    let starts = start.repeat(4);
+    let config = RolloutConfig {
+        horizon: 10,
+        particles: 2,
+        penalty: 2.0,
+        threshold: Some(1.0),
+        noise_scale: 1.0,
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let out = rollout_model(&dynamics, &policy, &rules, &starts, &config, &mut rng);
+    // η = 0.3 per step: 0.3, 0.6, 0.9 are kept, 1.2 > ε truncates.
+    assert_eq!(out.trace.rows, 8);
+    assert_eq!(out.trace.kept, vec![3; 8]);
+    assert!(
+        out.trace
+            .outcome
+            .iter()
+            .all(|&o| o == StepOutcome::Truncated)
+    );
+    assert_eq!(out.transitions.len(), 24);
+    assert_eq!(out.stats.truncated, 8);
+    for (row, acc) in out.trace.accumulated_eta.iter().enumerate() {
+        let kept = out.trace.kept[row];
+        assert!(acc[..kept].iter().all(|&a| a <= 1.0));
+        assert!(acc[kept] > 1.0);
+    }
+    // r̃ = r − λ·η with the task's known reward on the next observation.
+    for i in 0..out.transitions.len() {
+        let next = &out.transitions.next_observations[i * spec.obs_dim..(i + 1) * spec.obs_dim];
+        let reward = rules.reward(&[0.5, -0.5, 0.25], next);
+        assert!((out.transitions.rewards[i] - (reward - 0.6)).abs() < 1e-5);
+        assert_eq!(out.transitions.terminals[i], 0.0);
+    }
+    // Without a threshold every step is kept; a fallen start ends at once as terminal.
+    let free = RolloutConfig {
+        threshold: None,
+        ..config
+    };
+    let out = rollout_model(&dynamics, &policy, &rules, &starts, &free, &mut rng);
+    assert_eq!(out.transitions.len(), 80);
+    let mut fallen = start.clone();
+    fallen[0] = 0.5;
+    let out = rollout_model(&dynamics, &policy, &rules, &fallen, &free, &mut rng);
+    assert_eq!(out.trace.kept, vec![1, 1]);
+    assert_eq!(out.transitions.terminals, vec![1.0, 1.0]);
+    assert_eq!(out.stats.terminated, 2);
+}
+
+#[test]
+fn known_rules_agree_with_the_simulator() {
+    let (task, spec) = hopper();
+    let rules = TaskRules::new(task, &spec.split);
+    let mut sim = MujocoTask::new(task).unwrap();
+    let mut obs = sim.reset(Some(1));
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    let (mut steps, mut reward_error) = (0, 0.0f64);
+    let mut terminals = 0;
+    while steps < 3000 {
+        let action: Vec<f64> = (0..3)
+            .map(|_| rand::Rng::random_range(&mut rng, -1.0..1.0))
+            .collect();
+        let t = sim.step(&action).unwrap();
+        let next: Vec<f32> = t.observation.iter().map(|&x| x as f32).collect();
+        let a32: Vec<f32> = action.iter().map(|&x| x as f32).collect();
+        assert_eq!(rules.terminal(&next), t.terminated, "step {steps}");
+        reward_error += (f64::from(rules.reward(&a32, &next)) - t.reward).abs();
+        terminals += usize::from(t.terminated);
+        steps += 1;
+        obs = if t.terminated || t.truncated {
+            sim.reset(Some(steps as u64))
+        } else {
+            t.observation
+        };
+    }
+    let _ = obs;
+    assert!(
+        terminals > 10,
+        "the random policy should fall often ({terminals})"
+    );
+    // The velocity after the step stands in for (x' − x)/dt: close on average.
+    assert!(
+        reward_error / (steps as f64) < 0.15,
+        "mean |Δr| = {}",
+        reward_error / steps as f64
+    );
+}
+
+#[test]
+fn presets_are_table_3() {
+    assert_eq!(PRESETS.len(), 21);
+    let p = preset("hopper-random").unwrap();
+    assert_eq!((p.horizon, p.cvar_alpha, p.penalty), (10, 1.0, 0.001));
+    let p = preset("walker2d-medium-replay").unwrap();
+    assert_eq!((p.horizon, p.cvar_alpha, p.penalty), (10, 0.95, 1.0));
+    let p = preset("neorl-hopper-medium").unwrap();
+    assert_eq!(
+        (p.horizon, p.cvar_alpha, p.penalty, p.layout),
+        (5, 0.9, 0.1, ObservationLayout::Neorl)
+    );
+    let err = preset("hopper-expert").unwrap_err().to_string();
+    assert!(
+        err.contains("hopper-expert") && err.contains("hopper-medium-expert"),
+        "{err}"
+    );
+}
+
+fn tiny_config(seed: u64) -> PolicyLoopConfig {
+    let sac = SacConfig::new()
+        .with_actor_hidden(vec![16, 16])
+        .with_critic_hidden(vec![16, 16])
+        .with_batch_size(32);
+    let mut config = PolicyLoopConfig::from_preset(preset("hopper-random").unwrap(), sac);
+    config.horizon = 5;
+    config.rollout_freq = 10;
+    config.rollout_batch = 64;
+    config.steps_per_epoch = 15;
+    config.epochs = 2;
+    config.eval_episodes = 1;
+    config.eta_probe_states = 50;
+    config.seed = seed;
+    config
+}
+
+fn shipped_model() -> (nuno::sde::NeuralSde, nuno::artifact::DynamicsMetadata) {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models/hopper-random");
+    load_dynamics(&dir, &Device::flex()).unwrap()
+}
+
+fn small_dataset() -> Dataset {
+    let policy = RandomNetworkPolicy::new(11, 3, &[64, 64], 4);
+    let config = GenerateConfig::new(TaskConfig::d4rl(TaskName::Hopper), "random", 3000, 4);
+    generate(&config, &policy, "test", &|_| {}).unwrap()
+}
+
+#[test]
+fn batches_mix_real_and_model_data_at_beta() {
+    let (model, metadata) = shipped_model();
+    let dataset = small_dataset();
+    let task = TaskConfig::d4rl(TaskName::Hopper);
+    let ctx = LoopContext {
+        dataset: &dataset,
+        dynamics: &model,
+        task,
+        rules: TaskRules::new(task, &model.constants.spec.split),
+    };
+    let mut config = tiny_config(0);
+    config.sac.batch_size = 200;
+    config.real_ratio = 0.05;
+    let device = Device::flex();
+    let mut training = PolicyTraining::new(
+        config,
+        &ctx,
+        metadata.provenance.thresholds.as_ref(),
+        &device,
+    )
+    .unwrap();
+    // Empty model buffer: all real.
+    let batch = training.mixed_batch(&dataset);
+    assert_eq!(batch.len(), 200);
+    let marker = 1234.5f32;
+    let o = dataset.obs_dim();
+    training.model_buffer.push(&TransitionBatch {
+        observations: vec![marker; o],
+        actions: vec![0.0; 3],
+        rewards: vec![0.0],
+        next_observations: vec![marker; o],
+        terminals: vec![0.0],
+    });
+    let batch = training.mixed_batch(&dataset);
+    let from_model: Vec<bool> = batch
+        .observations
+        .chunks(o)
+        .map(|row| row[0] == marker)
+        .collect();
+    assert_eq!(batch.len(), 200);
+    assert!(
+        from_model[..10].iter().all(|m| !m),
+        "β·200 = 10 real rows first"
+    );
+    assert!(from_model[10..].iter().all(|&m| m), "then 190 model rows");
+}
+
+#[test]
+fn the_loop_runs_checkpoints_and_resumes_bit_exactly() {
+    let (model, metadata) = shipped_model();
+    let dataset = small_dataset();
+    let task = TaskConfig::d4rl(TaskName::Hopper);
+    let ctx = LoopContext {
+        dataset: &dataset,
+        dynamics: &model,
+        task,
+        rules: TaskRules::new(task, &model.constants.spec.split),
+    };
+    let thresholds = metadata.provenance.thresholds.as_ref();
+    let device = Device::flex();
+
+    // Two epochs straight through.
+    let mut straight = PolicyTraining::new(tiny_config(9), &ctx, thresholds, &device).unwrap();
+    assert_eq!(straight.threshold, thresholds.unwrap().get(5, 1.0));
+    for _ in 0..2 {
+        straight.run_epoch(&ctx).unwrap();
+    }
+    assert_eq!((straight.epoch, straight.step), (2, 30));
+    let last = straight.history.last().unwrap();
+    assert!(last.losses.qf1_loss.is_finite() && last.losses.actor_loss.is_finite());
+    assert!(last.eval.mean_return.is_finite() && last.rollout.transitions > 0);
+    assert!(!straight.model_buffer.is_empty());
+
+    // One epoch, a checkpoint, a fresh process state, the second epoch.
+    let dir = tempfile::tempdir().unwrap();
+    let mut first = PolicyTraining::new(tiny_config(9), &ctx, thresholds, &device).unwrap();
+    first.run_epoch(&ctx).unwrap();
+    save_checkpoint(dir.path(), &first).unwrap();
+    drop(first);
+    let mut resumed = PolicyTraining::new(tiny_config(9), &ctx, thresholds, &device).unwrap();
+    let checkpoint = latest_checkpoint(dir.path()).unwrap().unwrap();
+    load_checkpoint(&checkpoint, &mut resumed).unwrap();
+    assert_eq!((resumed.epoch, resumed.step), (1, 15));
+    resumed.run_epoch(&ctx).unwrap();
+
+    assert_eq!(
+        collect_tensors(&resumed.sac.actor),
+        collect_tensors(&straight.sac.actor)
+    );
+    assert_eq!(
+        collect_tensors(&resumed.sac.critic),
+        collect_tensors(&straight.sac.critic)
+    );
+    assert_eq!(resumed.model_buffer, straight.model_buffer);
+    let strip = |h: &[nuno::agent::EpochRecord]| -> Vec<String> {
+        h.iter()
+            .map(|r| format!("{:?} {:?} {:?}", r.losses, r.eval, r.eta))
+            .collect()
+    };
+    assert_eq!(strip(&resumed.history), strip(&straight.history));
+
+    // A checkpoint from other settings is refused by name.
+    let mut other = PolicyTraining::new(tiny_config(10), &ctx, thresholds, &device).unwrap();
+    let err = load_checkpoint(&checkpoint, &mut other)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("different configuration"), "{err}");
+}
+
+#[test]
+fn sde_rollouts_with_truncation_keep_nothing_past_epsilon() {
+    let (model, metadata) = shipped_model();
+    let dataset = small_dataset();
+    let (task, spec) = hopper();
+    let rules = TaskRules::new(task, &spec.split);
+    let device = Device::flex();
+    let actor = Sac::new(
+        small_actor(11, 3, -1.0, 1.0),
+        SacConfig::new().with_actor_hidden(vec![16, 16]),
+        &device,
+    )
+    .actor
+    .valid();
+    let policy = nuno::agent::ActorPolicy {
+        actor,
+        mode: nuno::agent::ActionMode::Sampled,
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let starts = nuno::data::StartStateSampler::new(&dataset).sample(256, &mut rng);
+    // ε at the median accumulated η so truncation really happens.
+    let table = metadata.provenance.thresholds.unwrap();
+    let epsilon = table.get(10, 0.9).unwrap() * 0.5;
+    let config = RolloutConfig {
+        horizon: 10,
+        particles: 2,
+        penalty: 0.001,
+        threshold: Some(epsilon),
+        noise_scale: 1.0,
+    };
+    let out = rollout_model(&model, &policy, &rules, &starts, &config, &mut rng);
+    assert!(
+        out.stats.truncated > 0,
+        "ε = {epsilon} should truncate some rollouts"
+    );
+    assert_eq!(out.trace.kept.iter().sum::<usize>(), out.transitions.len());
+    for (row, acc) in out.trace.accumulated_eta.iter().enumerate() {
+        assert!(
+            acc[..out.trace.kept[row]].iter().all(|&a| a <= epsilon),
+            "row {row}"
+        );
+    }
+}

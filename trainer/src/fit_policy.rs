@@ -1,0 +1,322 @@
+//! `nuno-trainer fit-policy`: NUNO's policy optimisation on a fitted model,
+//! with checkpoints every epoch, `--resume`, metrics, plots, and the best and
+//! last policy saved next to the dynamics artifact.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use indicatif::{ProgressBar, ProgressStyle};
+use nuno::agent::{EpochRecord, LoopContext, PolicyLoopConfig, PolicyTraining, SacConfig, preset};
+use nuno::artifact::{
+    BEST_POLICY, LAST_POLICY, PolicyProvenance, latest_checkpoint, load_checkpoint, load_dynamics,
+    save_checkpoint, save_policy, write_atomically,
+};
+use nuno::data::{DatasetFormat, read_dataset};
+use nuno::envs::{TaskConfig, TaskRules};
+use nuno::sde::ComputeDevice;
+
+use crate::plot::{Series, line_chart};
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Model directory written by `fit-model` (the policies are saved there too).
+    #[arg(long)]
+    model: PathBuf,
+    /// The dataset the model was fitted on (start states and real transitions).
+    #[arg(long)]
+    dataset: PathBuf,
+    /// Reader to use (default: detected).
+    #[arg(long)]
+    format: Option<DatasetFormat>,
+    /// Table 3 row giving h, α and λ_pen, e.g. hopper-random or neorl-hopper-low.
+    #[arg(long)]
+    preset: String,
+    /// Total gradient steps (rounded up to whole epochs).
+    #[arg(long, default_value_t = 1_000_000)]
+    steps: usize,
+    /// Gradient steps per epoch (evaluation and checkpoint after each).
+    #[arg(long, default_value_t = 1000)]
+    steps_per_epoch: usize,
+    /// Gradient steps between model rollouts.
+    #[arg(long, default_value_t = 1000)]
+    rollout_freq: usize,
+    /// Start states per model rollout.
+    #[arg(long, default_value_t = 50_000)]
+    rollout_batch: usize,
+    /// SDE trajectories per start state.
+    #[arg(long, default_value_t = 1)]
+    particles: usize,
+    /// β, the real-data fraction of each SAC batch.
+    #[arg(long, default_value_t = 0.05)]
+    real_ratio: f64,
+    /// SAC batch size.
+    #[arg(long, default_value_t = 256)]
+    batch_size: usize,
+    /// Hidden sizes of the actor and critics.
+    #[arg(long, value_delimiter = ',', default_value = "256,256")]
+    hidden: Vec<usize>,
+    /// MuJoCo evaluation episodes per epoch.
+    #[arg(long, default_value_t = 10)]
+    eval_episodes: usize,
+    /// Override the preset's h.
+    #[arg(long)]
+    horizon: Option<usize>,
+    /// Override the preset's α.
+    #[arg(long)]
+    cvar_alpha: Option<f64>,
+    /// Override the preset's λ_pen.
+    #[arg(long)]
+    penalty: Option<f64>,
+    /// Do not truncate rollouts at ε(h, α) (penalty only).
+    #[arg(long)]
+    no_truncation: bool,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Run directory: checkpoints, metrics.csv, metrics.jsonl, plots.
+    #[arg(long)]
+    out: PathBuf,
+    /// Continue from the last checkpoint in --out.
+    #[arg(long)]
+    resume: bool,
+    /// Compute device: cpu, or wgpu in a build with the `wgpu` feature.
+    #[arg(long, default_value_t = ComputeDevice::Cpu)]
+    device: ComputeDevice,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    anyhow::ensure!(args.steps > 0, "--steps must be at least 1");
+    anyhow::ensure!(
+        args.steps_per_epoch > 0,
+        "--steps-per-epoch must be at least 1"
+    );
+    anyhow::ensure!(args.rollout_batch > 0, "--rollout-batch must be at least 1");
+    anyhow::ensure!(args.particles > 0, "--particles must be at least 1");
+    anyhow::ensure!(args.batch_size > 0, "--batch-size must be at least 1");
+    anyhow::ensure!(
+        (0.0..=1.0).contains(&args.real_ratio),
+        "--real-ratio must lie in [0, 1], got {}",
+        args.real_ratio
+    );
+    anyhow::ensure!(
+        !args.hidden.is_empty() && args.hidden.iter().all(|&h| h > 0),
+        "--hidden needs positive layer sizes"
+    );
+    let preset = preset(&args.preset)?;
+    let device = args.device.device().map_err(anyhow::Error::msg)?;
+    let (dynamics, metadata) = load_dynamics(&args.model, &device)
+        .with_context(|| format!("loading the model in {}", args.model.display()))?;
+    let task = metadata.provenance.task.unwrap_or(TaskConfig {
+        name: preset.task,
+        layout: preset.layout,
+        ..TaskConfig::d4rl(preset.task)
+    });
+    anyhow::ensure!(
+        task.name == preset.task && task.layout == preset.layout,
+        "preset {} is for {} ({:?}), the model is for {} ({:?})",
+        preset.name,
+        preset.task,
+        preset.layout,
+        task.name,
+        task.layout
+    );
+    let dataset = read_dataset(&args.dataset, args.format)?;
+    dataset.check_task(&task, &args.dataset)?;
+
+    let sac = SacConfig::new()
+        .with_batch_size(args.batch_size)
+        .with_actor_hidden(args.hidden.clone())
+        .with_critic_hidden(args.hidden.clone());
+    let mut config = PolicyLoopConfig::from_preset(preset, sac);
+    config.horizon = args.horizon.unwrap_or(config.horizon);
+    config.cvar_alpha = args.cvar_alpha.unwrap_or(config.cvar_alpha);
+    config.penalty = args.penalty.unwrap_or(config.penalty);
+    config.truncate = !args.no_truncation;
+    config.rollout_freq = args.rollout_freq;
+    config.rollout_batch = args.rollout_batch;
+    config.particles = args.particles;
+    config.real_ratio = args.real_ratio;
+    config.steps_per_epoch = args.steps_per_epoch;
+    config.epochs = args.steps.div_ceil(args.steps_per_epoch);
+    config.eval_episodes = args.eval_episodes;
+    config.seed = args.seed;
+
+    let ctx = LoopContext {
+        dataset: &dataset,
+        dynamics: &dynamics,
+        task,
+        rules: TaskRules::new(task, &dynamics.constants.spec.split),
+    };
+    let thresholds = metadata.provenance.thresholds.as_ref();
+    let mut training = PolicyTraining::new(config, &ctx, thresholds, &device)?;
+    let checkpoints = args.out.join("checkpoints");
+    match (latest_checkpoint(&checkpoints)?, args.resume) {
+        (Some(checkpoint), true) => {
+            load_checkpoint(&checkpoint, &mut training)
+                .with_context(|| format!("resuming from {}", checkpoint.display()))?;
+            println!(
+                "resumed from {} (epoch {}, step {})",
+                checkpoint.display(),
+                training.epoch,
+                training.step
+            );
+        }
+        (Some(_), false) => anyhow::bail!(
+            "{} already holds a run; pass --resume to continue it or choose another --out",
+            args.out.display()
+        ),
+        (None, true) => println!(
+            "no checkpoint in {}; starting afresh",
+            checkpoints.display()
+        ),
+        (None, false) => {}
+    }
+    if let Some(threshold) = training.threshold {
+        println!(
+            "{}: h = {}, α = {}, λ_pen = {}, ε(h, α) = {threshold:.4}",
+            preset.name,
+            training.config.horizon,
+            training.config.cvar_alpha,
+            training.config.penalty
+        );
+    }
+
+    let epochs = training.config.epochs;
+    let bar = ProgressBar::new((epochs * training.config.steps_per_epoch) as u64).with_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} steps | {msg}")?,
+    );
+    bar.set_position(training.step as u64);
+    let provenance = |record: &EpochRecord, training: &PolicyTraining| PolicyProvenance {
+        preset: Some(preset.name.to_string()),
+        dynamics_sha256: Some(metadata.weights_sha256.clone()),
+        dataset_sha256: metadata
+            .provenance
+            .dataset
+            .as_ref()
+            .map(|d| d.sha256.clone()),
+        training: Some(training.config.clone()),
+        epoch: record.epoch,
+        step: record.step,
+        normalized_score: Some(record.eval.normalized_score),
+    };
+    while training.epoch < epochs {
+        let record = training.run_epoch(&ctx)?;
+        bar.set_position(training.step as u64);
+        bar.set_message(format!(
+            "SPS {:.1} | score {:.1} | η policy {:.3} data {:.3} | rollout len {:.1}",
+            record.sps,
+            record.eval.normalized_score,
+            record.eta.policy,
+            record.eta.dataset,
+            record.rollout.mean_length
+        ));
+        let actor = training
+            .policy(nuno::agent::ActionMode::Deterministic)
+            .actor;
+        save_policy(
+            &args.model,
+            LAST_POLICY,
+            &actor,
+            task,
+            provenance(&record, &training),
+        )?;
+        let best = training
+            .history
+            .iter()
+            .map(|r| r.eval.normalized_score)
+            .fold(f64::NEG_INFINITY, f64::max);
+        if record.eval.normalized_score >= best {
+            save_policy(
+                &args.model,
+                BEST_POLICY,
+                &actor,
+                task,
+                provenance(&record, &training),
+            )?;
+        }
+        save_checkpoint(&checkpoints, &training)?;
+        write_metrics(&args.out, &training.history)?;
+    }
+    bar.finish();
+    if let Some(last) = training.history.last() {
+        println!(
+            "{} epochs, {} steps: last normalised score {:.1}; policies in {}",
+            last.epoch,
+            last.step,
+            last.eval.normalized_score,
+            args.model.display()
+        );
+    }
+    Ok(())
+}
+
+/// metrics.csv and metrics.jsonl (CleanRL metric names) and the two plots,
+/// rewritten from the whole history so a resumed run's files stay consistent.
+fn write_metrics(out: &Path, history: &[EpochRecord]) -> anyhow::Result<()> {
+    let mut csv = String::from(
+        "epoch,step,charts/SPS,charts/normalized_score,charts/normalized_score_std,charts/episodic_return,\
+         losses/qf1_values,losses/qf1_loss,losses/qf2_loss,losses/actor_loss,losses/alpha,losses/alpha_loss,\
+         losses/entropy,rollout/mean_length,rollout/mean_eta,rollout/truncated,rollout/terminated,\
+         rollout/mean_penalized_reward,eta/policy,eta/dataset,eta/random,model_buffer\n",
+    );
+    let mut jsonl = String::new();
+    for r in history {
+        let (l, ro, e) = (&r.losses, &r.rollout, &r.eta);
+        csv.push_str(&format!(
+            "{},{},{:.3},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            r.epoch,
+            r.step,
+            r.sps,
+            r.eval.normalized_score,
+            r.eval.std_normalized_score,
+            r.eval.mean_return,
+            l.qf1_values,
+            l.qf1_loss,
+            l.qf2_loss,
+            l.actor_loss,
+            l.alpha,
+            l.alpha_loss,
+            l.entropy,
+            ro.mean_length,
+            ro.mean_eta,
+            ro.truncated,
+            ro.terminated,
+            ro.mean_penalized_reward,
+            e.policy,
+            e.dataset,
+            e.random,
+            r.model_buffer
+        ));
+        jsonl.push_str(&serde_json::to_string(r)?);
+        jsonl.push('\n');
+    }
+    for (name, text) in [("metrics.csv", csv), ("metrics.jsonl", jsonl)] {
+        let path = out.join(name);
+        write_atomically(&path, |tmp| std::fs::write(tmp, &text), |e| e)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    let series = |name, f: fn(&EpochRecord) -> f64| Series {
+        name,
+        points: history.iter().map(|r| (r.step as f64, f(r))).collect(),
+    };
+    line_chart(
+        &out.join("normalized_score.svg"),
+        "NUNO: D4RL normalised score",
+        "gradient step",
+        "normalised score",
+        &[series("evaluation (mean of episodes)", |r| {
+            r.eval.normalized_score
+        })],
+    )?;
+    line_chart(
+        &out.join("eta.svg"),
+        "η on dataset states",
+        "gradient step",
+        "mean η",
+        &[
+            series("policy actions", |r| f64::from(r.eta.policy)),
+            series("dataset actions", |r| f64::from(r.eta.dataset)),
+            series("random actions", |r| f64::from(r.eta.random)),
+        ],
+    )?;
+    Ok(())
+}

@@ -1,0 +1,186 @@
+//! `nuno-trainer fit-policy` and `evaluate --policy` end to end: a tiny run on
+//! the shipped model writes policies, metrics and checkpoints, refuses to
+//! overwrite a run, resumes to a longer one, and bad flags are named.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn trainer<S: AsRef<str>>(args: &[S]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_nuno-trainer"))
+        .args(args.iter().map(|a| a.as_ref()))
+        .output()
+        .expect("could not run nuno-trainer")
+}
+
+fn ok<S: AsRef<str>>(args: &[S]) -> String {
+    let out = trainer(args);
+    assert!(
+        out.status.success(),
+        "nuno-trainer {} failed:\n{}",
+        args.iter()
+            .map(|a| a.as_ref())
+            .collect::<Vec<_>>()
+            .join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn fails<S: AsRef<str>>(args: &[S]) -> String {
+    let out = trainer(args);
+    assert!(
+        !out.status.success(),
+        "nuno-trainer {} should fail",
+        args.iter()
+            .map(|a| a.as_ref())
+            .collect::<Vec<_>>()
+            .join(" ")
+    );
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let path = entry.unwrap().path();
+        std::fs::copy(&path, to.join(path.file_name().unwrap())).unwrap();
+    }
+}
+
+#[test]
+fn fit_policy_runs_resumes_and_its_policy_evaluates() {
+    let tmp = tempfile::tempdir().unwrap();
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/hopper-random");
+    let model = tmp.path().join("model");
+    copy_dir(&shipped, &model);
+    let dataset = tmp.path().join("hopper.hdf5");
+    let run = tmp.path().join("run");
+    let (model_s, dataset_s, run_s) = (
+        model.to_str().unwrap(),
+        dataset.to_str().unwrap(),
+        run.to_str().unwrap(),
+    );
+    ok(&[
+        "dataset",
+        "generate",
+        "--task",
+        "hopper",
+        "--kind",
+        "random",
+        "--transitions",
+        "2000",
+        "--out",
+        dataset_s,
+    ]);
+    let fit = |steps: &str, extra: &[&str]| -> Vec<String> {
+        let mut args: Vec<&str> = vec![
+            "fit-policy",
+            "--model",
+            model_s,
+            "--dataset",
+            dataset_s,
+            "--preset",
+            "hopper-random",
+            "--steps",
+            steps,
+            "--steps-per-epoch",
+            "10",
+            "--rollout-freq",
+            "10",
+            "--rollout-batch",
+            "32",
+            "--batch-size",
+            "32",
+            "--hidden",
+            "16,16",
+            "--eval-episodes",
+            "1",
+            "--out",
+            run_s,
+        ];
+        args.extend_from_slice(extra);
+        args.into_iter().map(String::from).collect()
+    };
+    let stdout = ok(&fit("20", &[]));
+    assert!(stdout.contains("ε(h, α)"), "{stdout}");
+    for file in [
+        "metrics.csv",
+        "metrics.jsonl",
+        "normalized_score.svg",
+        "eta.svg",
+        "checkpoints/LATEST",
+    ] {
+        assert!(run.join(file).is_file(), "{file} missing");
+    }
+    for file in [
+        "policy.json",
+        "policy.safetensors",
+        "policy-last.json",
+        "policy-last.safetensors",
+    ] {
+        assert!(
+            model.join(file).is_file(),
+            "{file} missing next to the dynamics"
+        );
+    }
+    let rows = |path: &Path| std::fs::read_to_string(path).unwrap().lines().count() - 1;
+    assert_eq!(rows(&run.join("metrics.csv")), 2);
+
+    // A second run into the same directory must not clobber it.
+    let err = fails(&fit("20", &[]));
+    assert!(err.contains("--resume"), "{err}");
+    // Resuming extends the run: two epochs kept, one more added.
+    let stdout = ok(&fit("30", &["--resume"]));
+    assert!(
+        stdout.contains("resumed from") && stdout.contains("epoch 2"),
+        "{stdout}"
+    );
+    assert_eq!(rows(&run.join("metrics.csv")), 3);
+    let latest = std::fs::read_to_string(run.join("checkpoints/LATEST")).unwrap();
+    assert_eq!(latest.trim(), "epoch-000003");
+    let checkpoints = std::fs::read_dir(run.join("checkpoints")).unwrap().count();
+    assert_eq!(checkpoints, 2, "LATEST and one checkpoint directory");
+
+    let report = ok(&["evaluate", "--policy", model_s, "--episodes", "2", "--json"]);
+    let report: serde_json::Value = serde_json::from_str(&report).unwrap();
+    assert_eq!(report["returns"].as_array().unwrap().len(), 2);
+    assert!(
+        report["mean_normalized_score"]
+            .as_f64()
+            .unwrap()
+            .is_finite()
+    );
+
+    // Bad flags and inputs are named.
+    let err = fails(&[
+        "fit-policy",
+        "--model",
+        model_s,
+        "--dataset",
+        dataset_s,
+        "--preset",
+        "hopper-expert",
+        "--out",
+        run_s,
+    ]);
+    assert!(err.contains("unknown preset `hopper-expert`"), "{err}");
+    let err = fails(&[
+        "fit-policy",
+        "--model",
+        model_s,
+        "--dataset",
+        dataset_s,
+        "--preset",
+        "walker2d-random",
+        "--out",
+        run_s,
+    ]);
+    assert!(
+        err.contains("preset walker2d-random is for walker2d"),
+        "{err}"
+    );
+    let err = fails(&fit("20", &["--real-ratio", "1.5"]));
+    assert!(err.contains("--real-ratio"), "{err}");
+    let err = fails(&["evaluate", "--policy", dataset_s, "--episodes", "1"]);
+    assert!(err.contains("loading policy"), "{err}");
+}
