@@ -15,14 +15,14 @@ VENV_STAMP        := $(VENV)/.installed
 # Any wheel of the pinned release carries the same libmujoco; take the one for this Python.
 PIP_DOWNLOAD      := $(PYTHON) -m pip download --quiet --no-deps --only-binary=:all:
 
-SERVE_TASK     ?= hopper
-SERVE_EPISODES ?= 10
+SERVE_ADDR   ?= 127.0.0.1:8080
+SERVE_MODELS ?= models
 
-.PHONY: serve test mujoco venv system-deps build lint bench check-wgpu clean-runtime
+.PHONY: serve test mujoco venv system-deps build lint bench openapi check-wgpu clean-runtime
 
-## serve: fetch what is missing, build, and run the main job.
+## serve: fetch what is missing, build, and serve the shipped models on $(SERVE_ADDR).
 serve: mujoco
-	$(CARGO) run --release -p nuno-trainer -- evaluate --policy random --task $(SERVE_TASK) --episodes $(SERVE_EPISODES)
+	$(CARGO) run --release --bin nuno-server -- --models $(SERVE_MODELS) --addr $(SERVE_ADDR)
 
 ## test: the full suite (unit, integration, Gymnasium parity).
 test: mujoco venv
@@ -37,6 +37,12 @@ lint: mujoco
 
 bench: mujoco
 	$(CARGO) bench --bench env_step
+	$(CARGO) bench --bench sde
+	$(CARGO) bench --bench sac
+
+## openapi: regenerate the committed spec (a test fails when it is stale).
+openapi: mujoco
+	$(CARGO) run --release --bin nuno-server -- --print-openapi > openapi/openapi.json
 
 ## check-wgpu: build burn's wgpu backend and run the GPU smoke test. Without a GPU,
 ## Mesa's lavapipe (Debian's mesa-vulkan-drivers) provides a Vulkan device on the CPU.

@@ -10,7 +10,8 @@
 //! - [`agent`]: SAC on penalised, truncated model rollouts, behind the narrow
 //!   batched `act` and `step` interfaces;
 //! - [`nn`]: the MLP both use;
-//! - [`artifact`]: atomic writes of everything nuno saves.
+//! - [`artifact`]: atomic writes of everything nuno saves;
+//! - [`server`]: the HTTP model server (axum), a thin layer over the rest.
 
 pub mod agent;
 pub mod artifact;
@@ -18,3 +19,4 @@ pub mod data;
 pub mod envs;
 pub mod nn;
 pub mod sde;
+pub mod server;

@@ -6,7 +6,8 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 use nuno::agent::{
     ActorConfig, BatchPolicy, LoopContext, PRESETS, PolicyLoopConfig, PolicyTraining,
-    RandomNetworkPolicy, RolloutConfig, Sac, SacConfig, StepOutcome, preset, rollout_model,
+    RandomNetworkPolicy, RolloutActions, RolloutConfig, Sac, SacConfig, StepOutcome, preset,
+    rollout_model,
 };
 use nuno::artifact::{
     collect_tensors, latest_checkpoint, load_checkpoint, load_dynamics, save_checkpoint,
@@ -253,7 +254,14 @@ fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
         noise_scale: 1.0,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(0);
-    let out = rollout_model(&dynamics, &policy, &rules, &starts, &config, &mut rng);
+    let out = rollout_model(
+        &dynamics,
+        RolloutActions::Policy(&policy),
+        &rules,
+        &starts,
+        &config,
+        &mut rng,
+    );
     // η = 0.3 per step: 0.3, 0.6, 0.9 are kept, 1.2 > ε truncates.
     assert_eq!(out.trace.rows, 8);
     assert_eq!(out.trace.kept, vec![3; 8]);
@@ -282,11 +290,25 @@ fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
         threshold: None,
         ..config
     };
-    let out = rollout_model(&dynamics, &policy, &rules, &starts, &free, &mut rng);
+    let out = rollout_model(
+        &dynamics,
+        RolloutActions::Policy(&policy),
+        &rules,
+        &starts,
+        &free,
+        &mut rng,
+    );
     assert_eq!(out.transitions.len(), 80);
     let mut fallen = start.clone();
     fallen[0] = 0.5;
-    let out = rollout_model(&dynamics, &policy, &rules, &fallen, &free, &mut rng);
+    let out = rollout_model(
+        &dynamics,
+        RolloutActions::Policy(&policy),
+        &rules,
+        &fallen,
+        &free,
+        &mut rng,
+    );
     assert_eq!(out.trace.kept, vec![1, 1]);
     assert_eq!(out.transitions.terminals, vec![1.0, 1.0]);
     assert_eq!(out.stats.terminated, 2);
@@ -518,7 +540,14 @@ fn sde_rollouts_with_truncation_keep_nothing_past_epsilon() {
         threshold: Some(epsilon),
         noise_scale: 1.0,
     };
-    let out = rollout_model(&model, &policy, &rules, &starts, &config, &mut rng);
+    let out = rollout_model(
+        &model,
+        RolloutActions::Policy(&policy),
+        &rules,
+        &starts,
+        &config,
+        &mut rng,
+    );
     assert!(
         out.stats.truncated > 0,
         "ε = {epsilon} should truncate some rollouts"

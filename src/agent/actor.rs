@@ -127,7 +127,17 @@ impl Actor {
 }
 
 /// How a trained actor chooses actions.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    utoipa::ToSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum ActionMode {
     /// tanh(μ(s)): what SAC evaluates (and the default for serving).

@@ -7,6 +7,7 @@ mod actor;
 mod buffer;
 mod critic;
 mod model_rollout;
+mod model_step;
 mod policy;
 mod policy_loop;
 mod presets;
@@ -17,8 +18,10 @@ pub use actor::{ActionMode, Actor, ActorConfig, ActorPolicy, ActorSample};
 pub use buffer::ReplayBuffer;
 pub use critic::{Temperature, TwinCritic};
 pub use model_rollout::{
-    ModelRollout, RolloutConfig, RolloutStats, RolloutTrace, StepOutcome, rollout_model,
+    ModelRollout, RolloutActions, RolloutConfig, RolloutStats, RolloutTrace, StepOutcome,
+    rollout_model,
 };
+pub use model_step::{ParticleConfig, ParticleStep, step_particles};
 pub use policy::{BatchPolicy, RandomPolicy};
 pub use policy_loop::{
     EpochRecord, EtaProbe, EvalSummary, LoopContext, PolicyLoopConfig, PolicyTraining,

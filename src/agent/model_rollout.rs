@@ -33,6 +33,15 @@ pub struct RolloutConfig {
     pub noise_scale: f32,
 }
 
+/// Where a rollout's actions come from.
+#[derive(Clone, Copy)]
+pub enum RolloutActions<'a> {
+    /// Closed loop: the policy acts on each state.
+    Policy(&'a dyn BatchPolicy),
+    /// Open loop: row-major `[starts, horizon, act_dim]`, shared by a start's particles.
+    Sequence(&'a [f32]),
+}
+
 /// What happened to one trajectory at one step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum StepOutcome {
@@ -52,6 +61,10 @@ pub struct RolloutTrace {
     pub horizon: usize,
     /// Steps each trajectory kept.
     pub kept: Vec<usize>,
+    /// Observations along each trajectory: the start, then one per kept step.
+    pub observations: Vec<Vec<f32>>,
+    /// The action of each step taken (including a truncating one).
+    pub actions: Vec<Vec<f32>>,
     /// η at each step taken (including a truncating one): `[rows][..]`.
     pub eta: Vec<Vec<f32>>,
     /// Accumulated η after each step taken.
@@ -84,10 +97,10 @@ pub struct ModelRollout {
     pub stats: RolloutStats,
 }
 
-/// Rolls `policy` through `dynamics` from `starts` (`[batch, obs_dim]` observations).
+/// Rolls the actions of `source` through `dynamics` from `starts` (`[batch, obs_dim]` observations).
 pub fn rollout_model(
     dynamics: &dyn BatchDynamics,
-    policy: &dyn BatchPolicy,
+    source: RolloutActions,
     rules: &TaskRules,
     starts: &[f32],
     config: &RolloutConfig,
@@ -110,6 +123,11 @@ pub fn rollout_model(
         rows,
         horizon: config.horizon,
         kept: vec![0; rows],
+        observations: observations
+            .chunks_exact(obs_dim)
+            .map(|o| o.to_vec())
+            .collect(),
+        actions: vec![Vec::new(); rows],
         eta: vec![Vec::new(); rows],
         accumulated_eta: vec![Vec::new(); rows],
         rewards: vec![Vec::new(); rows],
@@ -119,7 +137,7 @@ pub fn rollout_model(
     let mut accumulated = vec![0.0f32; rows];
     let mut active: Vec<usize> = (0..rows).collect();
 
-    for _ in 0..config.horizon {
+    for k in 0..config.horizon {
         if active.is_empty() {
             break;
         }
@@ -127,7 +145,16 @@ pub fn rollout_model(
             .iter()
             .flat_map(|&r| observations[r * obs_dim..(r + 1) * obs_dim].iter().copied())
             .collect();
-        let actions = policy.act(&obs, rng);
+        let actions = match source {
+            RolloutActions::Policy(policy) => policy.act(&obs, rng),
+            RolloutActions::Sequence(sequence) => active
+                .iter()
+                .flat_map(|&r| {
+                    let at = ((r / config.particles) * config.horizon + k) * act_dim;
+                    sequence[at..at + act_dim].iter().copied()
+                })
+                .collect(),
+        };
         // NUNO^R integrates r_c from 0 each step, so its increment is the reward.
         let states: Vec<f32> = if learned_reward {
             obs.chunks_exact(obs_dim)
@@ -153,6 +180,7 @@ pub fn rollout_model(
             };
             let eta = step.eta[i];
             accumulated[r] += eta;
+            trace.actions[r].extend_from_slice(action);
             trace.eta[r].push(eta);
             trace.accumulated_eta[r].push(accumulated[r]);
             trace.rewards[r].push(reward);
@@ -173,6 +201,7 @@ pub fn rollout_model(
             transitions.next_observations.extend_from_slice(next_obs);
             transitions.terminals.push(if terminal { 1.0 } else { 0.0 });
             trace.kept[r] += 1;
+            trace.observations[r].extend_from_slice(next_obs);
             observations[r * obs_dim..(r + 1) * obs_dim].copy_from_slice(next_obs);
             if terminal {
                 trace.outcome[r] = StepOutcome::Terminal;

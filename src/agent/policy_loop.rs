@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use super::actor::{ActionMode, ActorConfig, ActorPolicy};
 use super::buffer::ReplayBuffer;
-use super::model_rollout::{RolloutConfig, RolloutStats, rollout_model};
+use super::model_rollout::{RolloutActions, RolloutConfig, RolloutStats, rollout_model};
 use super::presets::Preset;
 use super::sac::{Sac, SacConfig, SacLosses};
 use super::{AgentError, BatchPolicy};
@@ -251,7 +251,7 @@ impl PolicyTraining {
         let config = self.config.rollout(self.threshold);
         let result = rollout_model(
             ctx.dynamics,
-            &policy,
+            RolloutActions::Policy(&policy),
             &ctx.rules,
             &starts,
             &config,

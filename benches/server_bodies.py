@@ -1,0 +1,27 @@
+"""Request bodies for the server load benchmark: hopper step batches as JSON and
+as safetensors (binary), and a rollout of 4096 starts x 10 steps with the policy."""
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from safetensors.numpy import save
+
+out = Path(sys.argv[1])
+out.mkdir(parents=True, exist_ok=True)
+rng = np.random.default_rng(0)
+
+
+def states(n):
+    s = rng.normal(0.0, 0.1, size=(n, 11)).astype(np.float32)
+    s[:, 0] += 1.25
+    return s
+
+
+for n in (1, 256, 4096):
+    s, a = states(n), rng.uniform(-1, 1, size=(n, 3)).astype(np.float32)
+    (out / f"step-{n}.json").write_text(json.dumps({"states": s.tolist(), "actions": a.tolist(), "seed": 0}))
+    (out / f"step-{n}.bin").write_bytes(save({"states": s, "actions": a}, metadata={"seed": "0"}))
+(out / "rollout-4096.json").write_text(
+    json.dumps({"states": states(4096).tolist(), "horizon": 10, "alpha": 0.99, "seed": 0})
+)

@@ -1,0 +1,118 @@
+//! One model step for a batch of observations with `particles` samples each:
+//! the SDE's terms, the sampled next observations, and what the task's rules
+//! (or NUNO^R's learned reward) make of them. What the server's `step` answers.
+
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
+
+use crate::envs::TaskRules;
+use crate::sde::BatchDynamics;
+
+/// A batch step's results, row-major; `b` items, `p` particles, `d` = obs_dim.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ParticleStep {
+    pub batch: usize,
+    pub particles: usize,
+    pub obs_dim: usize,
+    /// s + f(s, a)·dt: `[b, d]`
+    pub mean: Vec<f32>,
+    /// σ_ϕ(s, a): `[b, d]`
+    pub sigma: Vec<f32>,
+    /// h_ϕ(η_ϕ(s, a)): `[b, d]`
+    pub h_eta: Vec<f32>,
+    /// η_ϕ(s, a): `[b]`
+    pub eta: Vec<f32>,
+    /// Sampled next observations: `[b, p, d]`
+    pub next_states: Vec<f32>,
+    /// r(s, a, s'): the task's reward, or the learned r_c increment for NUNO^R: `[b, p]`
+    pub rewards: Vec<f32>,
+    /// r − λ_pen·η: `[b, p]`
+    pub penalized_rewards: Vec<f32>,
+    /// The task's termination rule on s': `[b, p]`
+    pub terminals: Vec<bool>,
+}
+
+/// How a batch step samples and penalises.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ParticleConfig {
+    /// Samples per item.
+    pub particles: usize,
+    /// λ_pen of the penalised reward.
+    pub penalty: f64,
+    /// Multiplies ε: 1 samples the SDE, 0 follows the drift.
+    pub noise_scale: f32,
+}
+
+/// Steps `observations` (`[b, obs_dim]`) under `actions` (`[b, act_dim]`).
+pub fn step_particles(
+    dynamics: &dyn BatchDynamics,
+    rules: &TaskRules,
+    observations: &[f32],
+    actions: &[f32],
+    config: ParticleConfig,
+    rng: &mut ChaCha8Rng,
+) -> ParticleStep {
+    let ParticleConfig {
+        particles,
+        penalty,
+        noise_scale,
+    } = config;
+    let spec = dynamics.spec();
+    let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
+    let state_dim = dynamics.state_dim();
+    let batch = observations.len() / obs_dim;
+    let rows = batch * particles;
+    // Particle p of item b is row b·particles + p; NUNO^R's r_c starts at 0.
+    let mut states = Vec::with_capacity(rows * state_dim);
+    let mut row_actions = Vec::with_capacity(rows * act_dim);
+    for b in 0..batch {
+        for _ in 0..particles {
+            states.extend_from_slice(&observations[b * obs_dim..(b + 1) * obs_dim]);
+            states.extend(std::iter::repeat_n(0.0, state_dim - obs_dim));
+            row_actions.extend_from_slice(&actions[b * act_dim..(b + 1) * act_dim]);
+        }
+    }
+    let noise: Vec<f32> = (0..rows * state_dim)
+        .map(|_| rng.sample::<f32, _>(StandardNormal) * noise_scale)
+        .collect();
+    let step = dynamics.step(&states, &row_actions, &noise);
+
+    let first_particle = |values: &[f32], width: usize| -> Vec<f32> {
+        (0..batch)
+            .flat_map(|b| {
+                let row = b * particles;
+                values[row * width..row * width + obs_dim.min(width)].to_vec()
+            })
+            .collect()
+    };
+    let mut out = ParticleStep {
+        batch,
+        particles,
+        obs_dim,
+        mean: first_particle(&step.means, state_dim),
+        sigma: first_particle(&step.sigma, state_dim),
+        h_eta: first_particle(&step.h_eta, state_dim),
+        eta: (0..batch).map(|b| step.eta[b * particles]).collect(),
+        next_states: Vec::with_capacity(rows * obs_dim),
+        rewards: Vec::with_capacity(rows),
+        penalized_rewards: Vec::with_capacity(rows),
+        terminals: Vec::with_capacity(rows),
+    };
+    for row in 0..rows {
+        let next = &step.next_states[row * state_dim..(row + 1) * state_dim];
+        let next_obs = &next[..obs_dim];
+        let reward = if dynamics.learns_reward() {
+            next[obs_dim]
+        } else {
+            rules.reward(&row_actions[row * act_dim..(row + 1) * act_dim], next_obs)
+        };
+        out.next_states.extend_from_slice(next_obs);
+        out.rewards.push(reward);
+        out.penalized_rewards
+            .push(reward - (penalty * f64::from(step.eta[row])) as f32);
+        out.terminals.push(rules.terminal(next_obs));
+    }
+    out
+}

@@ -1,0 +1,102 @@
+//! `nuno-server`: serves the models in a directory over HTTP (see `nuno::server`).
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+use nuno::server::{AppState, Limits, ServerConfig, openapi_json, serve};
+
+#[derive(Debug, Parser)]
+#[command(name = "nuno-server", version, about)]
+struct Args {
+    /// Directory whose subdirectories are model artifacts (model.json, dynamics.safetensors, policy.*).
+    #[arg(long, default_value = "models")]
+    models: PathBuf,
+    /// Address to listen on.
+    #[arg(long, default_value = "127.0.0.1:8080", env = "NUNO_ADDR")]
+    addr: SocketAddr,
+    /// Bearer token required on every route except health.
+    #[arg(long, env = "NUNO_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+    #[arg(long, default_value_t = Limits::default().max_batch)]
+    max_batch: usize,
+    #[arg(long, default_value_t = Limits::default().max_particles)]
+    max_particles: usize,
+    #[arg(long, default_value_t = Limits::default().max_horizon)]
+    max_horizon: usize,
+    #[arg(long, default_value_t = Limits::default().max_rollout_steps)]
+    max_rollout_steps: usize,
+    #[arg(long, default_value_t = Limits::default().max_episodes)]
+    max_episodes: usize,
+    #[arg(long, default_value_t = Limits::default().max_body_bytes)]
+    max_body_bytes: usize,
+    /// Seconds before a request is answered with a timeout error.
+    #[arg(long, default_value_t = Limits::default().request_timeout_s)]
+    request_timeout: u64,
+    /// Requests handled at once.
+    #[arg(long, default_value_t = Limits::default().concurrency)]
+    concurrency: usize,
+    /// Model computations at once (default: the number of cores).
+    #[arg(long, default_value_t = Limits::default().compute_slots)]
+    compute_slots: usize,
+    /// Print the OpenAPI document and exit.
+    #[arg(long)]
+    print_openapi: bool,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    if args.print_openapi {
+        print!("{}", openapi_json());
+        return ExitCode::SUCCESS;
+    }
+    let config = ServerConfig {
+        models_dir: args.models.clone(),
+        limits: Limits {
+            max_batch: args.max_batch,
+            max_particles: args.max_particles,
+            max_horizon: args.max_horizon,
+            max_rollout_steps: args.max_rollout_steps,
+            max_episodes: args.max_episodes,
+            max_body_bytes: args.max_body_bytes,
+            request_timeout_s: args.request_timeout,
+            concurrency: args.concurrency,
+            compute_slots: args.compute_slots,
+        },
+        token: args.token.filter(|t| !t.is_empty()),
+    };
+    let (state, report) = AppState::new(config);
+    for failure in &report.failed {
+        eprintln!("warning: not serving `{}`: {}", failure.id, failure.error);
+    }
+    if report.loaded.is_empty() {
+        eprintln!(
+            "warning: no model loaded from {} (each model is a subdirectory with model.json)",
+            args.models.display()
+        );
+    }
+    let runtime = match tokio::runtime::Runtime::new() {
+        Ok(runtime) => runtime,
+        Err(e) => {
+            eprintln!("error: cannot start the async runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let result = runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind(args.addr).await?;
+        eprintln!(
+            "nuno-server: serving {:?} on http://{} (docs at /docs)",
+            report.loaded,
+            listener.local_addr()?
+        );
+        serve(state, listener).await
+    });
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

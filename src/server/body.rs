@@ -1,0 +1,102 @@
+//! Request and response bodies: JSON, or safetensors bytes
+//! (`application/octet-stream`) for large batches, so 50 000 × 17 floats do not
+//! pay for text. Every rejection becomes an [`ApiError`].
+
+use std::collections::HashMap;
+
+use axum::body::Bytes;
+use axum::extract::{FromRequest, Request};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::de::DeserializeOwned;
+
+use super::ApiError;
+use super::AppState;
+use crate::artifact::{NamedTensors, parse_safetensors, safetensors_bytes};
+
+/// The MIME type of binary tensor bodies.
+pub const BINARY: &str = "application/octet-stream";
+
+/// A safetensors file as a request or response body (f32 tensors, options as
+/// string metadata in its header).
+#[derive(utoipa::ToSchema)]
+#[schema(value_type = String, format = Binary)]
+pub struct TensorBytes(pub Vec<u8>);
+
+/// How a request body is encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    Json,
+    Binary,
+}
+
+/// The raw request body, with body-size and read errors mapped to [`ApiError`].
+pub struct RawBody {
+    pub format: Format,
+    pub bytes: Bytes,
+}
+
+impl FromRequest<AppState> for RawBody {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &AppState) -> Result<Self, Self::Rejection> {
+        let format = request_format(req.headers())?;
+        let limit = state.config.limits.max_body_bytes;
+        let bytes = Bytes::from_request(req, state).await.map_err(|e| {
+            if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                ApiError::TooLarge(limit)
+            } else {
+                ApiError::Malformed(e.body_text())
+            }
+        })?;
+        Ok(Self { format, bytes })
+    }
+}
+
+impl RawBody {
+    /// The body as JSON of type `T` (binary bodies are refused for JSON-only routes).
+    pub fn json<T: DeserializeOwned>(&self) -> Result<T, ApiError> {
+        if self.format == Format::Binary {
+            return Err(ApiError::UnsupportedMediaType(BINARY.into()));
+        }
+        serde_json::from_slice(&self.bytes).map_err(|e| ApiError::Malformed(e.to_string()))
+    }
+
+    /// The body as safetensors: named f32 tensors and the header's string metadata.
+    pub fn tensors(&self) -> Result<(NamedTensors, HashMap<String, String>), ApiError> {
+        let metadata = safetensors::SafeTensors::read_metadata(&self.bytes)
+            .map_err(|e| ApiError::Malformed(format!("safetensors body: {e}")))?
+            .1
+            .metadata()
+            .clone()
+            .unwrap_or_default();
+        let tensors = parse_safetensors(&self.bytes, std::path::Path::new("request body"))
+            .map_err(|e| ApiError::Malformed(e.to_string()))?;
+        Ok((tensors, metadata))
+    }
+}
+
+fn request_format(headers: &HeaderMap) -> Result<Format, ApiError> {
+    let Some(value) = headers.get(header::CONTENT_TYPE) else {
+        // curl -d without -H sends no JSON type; JSON is the default.
+        return Ok(Format::Json);
+    };
+    let value = value.to_str().unwrap_or_default();
+    let mime = value
+        .split(';')
+        .next()
+        .unwrap_or_default()
+        .trim()
+        .to_ascii_lowercase();
+    match mime.as_str() {
+        "application/json" | "application/x-www-form-urlencoded" | "" => Ok(Format::Json),
+        BINARY => Ok(Format::Binary),
+        _ => Err(ApiError::UnsupportedMediaType(value.to_string())),
+    }
+}
+
+/// A safetensors response body.
+pub fn tensors_response(tensors: &NamedTensors) -> Result<Response, ApiError> {
+    let bytes = safetensors_bytes(tensors, None).map_err(|e| ApiError::Internal(e.to_string()))?;
+    Ok(([(header::CONTENT_TYPE, BINARY)], bytes).into_response())
+}

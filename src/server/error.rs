@@ -1,0 +1,96 @@
+//! Every error the API returns, mapped in one place to a status code and the
+//! JSON body `{ "error": { "code", "message" } }`.
+
+use axum::Json;
+use axum::extract::rejection::JsonRejection;
+use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+/// What went wrong with a request.
+#[derive(Debug, thiserror::Error)]
+pub enum ApiError {
+    #[error("model `{0}` is not loaded (GET /v1/models lists the loaded ones)")]
+    UnknownModel(String),
+    #[error("model `{0}` has no policy (train one with `nuno-trainer fit-policy`)")]
+    NoPolicy(String),
+    #[error("no route {0} (the API is listed at /docs and /openapi.json)")]
+    NoRoute(String),
+    #[error("malformed request body: {0}")]
+    Malformed(String),
+    #[error("{0}")]
+    Invalid(String),
+    #[error("{0}")]
+    OverLimit(String),
+    #[error("request body larger than the limit of {0} bytes")]
+    TooLarge(usize),
+    #[error("unsupported content type `{0}` (use application/json or application/octet-stream)")]
+    UnsupportedMediaType(String),
+    #[error("missing or wrong bearer token")]
+    Unauthorized,
+    #[error("the request did not finish within {0} s")]
+    Timeout(u64),
+    #[error("internal error: {0}")]
+    Internal(String),
+}
+
+impl ApiError {
+    /// The HTTP status and the stable machine-readable code.
+    pub fn status_code(&self) -> (StatusCode, &'static str) {
+        match self {
+            ApiError::UnknownModel(_) => (StatusCode::NOT_FOUND, "model_not_found"),
+            ApiError::NoRoute(_) => (StatusCode::NOT_FOUND, "route_not_found"),
+            ApiError::NoPolicy(_) => (StatusCode::CONFLICT, "no_policy"),
+            ApiError::Malformed(_) => (StatusCode::BAD_REQUEST, "malformed_body"),
+            ApiError::Invalid(_) => (StatusCode::UNPROCESSABLE_ENTITY, "invalid_request"),
+            ApiError::OverLimit(_) => (StatusCode::UNPROCESSABLE_ENTITY, "over_limit"),
+            ApiError::TooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, "body_too_large"),
+            ApiError::UnsupportedMediaType(_) => {
+                (StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported_media_type")
+            }
+            ApiError::Unauthorized => (StatusCode::UNAUTHORIZED, "unauthorized"),
+            ApiError::Timeout(_) => (StatusCode::SERVICE_UNAVAILABLE, "timeout"),
+            ApiError::Internal(_) => (StatusCode::INTERNAL_SERVER_ERROR, "internal"),
+        }
+    }
+
+    /// A rejected JSON body: too large, not JSON, or not the expected shape.
+    pub fn from_json_rejection(rejection: JsonRejection, limit: usize) -> Self {
+        match rejection {
+            JsonRejection::MissingJsonContentType(_) => {
+                ApiError::UnsupportedMediaType("none".into())
+            }
+            other if other.status() == StatusCode::PAYLOAD_TOO_LARGE => ApiError::TooLarge(limit),
+            other => ApiError::Malformed(other.body_text()),
+        }
+    }
+}
+
+/// The error body.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct ErrorBody {
+    pub error: ErrorDetail,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct ErrorDetail {
+    /// Stable code: model_not_found, route_not_found, no_policy, malformed_body, invalid_request,
+    /// over_limit, body_too_large, unsupported_media_type, unauthorized, timeout, internal.
+    pub code: String,
+    /// What was wrong, naming the field and the expected value.
+    pub message: String,
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let (status, code) = self.status_code();
+        let body = ErrorBody {
+            error: ErrorDetail {
+                code: code.to_string(),
+                message: self.to_string(),
+            },
+        };
+        (status, Json(body)).into_response()
+    }
+}

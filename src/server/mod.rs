@@ -1,0 +1,239 @@
+//! The model server: a thin axum layer over the library. `app()` builds the
+//! router (versioned JSON API under /v1, KServe v2 routes, health, metrics,
+//! OpenAPI and interactive docs); `serve()` runs it with graceful shutdown on
+//! SIGTERM/Ctrl-C and reloads the models on SIGHUP.
+//!
+//! Heavy work (model steps, rollouts, MuJoCo episodes) runs off the async
+//! runtime on tokio's blocking pool, at most `Limits::compute_slots` at once.
+
+mod body;
+mod error;
+mod metrics;
+mod openapi;
+mod registry;
+mod routes;
+mod validate;
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use axum::Router;
+use axum::extract::{DefaultBodyLimit, MatchedPath, Request, State};
+use axum::http::header;
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use serde::Serialize;
+use tokio::sync::Semaphore;
+use utoipa::ToSchema;
+
+pub use body::{BINARY, TensorBytes};
+pub use error::{ApiError, ErrorBody, ErrorDetail};
+pub use metrics::Metrics;
+pub use openapi::{ApiDoc, openapi_json};
+pub use registry::{LoadFailure, LoadedModel, ModelRegistry, ReloadReport, valid_model_id};
+pub use routes::*;
+
+/// What a client may ask for at most, and how long the server waits.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Limits {
+    /// Rows per step/act request, and start states per rollout.
+    pub max_batch: usize,
+    pub max_particles: usize,
+    pub max_horizon: usize,
+    /// batch × particles × horizon of one rollout.
+    pub max_rollout_steps: usize,
+    pub max_episodes: usize,
+    pub max_body_bytes: usize,
+    /// Seconds before a request is answered with a timeout error.
+    pub request_timeout_s: u64,
+    /// Requests handled at once; more wait in line.
+    pub concurrency: usize,
+    /// Model computations running at once on the blocking pool.
+    pub compute_slots: usize,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Self {
+            max_batch: 100_000,
+            max_particles: 64,
+            max_horizon: 1000,
+            max_rollout_steps: 5_000_000,
+            max_episodes: 100,
+            max_body_bytes: 64 << 20,
+            request_timeout_s: 120,
+            concurrency: 64,
+            compute_slots: std::thread::available_parallelism().map_or(2, |n| n.get()),
+        }
+    }
+}
+
+/// How the server runs.
+#[derive(Debug, Clone)]
+pub struct ServerConfig {
+    pub models_dir: PathBuf,
+    pub limits: Limits,
+    /// When set, every route except health needs `Authorization: Bearer <token>`.
+    pub token: Option<String>,
+}
+
+/// Shared by every handler.
+#[derive(Clone)]
+pub struct AppState {
+    pub config: Arc<ServerConfig>,
+    pub registry: Arc<ModelRegistry>,
+    pub metrics: Arc<Metrics>,
+    compute: Arc<Semaphore>,
+}
+
+impl AppState {
+    /// Loads the models in `config.models_dir`; the report says what failed.
+    pub fn new(config: ServerConfig) -> (Self, ReloadReport) {
+        let (registry, report) = ModelRegistry::open(&config.models_dir);
+        let state = Self {
+            compute: Arc::new(Semaphore::new(config.limits.compute_slots.max(1))),
+            config: Arc::new(config),
+            registry: Arc::new(registry),
+            metrics: Arc::new(Metrics::default()),
+        };
+        (state, report)
+    }
+
+    /// The model called `id`.
+    pub fn model(&self, id: &str) -> Result<Arc<LoadedModel>, ApiError> {
+        self.registry
+            .get(id)
+            .ok_or_else(|| ApiError::UnknownModel(id.chars().take(128).collect()))
+    }
+
+    /// Runs `work` on the blocking pool once a compute slot is free.
+    pub async fn compute<T: Send + 'static>(
+        &self,
+        work: impl FnOnce() -> Result<T, ApiError> + Send + 'static,
+    ) -> Result<T, ApiError> {
+        let _slot = self
+            .compute
+            .clone()
+            .acquire_owned()
+            .await
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        tokio::task::spawn_blocking(work)
+            .await
+            .map_err(|e| ApiError::Internal(format!("computation failed: {e}")))?
+    }
+}
+
+/// The whole HTTP application.
+pub fn app(state: AppState) -> Router {
+    let limits = state.config.limits.clone();
+    let protected = routes::api_routes()
+        .route_layer(middleware::from_fn_with_state(state.clone(), require_token));
+    Router::new()
+        .merge(protected)
+        .merge(routes::health_routes())
+        .merge(openapi::docs_routes())
+        .layer(middleware::from_fn_with_state(
+            state.clone(),
+            timeout_and_metrics,
+        ))
+        .layer(DefaultBodyLimit::max(limits.max_body_bytes))
+        .layer(tower::limit::ConcurrencyLimitLayer::new(
+            limits.concurrency.max(1),
+        ))
+        .fallback(|uri: axum::http::Uri| async move { ApiError::NoRoute(uri.path().to_string()) })
+        .with_state(state)
+}
+
+/// Bearer-token check for everything but health.
+async fn require_token(State(state): State<AppState>, request: Request, next: Next) -> Response {
+    if let Some(token) = &state.config.token {
+        let given = request
+            .headers()
+            .get(header::AUTHORIZATION)
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| v.strip_prefix("Bearer "));
+        if given != Some(token.as_str()) {
+            return ApiError::Unauthorized.into_response();
+        }
+    }
+    next.run(request).await
+}
+
+/// Per-request timeout (answered as a JSON error) and request metrics.
+async fn timeout_and_metrics(
+    State(state): State<AppState>,
+    request: Request,
+    next: Next,
+) -> Response {
+    let route = request
+        .extensions()
+        .get::<MatchedPath>()
+        .map_or_else(|| "unmatched".to_string(), |p| p.as_str().to_string());
+    let started = Instant::now();
+    let seconds = state.config.limits.request_timeout_s;
+    let response = match tokio::time::timeout(Duration::from_secs(seconds), next.run(request)).await
+    {
+        Ok(response) => response,
+        Err(_) => ApiError::Timeout(seconds).into_response(),
+    };
+    state.metrics.request(
+        &route,
+        response.status().as_u16(),
+        started.elapsed().as_secs_f64(),
+    );
+    response
+}
+
+/// Serves `state` on `addr` until SIGTERM or Ctrl-C; SIGHUP reloads the models.
+pub async fn serve(state: AppState, listener: tokio::net::TcpListener) -> std::io::Result<()> {
+    #[cfg(unix)]
+    {
+        let registry = state.registry.clone();
+        tokio::spawn(async move {
+            use tokio::signal::unix::{SignalKind, signal};
+            let Ok(mut hangups) = signal(SignalKind::hangup()) else {
+                return;
+            };
+            while hangups.recv().await.is_some() {
+                let registry = registry.clone();
+                let report = tokio::task::spawn_blocking(move || registry.reload()).await;
+                if let Ok(report) = report {
+                    eprintln!(
+                        "SIGHUP: reloaded {:?}, failed {:?}",
+                        report.loaded, report.failed
+                    );
+                }
+            }
+        });
+    }
+    axum::serve(
+        listener,
+        app(state).into_make_service_with_connect_info::<SocketAddr>(),
+    )
+    .with_graceful_shutdown(shutdown_signal())
+    .await
+}
+
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let terminate = async {
+        use tokio::signal::unix::{SignalKind, signal};
+        match signal(SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let terminate = std::future::pending::<()>();
+    tokio::select! {
+        () = ctrl_c => {},
+        () = terminate => {},
+    }
+}

@@ -1,0 +1,78 @@
+//! `POST /v1/models/{id}/act`: the model's policy on a batch of states.
+
+use axum::Json;
+use axum::extract::{Path, State};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use crate::agent::{ActionMode, ActorPolicy, BatchPolicy};
+use crate::server::body::RawBody;
+use crate::server::validate::{matrix, within};
+use crate::server::{ApiError, AppState};
+
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ActRequest {
+    /// Observations, `[batch][obs_dim]`.
+    pub states: Vec<Vec<f32>>,
+    /// deterministic (tanh of the mean, the default) or sampled.
+    #[serde(default)]
+    pub mode: ActionMode,
+    /// Seed of the policy's noise when sampled.
+    #[serde(default)]
+    pub seed: u64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct ActResponse {
+    pub model: String,
+    /// `[batch][act_dim]`, inside the task's action box.
+    pub actions: Vec<Vec<f32>>,
+}
+
+/// Policy actions for a batch of observations.
+#[utoipa::path(post, path = "/v1/models/{id}/act", tag = "models",
+    params(("id" = String, Path, description = "Model id")),
+    request_body = ActRequest,
+    responses(
+        (status = 200, description = "Success", body = ActResponse),
+        (status = 404, description = "Unknown model", body = crate::server::ErrorBody),
+        (status = 409, body = crate::server::ErrorBody, description = "The model has no policy"),
+        (status = 422, description = "Wrong dimensions, non-finite values, an empty batch, or over a limit", body = crate::server::ErrorBody),
+    ))]
+pub async fn act(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    body: RawBody,
+) -> Result<Json<ActResponse>, ApiError> {
+    let r: ActRequest = body.json()?;
+    let model = state.model(&id)?;
+    let Some((actor, _)) = model.policy.as_ref() else {
+        return Err(ApiError::NoPolicy(id));
+    };
+    let obs_dim = actor.config.obs_dim;
+    let states = matrix("states", &r.states, obs_dim)?;
+    within(
+        "batch (rows of states)",
+        r.states.len(),
+        state.config.limits.max_batch,
+    )?;
+    state.metrics.batch("act", &id, r.states.len());
+    let policy = ActorPolicy {
+        actor: actor.clone(),
+        mode: r.mode,
+    };
+    let act_dim = policy.act_dim();
+    let actions = state
+        .compute(move || {
+            let mut rng = ChaCha8Rng::seed_from_u64(r.seed);
+            Ok(policy.act(&states, &mut rng))
+        })
+        .await?;
+    Ok(Json(ActResponse {
+        model: id,
+        actions: actions.chunks(act_dim).map(<[f32]>::to_vec).collect(),
+    }))
+}

@@ -1,0 +1,234 @@
+//! MuJoCo-backed checks: `POST /v1/evaluate` runs a loaded policy in the real
+//! task; `POST /v1/models/{id}/validate` compares the model's open-loop
+//! prediction with the real task along given actions.
+
+use axum::Json;
+use axum::extract::{Path, State};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use crate::agent::{ActionMode, ActorPolicy, RolloutActions, RolloutConfig, rollout_model};
+use crate::envs::{EvaluationConfig, MujocoTask, evaluate as run_episodes};
+use crate::server::body::RawBody;
+use crate::server::validate::{matrix, within};
+use crate::server::{ApiError, AppState};
+
+fn ten() -> usize {
+    10
+}
+fn one() -> usize {
+    1
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct EvaluateRequest {
+    /// The model whose policy runs, in the model's task.
+    pub model: String,
+    /// Episodes (default 10); episode i resets with seed + i.
+    #[serde(default = "ten")]
+    pub episodes: usize,
+    #[serde(default)]
+    pub seed: u64,
+    /// deterministic (default) or sampled actions.
+    #[serde(default)]
+    pub mode: ActionMode,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct EvaluateResponse {
+    pub model: String,
+    pub task: String,
+    pub returns: Vec<f64>,
+    pub lengths: Vec<usize>,
+    /// D4RL normalised scores (× 100).
+    pub normalized_scores: Vec<f64>,
+    pub mean_return: f64,
+    pub std_return: f64,
+    pub mean_normalized_score: f64,
+    pub std_normalized_score: f64,
+}
+
+/// Runs the model's policy in the real MuJoCo task.
+#[utoipa::path(post, path = "/v1/evaluate", tag = "evaluation",
+    request_body = EvaluateRequest,
+    responses(
+        (status = 200, description = "Success", body = EvaluateResponse),
+        (status = 404, description = "Unknown model", body = crate::server::ErrorBody),
+        (status = 409, body = crate::server::ErrorBody, description = "The model has no policy"),
+        (status = 422, description = "Wrong dimensions, non-finite values, an empty batch, or over a limit", body = crate::server::ErrorBody),
+    ))]
+pub async fn evaluate(
+    State(state): State<AppState>,
+    body: RawBody,
+) -> Result<Json<EvaluateResponse>, ApiError> {
+    let r: EvaluateRequest = body.json()?;
+    let model = state.model(&r.model)?;
+    let Some((actor, _)) = model.policy.as_ref() else {
+        return Err(ApiError::NoPolicy(r.model));
+    };
+    within("episodes", r.episodes, state.config.limits.max_episodes)?;
+    state.metrics.batch("evaluate", &r.model, r.episodes);
+    let policy = ActorPolicy {
+        actor: actor.clone(),
+        mode: r.mode,
+    };
+    let config = EvaluationConfig::new(model.task, r.episodes, r.seed);
+    let report = state
+        .compute(move || {
+            run_episodes(&policy, &config).map_err(|e| ApiError::Internal(e.to_string()))
+        })
+        .await?;
+    Ok(Json(EvaluateResponse {
+        model: r.model,
+        task: model.task.name.to_string(),
+        returns: report.returns,
+        lengths: report.lengths,
+        normalized_scores: report.normalized_scores,
+        mean_return: report.mean_return,
+        std_return: report.std_return,
+        mean_normalized_score: report.mean_normalized_score,
+        std_normalized_score: report.std_normalized_score,
+    }))
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ValidateRequest {
+    /// Actions to apply, `[horizon][act_dim]`.
+    pub actions: Vec<Vec<f32>>,
+    /// Reset seed of the real task (the start state).
+    #[serde(default)]
+    pub seed: u64,
+    /// Model samples averaged per step (default 1).
+    #[serde(default = "one")]
+    pub particles: usize,
+    /// Multiplies the model's noise (default 0: the drift alone).
+    #[serde(default)]
+    pub noise_scale: f32,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct ValidateResponse {
+    pub model: String,
+    /// Steps compared: until the horizon, or until the real task or the model terminated.
+    pub steps: usize,
+    /// Real observations, `[steps + 1][obs_dim]`.
+    pub real_states: Vec<Vec<f32>>,
+    /// The model's (particle-mean) observations, `[steps + 1][obs_dim]`.
+    pub model_states: Vec<Vec<f32>>,
+    /// RMSE over observation entries after each step, physical units: `[steps]`.
+    pub rmse: Vec<f32>,
+    /// The same with each entry divided by the dataset's std.
+    pub normalized_rmse: Vec<f32>,
+}
+
+/// Compares the model's open-loop prediction with the real MuJoCo task.
+#[utoipa::path(post, path = "/v1/models/{id}/validate", tag = "evaluation",
+    params(("id" = String, Path, description = "Model id")),
+    request_body = ValidateRequest,
+    responses(
+        (status = 200, description = "Success", body = ValidateResponse),
+        (status = 404, description = "Unknown model", body = crate::server::ErrorBody),
+        (status = 422, description = "Wrong dimensions, non-finite values, an empty batch, or over a limit", body = crate::server::ErrorBody),
+    ))]
+pub async fn validate(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    body: RawBody,
+) -> Result<Json<ValidateResponse>, ApiError> {
+    let r: ValidateRequest = body.json()?;
+    let model = state.model(&id)?;
+    let spec = &model.metadata.spec;
+    let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
+    let actions = matrix("actions", &r.actions, act_dim)?;
+    let limits = &state.config.limits;
+    within(
+        "horizon (rows of actions)",
+        r.actions.len(),
+        limits.max_horizon,
+    )?;
+    within("particles", r.particles, limits.max_particles)?;
+    if !r.noise_scale.is_finite() || r.noise_scale < 0.0 {
+        return Err(ApiError::Invalid(
+            "`noise_scale` must be a finite number ≥ 0".into(),
+        ));
+    }
+    let horizon = r.actions.len();
+    state.metrics.batch("validate", &id, horizon * r.particles);
+    let worker = model.clone();
+    let (real, predicted) = state
+        .compute(move || {
+            let internal = |e: crate::envs::EnvError| ApiError::Internal(e.to_string());
+            let mut task = MujocoTask::new(worker.task).map_err(internal)?;
+            let start: Vec<f32> = task.reset(Some(r.seed)).iter().map(|&x| x as f32).collect();
+            let mut real = vec![start.clone()];
+            for action in actions.chunks(act_dim) {
+                let action: Vec<f64> = action.iter().map(|&a| f64::from(a)).collect();
+                let t = task
+                    .step(&action)
+                    .map_err(|e| ApiError::Invalid(e.to_string()))?;
+                real.push(t.observation.iter().map(|&x| x as f32).collect());
+                if t.terminated {
+                    break;
+                }
+            }
+            let config = RolloutConfig {
+                horizon,
+                particles: r.particles,
+                penalty: 0.0,
+                threshold: None,
+                noise_scale: r.noise_scale,
+            };
+            let mut rng = ChaCha8Rng::seed_from_u64(r.seed);
+            let out = rollout_model(
+                &worker.dynamics,
+                RolloutActions::Sequence(&actions),
+                &worker.rules,
+                &start,
+                &config,
+                &mut rng,
+            );
+            Ok((real, out.trace.observations))
+        })
+        .await?;
+
+    // Mean over particles, as far as every particle got.
+    let kept = predicted
+        .iter()
+        .map(|p| p.len() / obs_dim)
+        .min()
+        .unwrap_or(1);
+    let steps = (real.len() - 1).min(kept - 1);
+    let model_states: Vec<Vec<f32>> = (0..=steps)
+        .map(|k| {
+            (0..obs_dim)
+                .map(|i| {
+                    predicted.iter().map(|p| p[k * obs_dim + i]).sum::<f32>()
+                        / predicted.len() as f32
+                })
+                .collect()
+        })
+        .collect();
+    let std = &model.metadata.scales.normalizer.state.std;
+    let rmse = |scale: &dyn Fn(usize) -> f32| -> Vec<f32> {
+        (1..=steps)
+            .map(|k| {
+                let sum: f32 = (0..obs_dim)
+                    .map(|i| ((model_states[k][i] - real[k][i]) / scale(i)).powi(2))
+                    .sum();
+                (sum / obs_dim as f32).sqrt()
+            })
+            .collect()
+    };
+    Ok(Json(ValidateResponse {
+        model: id,
+        steps,
+        rmse: rmse(&|_| 1.0),
+        normalized_rmse: rmse(&|i| std[i]),
+        real_states: real.into_iter().take(steps + 1).collect(),
+        model_states,
+    }))
+}

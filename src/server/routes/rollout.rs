@@ -1,0 +1,259 @@
+//! `POST /v1/models/{id}/rollout`: multi-step rollouts from a batch of start
+//! states, open loop along given actions or closed loop with the model's
+//! policy, with η, accumulated η, penalised rewards, terminal flags and NUNO's
+//! truncation at ε(h, α).
+
+use axum::Json;
+use axum::extract::{Path, State};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use crate::agent::{
+    ActionMode, ActorPolicy, RolloutActions, RolloutConfig, StepOutcome, rollout_model,
+};
+use crate::server::body::RawBody;
+use crate::server::validate::{matrix, non_negative, within};
+use crate::server::{ApiError, AppState};
+
+fn one() -> usize {
+    1
+}
+fn unit() -> f64 {
+    1.0
+}
+fn unit_f32() -> f32 {
+    1.0
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RolloutRequest {
+    /// Start observations, `[batch][obs_dim]`.
+    pub states: Vec<Vec<f32>>,
+    /// Open-loop actions `[batch][horizon][act_dim]`; without them the model's policy acts.
+    #[serde(default)]
+    pub actions: Option<Vec<Vec<Vec<f32>>>>,
+    /// How the policy acts when it does (default deterministic).
+    #[serde(default)]
+    pub policy_mode: ActionMode,
+    /// Steps h.
+    pub horizon: usize,
+    /// Trajectories per start state (default 1).
+    #[serde(default = "one")]
+    pub particles: usize,
+    #[serde(default)]
+    pub seed: u64,
+    /// λ_pen (default 1).
+    #[serde(default = "unit")]
+    pub penalty: f64,
+    /// CVaR level α: truncate at the model's ε(h, α) (h = horizon).
+    #[serde(default)]
+    pub alpha: Option<f64>,
+    /// An explicit truncation threshold instead of α.
+    #[serde(default)]
+    pub threshold: Option<f32>,
+    /// Multiplies ε (default 1; 0 follows the drift).
+    #[serde(default = "unit_f32")]
+    pub noise_scale: f32,
+}
+
+/// One trajectory; arrays stop where it ended.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct Trajectory {
+    /// Index of its start state in the request.
+    pub start: usize,
+    pub particle: usize,
+    /// The start, then one observation per kept step: `[length + 1][obs_dim]`.
+    pub states: Vec<Vec<f32>>,
+    /// The action of every step taken, a truncating one included.
+    pub actions: Vec<Vec<f32>>,
+    /// η(s_k, a_k) of every step taken.
+    pub eta: Vec<f32>,
+    /// Σ_{j ≤ k} η(s_j, a_j).
+    pub accumulated_eta: Vec<f32>,
+    /// Rewards before the penalty.
+    pub rewards: Vec<f32>,
+    /// r − λ_pen·η.
+    pub penalized_rewards: Vec<f32>,
+    /// Steps kept.
+    pub length: usize,
+    /// Ended in a terminal state (the task's rules).
+    pub terminal: bool,
+    /// Accumulated η passed the threshold at step `truncation_step` (that step is not kept).
+    pub truncated: bool,
+    pub truncation_step: Option<usize>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct RolloutResponse {
+    pub model: String,
+    pub horizon: usize,
+    pub particles: usize,
+    /// The truncation threshold used, if any.
+    pub threshold: Option<f32>,
+    /// Start `b`'s particle `p` is entry `b·particles + p`.
+    pub trajectories: Vec<Trajectory>,
+}
+
+/// Rolls the model h steps from each start state.
+#[utoipa::path(post, path = "/v1/models/{id}/rollout", tag = "models",
+    params(("id" = String, Path, description = "Model id")),
+    request_body = RolloutRequest,
+    responses(
+        (status = 200, description = "Success", body = RolloutResponse),
+        (status = 400, description = "Malformed body", body = crate::server::ErrorBody),
+        (status = 404, description = "Unknown model", body = crate::server::ErrorBody),
+        (status = 409, body = crate::server::ErrorBody, description = "No actions given and the model has no policy"),
+        (status = 422, description = "Wrong dimensions, non-finite values, an empty batch, or over a limit", body = crate::server::ErrorBody),
+    ))]
+pub async fn rollout(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    body: RawBody,
+) -> Result<Json<RolloutResponse>, ApiError> {
+    let r: RolloutRequest = body.json()?;
+    let model = state.model(&id)?;
+    let spec = &model.metadata.spec;
+    let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
+    let limits = &state.config.limits;
+    let starts = matrix("states", &r.states, obs_dim)?;
+    let batch = r.states.len();
+    within("batch (rows of states)", batch, limits.max_batch)?;
+    within("horizon", r.horizon, limits.max_horizon)?;
+    within("particles", r.particles, limits.max_particles)?;
+    within(
+        "batch × particles × horizon",
+        batch * r.particles * r.horizon,
+        limits.max_rollout_steps,
+    )?;
+    non_negative("penalty", r.penalty)?;
+    non_negative("noise_scale", f64::from(r.noise_scale))?;
+    let sequence = match &r.actions {
+        None => {
+            if model.policy.is_none() {
+                return Err(ApiError::NoPolicy(id));
+            }
+            None
+        }
+        Some(actions) => {
+            if actions.len() != batch {
+                return Err(ApiError::Invalid(format!(
+                    "`actions` has {} sequences for {batch} start states",
+                    actions.len()
+                )));
+            }
+            let mut flat = Vec::with_capacity(batch * r.horizon * act_dim);
+            for (b, sequence) in actions.iter().enumerate() {
+                if sequence.len() != r.horizon {
+                    return Err(ApiError::Invalid(format!(
+                        "`actions[{b}]` has {} steps, the horizon is {}",
+                        sequence.len(),
+                        r.horizon
+                    )));
+                }
+                flat.extend(matrix(&format!("actions[{b}]"), sequence, act_dim)?);
+            }
+            Some(flat)
+        }
+    };
+    let threshold = match (r.threshold, r.alpha) {
+        (Some(_), Some(_)) => {
+            return Err(ApiError::Invalid(
+                "give `alpha` or `threshold`, not both".into(),
+            ));
+        }
+        (Some(t), None) if t.is_finite() => Some(t),
+        (Some(t), None) => {
+            return Err(ApiError::Invalid(format!(
+                "`threshold` must be finite, got {t}"
+            )));
+        }
+        (None, Some(alpha)) => {
+            let table = model.metadata.provenance.thresholds.as_ref();
+            Some(table.and_then(|t| t.get(r.horizon, alpha)).ok_or_else(|| {
+                ApiError::Invalid(format!(
+                    "the model has no ε(h = {}, α = {alpha}); its table covers h ∈ {:?}, α ∈ {:?}",
+                    r.horizon,
+                    table.map(|t| t.horizons.clone()).unwrap_or_default(),
+                    table.map(|t| t.alphas.clone()).unwrap_or_default()
+                ))
+            })?)
+        }
+        (None, None) => None,
+    };
+    state
+        .metrics
+        .batch("rollout", &id, batch * r.particles * r.horizon);
+
+    let config = RolloutConfig {
+        horizon: r.horizon,
+        particles: r.particles,
+        penalty: r.penalty,
+        threshold,
+        noise_scale: r.noise_scale,
+    };
+    let (seed, mode) = (r.seed, r.policy_mode);
+    let worker = model.clone();
+    let out = state
+        .compute(move || {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let policy = worker.policy.as_ref().map(|(actor, _)| ActorPolicy {
+                actor: actor.clone(),
+                mode,
+            });
+            let source = match (&sequence, &policy) {
+                (Some(actions), _) => RolloutActions::Sequence(actions),
+                (None, Some(policy)) => RolloutActions::Policy(policy),
+                (None, None) => return Err(ApiError::NoPolicy(worker.id.clone())),
+            };
+            Ok(rollout_model(
+                &worker.dynamics,
+                source,
+                &worker.rules,
+                &starts,
+                &config,
+                &mut rng,
+            ))
+        })
+        .await?;
+
+    let t = &out.trace;
+    let trajectories = (0..t.rows)
+        .map(|row| {
+            let truncated = t.outcome[row] == StepOutcome::Truncated;
+            Trajectory {
+                start: row / r.particles,
+                particle: row % r.particles,
+                states: t.observations[row]
+                    .chunks(obs_dim)
+                    .map(<[f32]>::to_vec)
+                    .collect(),
+                actions: t.actions[row]
+                    .chunks(act_dim)
+                    .map(<[f32]>::to_vec)
+                    .collect(),
+                eta: t.eta[row].clone(),
+                accumulated_eta: t.accumulated_eta[row].clone(),
+                rewards: t.rewards[row].clone(),
+                penalized_rewards: t.rewards[row]
+                    .iter()
+                    .zip(&t.eta[row])
+                    .map(|(reward, eta)| reward - (r.penalty * f64::from(*eta)) as f32)
+                    .collect(),
+                length: t.kept[row],
+                terminal: t.outcome[row] == StepOutcome::Terminal,
+                truncated,
+                truncation_step: truncated.then_some(t.kept[row]),
+            }
+        })
+        .collect();
+    Ok(Json(RolloutResponse {
+        model: id,
+        horizon: r.horizon,
+        particles: r.particles,
+        threshold,
+        trajectories,
+    }))
+}

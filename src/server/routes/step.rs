@@ -1,0 +1,246 @@
+//! `POST /v1/models/{id}/step`: one Euler–Maruyama step for a batch of
+//! (state, action) pairs, `particles` samples each. JSON, or safetensors bytes
+//! both ways (`application/octet-stream`).
+
+use std::collections::HashMap;
+
+use axum::Json;
+use axum::extract::{Path, State};
+use axum::response::{IntoResponse, Response};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use crate::agent::{ParticleConfig, ParticleStep, step_particles};
+use crate::artifact::NamedTensors;
+use crate::server::body::{Format, RawBody, TensorBytes, tensors_response};
+use crate::server::validate::{flat, matrix, non_negative, within};
+use crate::server::{ApiError, AppState};
+
+fn one() -> usize {
+    1
+}
+fn unit() -> f64 {
+    1.0
+}
+fn unit_f32() -> f32 {
+    1.0
+}
+
+/// A batch of observations and actions to step.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct StepRequest {
+    /// Observations, `[batch][obs_dim]`.
+    pub states: Vec<Vec<f32>>,
+    /// Actions, `[batch][act_dim]`.
+    pub actions: Vec<Vec<f32>>,
+    /// Samples per item (default 1).
+    #[serde(default = "one")]
+    pub particles: usize,
+    /// Seed of the noise ε (default 0): the same request gives the same answer.
+    #[serde(default)]
+    pub seed: u64,
+    /// λ_pen of the penalised reward r − λ_pen·η (default 1).
+    #[serde(default = "unit")]
+    pub penalty: f64,
+    /// Multiplies ε (default 1; 0 follows the drift).
+    #[serde(default = "unit_f32")]
+    pub noise_scale: f32,
+}
+
+/// Per item: the SDE's terms; per item and particle: the sampled step.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct StepResponse {
+    pub model: String,
+    pub batch: usize,
+    pub particles: usize,
+    /// s + f(s, a)·dt, the drift mean: `[batch][obs_dim]`.
+    pub mean: Vec<Vec<f32>>,
+    /// Aleatoric diffusion σ(s, a): `[batch][obs_dim]`.
+    pub sigma: Vec<Vec<f32>>,
+    /// Epistemic diffusion h(η(s, a)): `[batch][obs_dim]`.
+    pub h_eta: Vec<Vec<f32>>,
+    /// Distance-aware uncertainty η(s, a): `[batch]`.
+    pub eta: Vec<f32>,
+    /// Sampled next observations: `[batch][particles][obs_dim]`.
+    pub next_states: Vec<Vec<Vec<f32>>>,
+    /// The task's reward (or the learned one for NUNO^R): `[batch][particles]`.
+    pub rewards: Vec<Vec<f32>>,
+    /// r − λ_pen·η: `[batch][particles]`.
+    pub penalized_rewards: Vec<Vec<f32>>,
+    /// The task's termination rule on the next observation: `[batch][particles]`.
+    pub terminals: Vec<Vec<bool>>,
+}
+
+/// Samples one EM step. Binary bodies: a safetensors file with `states`
+/// `[batch, obs_dim]` and `actions` `[batch, act_dim]` (f32), the options as
+/// string metadata (`particles`, `seed`, `penalty`, `noise_scale`); the answer
+/// is a safetensors file with `mean`, `sigma`, `h_eta` `[batch, obs_dim]`,
+/// `eta` `[batch]`, `next_states` `[batch, particles, obs_dim]`, `rewards`,
+/// `penalized_rewards`, `terminals` (0/1) `[batch, particles]`.
+#[utoipa::path(post, path = "/v1/models/{id}/step", tag = "models",
+    params(("id" = String, Path, description = "Model id")),
+    request_body(content(
+        (StepRequest = "application/json"),
+        (TensorBytes = "application/octet-stream"),
+    )),
+    responses(
+        (status = 200, description = "Success", content((StepResponse = "application/json"), (TensorBytes = "application/octet-stream"))),
+        (status = 400, body = crate::server::ErrorBody, description = "Malformed body"),
+        (status = 404, body = crate::server::ErrorBody, description = "Unknown model"),
+        (status = 413, body = crate::server::ErrorBody, description = "Body too large"),
+        (status = 422, body = crate::server::ErrorBody, description = "Wrong dimensions, non-finite values, empty batch or over a limit"),
+    ))]
+pub async fn step(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    body: RawBody,
+) -> Result<Response, ApiError> {
+    let model = state.model(&id)?;
+    let spec = &model.metadata.spec;
+    let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
+    let (observations, actions, request) = match body.format {
+        Format::Json => {
+            let r: StepRequest = body.json()?;
+            let states = matrix("states", &r.states, obs_dim)?;
+            let actions = matrix("actions", &r.actions, act_dim)?;
+            (states, actions, r)
+        }
+        Format::Binary => binary_request(&body, obs_dim, act_dim)?,
+    };
+    let batch = observations.len() / obs_dim;
+    if actions.len() / act_dim != batch {
+        return Err(ApiError::Invalid(format!(
+            "`states` has {batch} rows but `actions` has {}",
+            actions.len() / act_dim
+        )));
+    }
+    let limits = &state.config.limits;
+    within("batch (rows of states)", batch, limits.max_batch)?;
+    within("particles", request.particles, limits.max_particles)?;
+    non_negative("penalty", request.penalty)?;
+    non_negative("noise_scale", f64::from(request.noise_scale))?;
+    state.metrics.batch("step", &id, batch * request.particles);
+
+    let config = ParticleConfig {
+        particles: request.particles,
+        penalty: request.penalty,
+        noise_scale: request.noise_scale,
+    };
+    let worker = model.clone();
+    let result = state
+        .compute(move || {
+            let mut rng = ChaCha8Rng::seed_from_u64(request.seed);
+            Ok(step_particles(
+                &worker.dynamics,
+                &worker.rules,
+                &observations,
+                &actions,
+                config,
+                &mut rng,
+            ))
+        })
+        .await?;
+    match body.format {
+        Format::Json => Ok(Json(json_response(&id, &result)).into_response()),
+        Format::Binary => tensors_response(&binary_response(&result)),
+    }
+}
+
+fn binary_request(
+    body: &RawBody,
+    obs_dim: usize,
+    act_dim: usize,
+) -> Result<(Vec<f32>, Vec<f32>, StepRequest), ApiError> {
+    let (mut tensors, metadata) = body.tensors()?;
+    let mut take = |name: &str, width: usize| -> Result<Vec<f32>, ApiError> {
+        let (shape, values) = tensors.remove(name).ok_or_else(|| {
+            ApiError::Invalid(format!("the safetensors body has no `{name}` tensor"))
+        })?;
+        if shape.len() != 2 || shape[1] != width {
+            return Err(ApiError::Invalid(format!(
+                "`{name}` has shape {shape:?}, this model expects [batch, {width}]"
+            )));
+        }
+        flat(name, &values, width)?;
+        Ok(values)
+    };
+    let states = take("states", obs_dim)?;
+    let actions = take("actions", act_dim)?;
+    let request = StepRequest {
+        states: Vec::new(),
+        actions: Vec::new(),
+        particles: option(&metadata, "particles", 1)?,
+        seed: option(&metadata, "seed", 0)?,
+        penalty: option(&metadata, "penalty", 1.0)?,
+        noise_scale: option(&metadata, "noise_scale", 1.0)?,
+    };
+    Ok((states, actions, request))
+}
+
+/// A safetensors metadata option, or its default.
+fn option<T: std::str::FromStr>(
+    metadata: &HashMap<String, String>,
+    key: &str,
+    default: T,
+) -> Result<T, ApiError> {
+    match metadata.get(key) {
+        None => Ok(default),
+        Some(text) => text.parse().map_err(|_| {
+            ApiError::Invalid(format!("metadata `{key}` = `{text}` is not a valid value"))
+        }),
+    }
+}
+
+fn rows(values: &[f32], width: usize) -> Vec<Vec<f32>> {
+    values.chunks(width.max(1)).map(<[f32]>::to_vec).collect()
+}
+
+fn json_response(id: &str, s: &ParticleStep) -> StepResponse {
+    let (p, d) = (s.particles, s.obs_dim);
+    StepResponse {
+        model: id.to_string(),
+        batch: s.batch,
+        particles: p,
+        mean: rows(&s.mean, d),
+        sigma: rows(&s.sigma, d),
+        h_eta: rows(&s.h_eta, d),
+        eta: s.eta.clone(),
+        next_states: s
+            .next_states
+            .chunks(p * d)
+            .map(|item| rows(item, d))
+            .collect(),
+        rewards: rows(&s.rewards, p),
+        penalized_rewards: rows(&s.penalized_rewards, p),
+        terminals: s.terminals.chunks(p).map(<[bool]>::to_vec).collect(),
+    }
+}
+
+fn binary_response(s: &ParticleStep) -> NamedTensors {
+    let (b, p, d) = (s.batch, s.particles, s.obs_dim);
+    NamedTensors::from([
+        ("mean".into(), (vec![b, d], s.mean.clone())),
+        ("sigma".into(), (vec![b, d], s.sigma.clone())),
+        ("h_eta".into(), (vec![b, d], s.h_eta.clone())),
+        ("eta".into(), (vec![b], s.eta.clone())),
+        ("next_states".into(), (vec![b, p, d], s.next_states.clone())),
+        ("rewards".into(), (vec![b, p], s.rewards.clone())),
+        (
+            "penalized_rewards".into(),
+            (vec![b, p], s.penalized_rewards.clone()),
+        ),
+        (
+            "terminals".into(),
+            (
+                vec![b, p],
+                s.terminals
+                    .iter()
+                    .map(|&t| f32::from(u8::from(t)))
+                    .collect(),
+            ),
+        ),
+    ])
+}

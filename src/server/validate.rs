@@ -1,0 +1,77 @@
+//! Checks on client-supplied batches: not empty, the right widths, finite
+//! values, within the configured limits. Every message names the field.
+
+use super::ApiError;
+
+/// Flattens `rows` after checking there is at least one, each has `width`
+/// entries, and every entry is finite.
+pub fn matrix(field: &str, rows: &[Vec<f32>], width: usize) -> Result<Vec<f32>, ApiError> {
+    if rows.is_empty() {
+        return Err(ApiError::Invalid(format!(
+            "`{field}` is empty: send at least one row"
+        )));
+    }
+    let mut flat = Vec::with_capacity(rows.len() * width);
+    for (i, row) in rows.iter().enumerate() {
+        if row.len() != width {
+            return Err(ApiError::Invalid(format!(
+                "`{field}[{i}]` has {} entries, this model expects {width}",
+                row.len()
+            )));
+        }
+        flat.extend_from_slice(row);
+    }
+    finite(field, &flat, width)?;
+    Ok(flat)
+}
+
+/// Checks a flat row-major buffer: whole rows of `width`, all finite.
+pub fn flat(field: &str, values: &[f32], width: usize) -> Result<usize, ApiError> {
+    if values.is_empty() {
+        return Err(ApiError::Invalid(format!(
+            "`{field}` is empty: send at least one row"
+        )));
+    }
+    if width == 0 || !values.len().is_multiple_of(width) {
+        return Err(ApiError::Invalid(format!(
+            "`{field}` has {} values, not a whole number of rows of width {width}",
+            values.len()
+        )));
+    }
+    finite(field, values, width)?;
+    Ok(values.len() / width)
+}
+
+fn finite(field: &str, values: &[f32], width: usize) -> Result<(), ApiError> {
+    match values.iter().position(|v| !v.is_finite()) {
+        Some(i) => Err(ApiError::Invalid(format!(
+            "`{field}[{}][{}]` is not a finite number",
+            i / width,
+            i % width
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// `value` of `field` must lie in `1..=max`.
+pub fn within(field: &str, value: usize, max: usize) -> Result<(), ApiError> {
+    if value == 0 {
+        return Err(ApiError::Invalid(format!("`{field}` must be at least 1")));
+    }
+    if value > max {
+        return Err(ApiError::OverLimit(format!(
+            "`{field}` is {value}, over this server's limit of {max}"
+        )));
+    }
+    Ok(())
+}
+
+/// A finite, non-negative number.
+pub fn non_negative(field: &str, value: f64) -> Result<(), ApiError> {
+    if !value.is_finite() || value < 0.0 {
+        return Err(ApiError::Invalid(format!(
+            "`{field}` must be a finite number ≥ 0, got {value}"
+        )));
+    }
+    Ok(())
+}

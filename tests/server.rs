@@ -1,0 +1,769 @@
+//! The model server end to end: the real router on 127.0.0.1:0, called with
+//! reqwest. Happy paths with value checks against the library, every bad-input
+//! case, auth, concurrency, metrics, KServe v2, reload, and the committed spec.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use burn::tensor::Device;
+use nuno::agent::{ActionMode, ActorConfig, ActorPolicy, BatchPolicy};
+use nuno::artifact::{BEST_POLICY, PolicyProvenance, load_dynamics, save_policy};
+use nuno::envs::{TaskConfig, TaskName, TaskRules};
+use nuno::sde::BatchDynamics;
+use nuno::server::{
+    ActResponse, AppState, EvaluateResponse, Limits, ModelDetail, ModelList, RolloutResponse,
+    ServerConfig, StepResponse, ValidateResponse, openapi_json, serve,
+};
+use reqwest::StatusCode;
+use serde_json::{Value, json};
+
+const MODEL: &str = "hopper-random";
+
+fn shipped() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("models")
+        .join(MODEL)
+}
+
+fn copy_model(to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for file in ["model.json", "dynamics.safetensors"] {
+        std::fs::copy(shipped().join(file), to.join(file)).unwrap();
+    }
+}
+
+/// A models directory with `hopper-random` (plus a seeded random policy) and
+/// `no-policy` (dynamics only).
+fn models_dir() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    copy_model(&dir.path().join(MODEL));
+    copy_model(&dir.path().join("no-policy"));
+    let device = Device::flex();
+    device.seed(1);
+    let actor = ActorConfig::new(11, 3, vec![-1.0; 3], vec![1.0; 3]).init(&device);
+    let task = TaskConfig::d4rl(TaskName::Hopper);
+    save_policy(
+        &dir.path().join(MODEL),
+        BEST_POLICY,
+        &actor,
+        task,
+        PolicyProvenance::default(),
+    )
+    .unwrap();
+    dir
+}
+
+struct Server {
+    base: String,
+    client: reqwest::Client,
+    _models: tempfile::TempDir,
+    models_path: PathBuf,
+}
+
+impl Server {
+    async fn start(limits: Limits, token: Option<&str>) -> Self {
+        let models = models_dir();
+        let config = ServerConfig {
+            models_dir: models.path().to_path_buf(),
+            limits,
+            token: token.map(String::from),
+        };
+        let (state, report) = AppState::new(config);
+        assert_eq!(
+            report.loaded,
+            vec![MODEL.to_string(), "no-policy".to_string()]
+        );
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let base = format!("http://{}", listener.local_addr().unwrap());
+        tokio::spawn(serve(state, listener));
+        Self {
+            base,
+            client: reqwest::Client::new(),
+            models_path: models.path().to_path_buf(),
+            _models: models,
+        }
+    }
+
+    async fn post(&self, path: &str, body: &Value) -> (StatusCode, Value) {
+        let r = self
+            .client
+            .post(format!("{}{path}", self.base))
+            .json(body)
+            .send()
+            .await
+            .unwrap();
+        let status = r.status();
+        (status, r.json().await.unwrap())
+    }
+
+    async fn get(&self, path: &str) -> (StatusCode, Value) {
+        let r = self
+            .client
+            .get(format!("{}{path}", self.base))
+            .send()
+            .await
+            .unwrap();
+        let status = r.status();
+        (status, r.json().await.unwrap_or(Value::Null))
+    }
+}
+
+fn limits() -> Limits {
+    Limits {
+        max_batch: 5000,
+        max_particles: 8,
+        max_horizon: 50,
+        max_body_bytes: 1 << 20,
+        ..Limits::default()
+    }
+}
+
+fn upright(n: usize) -> Vec<Vec<f32>> {
+    (0..n)
+        .map(|i| {
+            let mut s = vec![0.0f32; 11];
+            s[0] = 1.25;
+            s[5] = 0.1 * i as f32;
+            s[7] = -0.2 * i as f32;
+            s
+        })
+        .collect()
+}
+
+fn actions(n: usize) -> Vec<Vec<f32>> {
+    (0..n)
+        .map(|i| vec![0.3 * (i as f32).sin(), -0.2, 0.5])
+        .collect()
+}
+
+fn error_code(body: &Value) -> &str {
+    body["error"]["code"].as_str().unwrap_or("<no code>")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn models_are_listed_with_their_details() {
+    let server = Server::start(limits(), None).await;
+    let (status, body) = server.get("/v1/models").await;
+    assert_eq!(status, StatusCode::OK);
+    let list: ModelList = serde_json::from_value(body).unwrap();
+    assert_eq!(list.models.len(), 2);
+    let m = &list.models[0];
+    assert_eq!(
+        (m.id.as_str(), m.task.as_str(), m.obs_dim, m.act_dim),
+        (MODEL, "hopper", 11, 3)
+    );
+    assert!(m.has_policy && !list.models[1].has_policy);
+    assert!((m.dt - 0.008).abs() < 1e-12);
+    let (status, body) = server.get(&format!("/v1/models/{MODEL}")).await;
+    assert_eq!(status, StatusCode::OK);
+    let detail: ModelDetail = serde_json::from_value(body).unwrap();
+    assert_eq!(detail.thresholds["horizons"], json!([5, 10, 15, 20]));
+    assert_eq!(detail.state_split["positions"].as_array().unwrap().len(), 5);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn step_matches_the_library_in_json_and_binary() {
+    let server = Server::start(limits(), None).await;
+    let (states, acts) = (upright(4), actions(4));
+    let request =
+        json!({"states": states, "actions": acts, "particles": 3, "seed": 7, "penalty": 0.5});
+    let (status, body) = server
+        .post(&format!("/v1/models/{MODEL}/step"), &request)
+        .await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    let r: StepResponse = serde_json::from_value(body).unwrap();
+    assert_eq!(
+        (
+            r.batch,
+            r.particles,
+            r.next_states.len(),
+            r.next_states[0].len()
+        ),
+        (4, 3, 4, 3)
+    );
+
+    // The drift mean, σ, h(η) and η equal the library's step.
+    let (model, metadata) = load_dynamics(&shipped(), &Device::flex()).unwrap();
+    let flat_states: Vec<f32> = states.concat();
+    let flat_actions: Vec<f32> = acts.concat();
+    let direct = BatchDynamics::step(&model, &flat_states, &flat_actions, &[0.0; 44]);
+    for (b, action) in acts.iter().enumerate() {
+        for i in 0..11 {
+            assert!((r.mean[b][i] - direct.means[b * 11 + i]).abs() < 1e-5);
+            assert!((r.sigma[b][i] - direct.sigma[b * 11 + i]).abs() < 1e-6);
+        }
+        assert!((r.eta[b] - direct.eta[b]).abs() < 1e-6);
+        let rules = TaskRules::new(metadata.provenance.task.unwrap(), &metadata.spec.split);
+        for p in 0..3 {
+            let reward = rules.reward(action, &r.next_states[b][p]);
+            assert!((r.rewards[b][p] - reward).abs() < 1e-5);
+            assert!((r.penalized_rewards[b][p] - (reward - 0.5 * r.eta[b])).abs() < 1e-5);
+            assert_eq!(r.terminals[b][p], rules.terminal(&r.next_states[b][p]));
+        }
+        assert_ne!(r.next_states[b][0], r.next_states[b][1], "particles differ");
+    }
+    // Same seed, same answer; no noise, the mean.
+    let (_, again) = server
+        .post(&format!("/v1/models/{MODEL}/step"), &request)
+        .await;
+    assert_eq!(
+        serde_json::from_value::<StepResponse>(again)
+            .unwrap()
+            .next_states,
+        r.next_states
+    );
+    let calm = json!({"states": states, "actions": acts, "noise_scale": 0.0});
+    let (_, calm) = server
+        .post(&format!("/v1/models/{MODEL}/step"), &calm)
+        .await;
+    let calm: StepResponse = serde_json::from_value(calm).unwrap();
+    for b in 0..4 {
+        assert_eq!(calm.next_states[b][0], calm.mean[b]);
+    }
+
+    // The binary body gives the same numbers.
+    let tensors = nuno::artifact::NamedTensors::from([
+        ("states".to_string(), (vec![4, 11], flat_states.clone())),
+        ("actions".to_string(), (vec![4, 3], flat_actions.clone())),
+    ]);
+    let metadata = std::collections::HashMap::from([
+        ("particles".to_string(), "3".to_string()),
+        ("seed".to_string(), "7".to_string()),
+        ("penalty".to_string(), "0.5".to_string()),
+    ]);
+    let bytes = nuno::artifact::safetensors_bytes(&tensors, Some(metadata)).unwrap();
+    let response = server
+        .client
+        .post(format!("{}/v1/models/{MODEL}/step", server.base))
+        .header("content-type", "application/octet-stream")
+        .body(bytes)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(response.status(), StatusCode::OK);
+    assert_eq!(
+        response.headers()["content-type"],
+        "application/octet-stream"
+    );
+    let body = response.bytes().await.unwrap();
+    let out = nuno::artifact::parse_safetensors(&body, Path::new("response")).unwrap();
+    assert_eq!(out["next_states"].0, vec![4, 3, 11]);
+    let json_next: Vec<f32> = r.next_states.concat().concat();
+    assert_eq!(out["next_states"].1, json_next);
+    assert_eq!(out["eta"].1, r.eta);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rollout_without_noise_chains_steps_and_truncates_at_epsilon() {
+    let server = Server::start(limits(), None).await;
+    let h = 6;
+    let starts = upright(2);
+    let plan: Vec<Vec<Vec<f32>>> = (0..2).map(|_| actions(h)).collect();
+    let request = json!({"states": starts, "actions": plan, "horizon": h, "noise_scale": 0.0, "penalty": 0.0});
+    let (status, body) = server
+        .post(&format!("/v1/models/{MODEL}/rollout"), &request)
+        .await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    let r: RolloutResponse = serde_json::from_value(body).unwrap();
+    assert_eq!(r.trajectories.len(), 2);
+    let t = &r.trajectories[0];
+    // Chained steps through the step endpoint reproduce it.
+    let mut state = starts[0].clone();
+    for (k, action) in plan[0].iter().enumerate().take(t.length) {
+        let step =
+            json!({"states": [state], "actions": [action], "noise_scale": 0.0, "penalty": 0.0});
+        let (_, s) = server
+            .post(&format!("/v1/models/{MODEL}/step"), &step)
+            .await;
+        let s: StepResponse = serde_json::from_value(s).unwrap();
+        assert!((s.eta[0] - t.eta[k]).abs() < 1e-6, "η at step {k}");
+        state = s.next_states[0][0].clone();
+        for (a, b) in state.iter().zip(&t.states[k + 1]) {
+            assert!((a - b).abs() < 1e-5, "state at step {k}");
+        }
+    }
+
+    // Closed loop with the policy and an explicit threshold.
+    let epsilon = 0.5f32;
+    let request = json!({"states": upright(20), "horizon": 10, "particles": 2, "threshold": epsilon, "seed": 3});
+    let (status, body) = server
+        .post(&format!("/v1/models/{MODEL}/rollout"), &request)
+        .await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    let r: RolloutResponse = serde_json::from_value(body).unwrap();
+    assert_eq!((r.trajectories.len(), r.threshold), (40, Some(epsilon)));
+    let mut truncated = 0;
+    for t in &r.trajectories {
+        let last = *t.accumulated_eta.last().unwrap();
+        assert_eq!(t.truncated, last > epsilon, "flag vs accumulated η");
+        assert!(t.accumulated_eta[..t.length].iter().all(|&a| a <= epsilon));
+        assert_eq!(t.states.len(), t.length + 1);
+        if t.truncated {
+            assert_eq!(t.truncation_step, Some(t.length));
+            truncated += 1;
+        }
+    }
+    assert!(truncated > 0, "ε = {epsilon} should truncate something");
+    // α picks ε(h, α) from the model's table.
+    let request = json!({"states": upright(1), "horizon": 10, "alpha": 0.9});
+    let (_, body) = server
+        .post(&format!("/v1/models/{MODEL}/rollout"), &request)
+        .await;
+    let expected = load_dynamics(&shipped(), &Device::flex())
+        .unwrap()
+        .1
+        .provenance
+        .thresholds
+        .unwrap()
+        .get(10, 0.9);
+    assert_eq!(
+        serde_json::from_value::<RolloutResponse>(body)
+            .unwrap()
+            .threshold,
+        expected
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn act_evaluate_and_validate() {
+    let server = Server::start(limits(), None).await;
+    let states = upright(5);
+    let (status, body) = server
+        .post(
+            &format!("/v1/models/{MODEL}/act"),
+            &json!({"states": states}),
+        )
+        .await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    let r: ActResponse = serde_json::from_value(body).unwrap();
+    let device = Device::flex();
+    let (actor, _) =
+        nuno::artifact::load_policy(&server.models_path.join(MODEL), BEST_POLICY, &device).unwrap();
+    let policy = ActorPolicy {
+        actor,
+        mode: ActionMode::Deterministic,
+    };
+    let expected = policy.act(&states.concat(), &mut rand::rng());
+    assert_eq!(r.actions.concat(), expected);
+    assert!(r.actions.iter().flatten().all(|a| (-1.0..=1.0).contains(a)));
+
+    let (status, body) = server
+        .post(
+            "/v1/evaluate",
+            &json!({"model": MODEL, "episodes": 3, "seed": 4}),
+        )
+        .await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    let e: EvaluateResponse = serde_json::from_value(body).unwrap();
+    assert_eq!((e.returns.len(), e.lengths.len()), (3, 3));
+    assert!(e.lengths.iter().all(|&l| (1..=1000).contains(&l)));
+    let mean = e.returns.iter().sum::<f64>() / 3.0;
+    assert!((mean - e.mean_return).abs() < 1e-9);
+
+    let (status, body) = server
+        .post("/v1/evaluate", &json!({"model": "no-policy"}))
+        .await;
+    assert_eq!(
+        (status, error_code(&body)),
+        (StatusCode::CONFLICT, "no_policy")
+    );
+
+    let (status, body) = server
+        .post(
+            &format!("/v1/models/{MODEL}/validate"),
+            &json!({"actions": actions(8), "seed": 2}),
+        )
+        .await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    let v: ValidateResponse = serde_json::from_value(body).unwrap();
+    assert!(v.steps >= 1 && v.steps <= 8);
+    assert_eq!(
+        (v.rmse.len(), v.real_states.len(), v.model_states.len()),
+        (v.steps, v.steps + 1, v.steps + 1)
+    );
+    assert_eq!(
+        v.real_states[0], v.model_states[0],
+        "both start from the reset state"
+    );
+    assert!(v.rmse.iter().all(|e| e.is_finite() && *e >= 0.0));
+    assert!(
+        v.rmse[0] < 0.5,
+        "one step of a fitted model stays close: {}",
+        v.rmse[0]
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_input_gets_a_named_4xx() {
+    let server = Server::start(limits(), None).await;
+    let step = format!("/v1/models/{MODEL}/step");
+    let cases: Vec<(Value, StatusCode, &str, &str)> = vec![
+        (
+            json!({"states": [[1.0, 2.0]], "actions": [[0, 0, 0]]}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_request",
+            "expects 11",
+        ),
+        (
+            json!({"states": upright(1), "actions": [[0, 0]]}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_request",
+            "expects 3",
+        ),
+        (
+            json!({"states": [], "actions": []}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_request",
+            "empty",
+        ),
+        (
+            json!({"states": upright(2), "actions": actions(1)}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_request",
+            "rows",
+        ),
+        (
+            json!({"states": upright(1), "actions": actions(1), "particles": 9}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "over_limit",
+            "limit of 8",
+        ),
+        (
+            json!({"states": upright(1), "actions": actions(1), "particles": 0}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_request",
+            "at least 1",
+        ),
+        (
+            json!({"states": upright(1), "actions": actions(1), "penalty": -1}),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_request",
+            "penalty",
+        ),
+        (
+            json!({"states": [[1e39, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]], "actions": actions(1)}),
+            StatusCode::BAD_REQUEST,
+            "malformed_body",
+            "out of range",
+        ),
+        (
+            json!({"states": upright(1), "actions": actions(1), "bogus": 1}),
+            StatusCode::BAD_REQUEST,
+            "malformed_body",
+            "bogus",
+        ),
+        (
+            json!({"actions": actions(1)}),
+            StatusCode::BAD_REQUEST,
+            "malformed_body",
+            "states",
+        ),
+    ];
+    for (body, status, code, needle) in cases {
+        let (got, response) = server.post(&step, &body).await;
+        assert_eq!(
+            (got, error_code(&response)),
+            (status, code),
+            "{body} -> {response}"
+        );
+        let message = response["error"]["message"].as_str().unwrap();
+        assert!(
+            message.contains(needle),
+            "{message} should mention {needle}"
+        );
+    }
+    let (status, body) = server
+        .post(
+            &format!("/v1/models/{MODEL}/rollout"),
+            &json!({"states": upright(1), "horizon": 51}),
+        )
+        .await;
+    assert_eq!(
+        (status, error_code(&body)),
+        (StatusCode::UNPROCESSABLE_ENTITY, "over_limit")
+    );
+    let (status, body) = server
+        .post(
+            "/v1/models/no-policy/rollout",
+            &json!({"states": upright(1), "horizon": 3}),
+        )
+        .await;
+    assert_eq!(
+        (status, error_code(&body)),
+        (StatusCode::CONFLICT, "no_policy")
+    );
+    let (status, body) = server
+        .post(
+            &format!("/v1/models/{MODEL}/rollout"),
+            &json!({"states": upright(1), "horizon": 3, "alpha": 0.5}),
+        )
+        .await;
+    assert_eq!(
+        (status, error_code(&body)),
+        (StatusCode::UNPROCESSABLE_ENTITY, "invalid_request"),
+        "{body}"
+    );
+
+    // Unknown models and path tricks never reach the filesystem.
+    for id in ["nope", "..%2F..%2Fetc", "%2e%2e", "hopper-random%00"] {
+        let (status, body) = server
+            .post(&format!("/v1/models/{id}/step"), &json!({}))
+            .await;
+        assert_eq!(status, StatusCode::NOT_FOUND, "{id}");
+        assert!(error_code(&body).ends_with("not_found"), "{id}: {body}");
+    }
+    // Not JSON, the wrong type, too large, an unknown route.
+    let raw = |body: &'static str, content_type: &'static str| {
+        server
+            .client
+            .post(format!("{}{step}", server.base))
+            .header("content-type", content_type)
+            .body(body)
+            .send()
+    };
+    let r = raw("{\"states\": [[", "application/json").await.unwrap();
+    assert_eq!(r.status(), StatusCode::BAD_REQUEST);
+    let r = raw("states=1", "text/csv").await.unwrap();
+    assert_eq!(r.status(), StatusCode::UNSUPPORTED_MEDIA_TYPE);
+    let r = raw("not safetensors", "application/octet-stream")
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::BAD_REQUEST);
+    let big = vec![b' '; 2 << 20];
+    let r = server
+        .client
+        .post(format!("{}{step}", server.base))
+        .header("content-type", "application/json")
+        .body(big)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::PAYLOAD_TOO_LARGE);
+    let body: Value = r.json().await.unwrap();
+    assert_eq!(error_code(&body), "body_too_large");
+    let (status, body) = server.get("/v1/nothing").await;
+    assert_eq!(
+        (status, error_code(&body)),
+        (StatusCode::NOT_FOUND, "route_not_found")
+    );
+    // NaN inside a binary body.
+    let tensors = nuno::artifact::NamedTensors::from([
+        ("states".to_string(), (vec![1, 11], vec![f32::NAN; 11])),
+        ("actions".to_string(), (vec![1, 3], vec![0.0; 3])),
+    ]);
+    let bytes = nuno::artifact::safetensors_bytes(&tensors, None).unwrap();
+    let r = server
+        .client
+        .post(format!("{}{step}", server.base))
+        .header("content-type", "application/octet-stream")
+        .body(bytes)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::UNPROCESSABLE_ENTITY);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn token_guards_everything_but_health() {
+    let server = Server::start(limits(), Some("s3cret")).await;
+    assert_eq!(server.get("/healthz").await.0, StatusCode::OK);
+    assert_eq!(server.get("/readyz").await.0, StatusCode::OK);
+    assert_eq!(server.get("/v2/health/live").await.0, StatusCode::OK);
+    let (status, body) = server.get("/v1/models").await;
+    assert_eq!(
+        (status, error_code(&body)),
+        (StatusCode::UNAUTHORIZED, "unauthorized")
+    );
+    let r = server
+        .client
+        .get(format!("{}/v1/models", server.base))
+        .bearer_auth("wrong")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::UNAUTHORIZED);
+    let r = server
+        .client
+        .get(format!("{}/v1/models", server.base))
+        .bearer_auth("s3cret")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::OK);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn concurrent_requests_metrics_kserve_and_reload() {
+    let server = Server::start(limits(), None).await;
+    let step = format!("/v1/models/{MODEL}/step");
+    let request = |seed: u64| json!({"states": upright(64), "actions": actions(64), "seed": seed});
+    let mut tasks = Vec::new();
+    for seed in 0..16u64 {
+        let (client, url, body) = (
+            server.client.clone(),
+            format!("{}{step}", server.base),
+            request(seed % 4),
+        );
+        tasks.push(tokio::spawn(async move {
+            let r = client.post(url).json(&body).send().await.unwrap();
+            assert_eq!(r.status(), StatusCode::OK);
+            r.json::<StepResponse>().await.unwrap()
+        }));
+    }
+    let mut answers = Vec::new();
+    for t in tasks {
+        answers.push(t.await.unwrap());
+    }
+    for (i, a) in answers.iter().enumerate() {
+        assert_eq!(
+            a.next_states,
+            answers[i % 4].next_states,
+            "seed {} answers alike",
+            i % 4
+        );
+    }
+
+    let text = server
+        .client
+        .get(format!("{}/metrics", server.base))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        text.contains("nuno_requests_total{route=\"/v1/models/{id}/step\",status=\"200\"} 16"),
+        "{text}"
+    );
+    assert!(
+        text.contains("nuno_items_total{model=\"hopper-random\"} 1024"),
+        "{text}"
+    );
+    assert!(
+        text.contains("nuno_request_duration_seconds_count{route=\"/v1/models/{id}/step\"} 16")
+    );
+
+    // KServe v2: metadata and infer agree with step.
+    let (status, meta) = server.get(&format!("/v2/models/{MODEL}")).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(
+        meta["inputs"][0],
+        json!({"name": "states", "datatype": "FP32", "shape": [-1, 11]})
+    );
+    let infer = json!({"id": "q1", "inputs": [
+        {"name": "states", "shape": [2, 11], "datatype": "FP32", "data": upright(2).concat()},
+        {"name": "actions", "shape": [2, 3], "datatype": "FP32", "data": actions(2).concat()},
+    ], "parameters": {"seed": 5}});
+    let (status, out) = server
+        .post(&format!("/v2/models/{MODEL}/infer"), &infer)
+        .await;
+    assert_eq!(status, StatusCode::OK, "{out}");
+    assert_eq!(out["id"], "q1");
+    let (_, s) = server
+        .post(
+            &step,
+            &json!({"states": upright(2), "actions": actions(2), "seed": 5}),
+        )
+        .await;
+    let s: StepResponse = serde_json::from_value(s).unwrap();
+    let next: Vec<f64> = s
+        .next_states
+        .concat()
+        .concat()
+        .iter()
+        .map(|&x| f64::from(x))
+        .collect();
+    let got: Vec<f64> = serde_json::from_value(out["outputs"][0]["data"].clone()).unwrap();
+    assert_eq!(out["outputs"][0]["name"], "next_states");
+    assert_eq!(got, next);
+    let (status, err) = server
+        .post(&format!("/v2/models/{MODEL}/infer"), &json!({"inputs": []}))
+        .await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert!(err["error"].as_str().unwrap().contains("states"));
+
+    // Reload: a new model appears, a broken one is refused and not served.
+    copy_model(&server.models_path.join("second"));
+    let broken = server.models_path.join("broken");
+    copy_model(&broken);
+    let weights = broken.join("dynamics.safetensors");
+    let bytes = std::fs::read(&weights).unwrap();
+    std::fs::write(&weights, &bytes[..bytes.len() / 2]).unwrap();
+    let (status, report) = server.post("/v1/admin/reload", &json!({})).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(
+        report["loaded"],
+        json!(["hopper-random", "no-policy", "second"])
+    );
+    assert_eq!(report["failed"][0]["id"], "broken");
+    assert_eq!(server.get("/v1/models/second").await.0, StatusCode::OK);
+    assert_eq!(
+        server.get("/v1/models/broken").await.0,
+        StatusCode::NOT_FOUND
+    );
+}
+
+#[test]
+fn committed_openapi_spec_is_current() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("openapi/openapi.json");
+    let committed = std::fs::read_to_string(&path).unwrap();
+    assert!(
+        committed == openapi_json(),
+        "openapi/openapi.json is stale: run `make openapi` and commit it"
+    );
+    let spec: Value = serde_json::from_str(&committed).unwrap();
+    assert_eq!(spec["openapi"], "3.1.0");
+    for path in [
+        "/v1/models/{id}/step",
+        "/v1/models/{id}/rollout",
+        "/v1/evaluate",
+        "/v2/models/{id}/infer",
+    ] {
+        assert!(
+            spec["paths"][path].is_object(),
+            "{path} missing from the spec"
+        );
+    }
+    let step = &spec["paths"]["/v1/models/{id}/step"]["post"]["requestBody"]["content"];
+    assert!(step["application/json"].is_object() && step["application/octet-stream"].is_object());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_generated_from_the_spec_calls_the_server() {
+    let server = Server::start(limits(), None).await;
+    let work = tempfile::tempdir().unwrap();
+    let spec = Path::new(env!("CARGO_MANIFEST_DIR")).join("openapi/openapi.json");
+    let (base, dir) = (server.base.clone(), work.path().to_path_buf());
+    tokio::task::spawn_blocking(move || {
+        common::run_python("openapi_client.py", &[spec.to_str().unwrap(), &base], &dir)
+    })
+    .await
+    .unwrap();
+    let result: Value =
+        serde_json::from_str(&std::fs::read_to_string(work.path().join("result.json")).unwrap())
+            .unwrap();
+    assert_eq!(result["models"], json!([MODEL, "no-policy"]));
+    let start = {
+        let mut s = vec![0.0f32; 11];
+        s[0] = 1.25;
+        s
+    };
+    let request = json!({"states": [start, start], "actions": [[0.1, 0.2, 0.3], [0.0, 0.0, 0.0]], "particles": 2, "seed": 3});
+    let (_, direct) = server
+        .post(&format!("/v1/models/{MODEL}/step"), &request)
+        .await;
+    let direct: StepResponse = serde_json::from_value(direct).unwrap();
+    let eta: Vec<f32> = serde_json::from_value(result["eta"].clone()).unwrap();
+    let next: Vec<Vec<Vec<f32>>> = serde_json::from_value(result["next_states"].clone()).unwrap();
+    assert_eq!((eta, next), (direct.eta, direct.next_states));
+    assert_eq!(result["actions"].as_array().unwrap().len(), 1);
+    assert_eq!(
+        (
+            result["missing_status"].as_u64(),
+            result["missing_code"].as_str()
+        ),
+        (Some(404), Some("model_not_found"))
+    );
+}
