@@ -43,7 +43,9 @@ fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
     for entry in std::fs::read_dir(from).unwrap() {
         let path = entry.unwrap().path();
-        std::fs::copy(&path, to.join(path.file_name().unwrap())).unwrap();
+        if path.is_file() {
+            std::fs::copy(&path, to.join(path.file_name().unwrap())).unwrap();
+        }
     }
 }
 
@@ -53,6 +55,9 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/hopper-random");
     let model = tmp.path().join("model");
     copy_dir(&shipped, &model);
+    for stale in ["policy.json", "policy.safetensors"] {
+        std::fs::remove_file(model.join(stale)).unwrap();
+    }
     let dataset = tmp.path().join("hopper.hdf5");
     let run = tmp.path().join("run");
     let (model_s, dataset_s, run_s) = (
