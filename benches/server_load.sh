@@ -19,8 +19,8 @@ until curl -fs "http://127.0.0.1:$PORT/readyz" >/dev/null; do sleep 0.2; done
 url="http://127.0.0.1:$PORT/v1/models/hopper-random"
 run() { # name, path, body file, content type
   echo "== $1"
-  wrk -t2 -c"$CONNECTIONS" -d"$DURATION" --latency -s benches/wrk_post.lua "$url/$2" -- "$3" "$4" \
-    | grep -E "Requests/sec|Non-2xx|^ +(50|99)%"
+  wrk -t2 -c"$CONNECTIONS" -d"$DURATION" --timeout 120s --latency -s benches/wrk_post.lua "$url/$2" -- "$3" "$4" \
+    | grep -E "Requests/sec|Non-2xx|Socket errors|requests in|^ +(50|99)%"
 }
 for n in 1 256 4096; do
   run "step batch $n, JSON" step "$BODIES/step-$n.json" application/json
