@@ -767,3 +767,71 @@ async fn a_client_generated_from_the_spec_calls_the_server() {
         (Some(404), Some("model_not_found"))
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn slow_requests_time_out_with_a_json_error() {
+    let limits = Limits {
+        request_timeout_s: 1,
+        max_batch: 100_000,
+        max_body_bytes: 16 << 20,
+        ..limits()
+    };
+    let server = Server::start(limits, None).await;
+    // 80k sampled transitions: several seconds of model work, answered after one.
+    let body = json!({"states": upright(10_000), "actions": actions(10_000), "particles": 8});
+    let started = std::time::Instant::now();
+    let (status, body) = server
+        .post(&format!("/v1/models/{MODEL}/step"), &body)
+        .await;
+    assert_eq!(
+        (status, error_code(&body)),
+        (StatusCode::SERVICE_UNAVAILABLE, "timeout")
+    );
+    assert!(
+        started.elapsed().as_secs_f64() < 3.0,
+        "answered when the limit passed"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_binary_serves_and_stops_cleanly_on_sigterm() {
+    use std::io::{BufRead, BufReader};
+    use std::process::{Command, Stdio};
+    let models = models_dir();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_nuno-server"))
+        .args([
+            "--models",
+            models.path().to_str().unwrap(),
+            "--addr",
+            "127.0.0.1:0",
+        ])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The first line names the address it bound.
+    let mut line = String::new();
+    BufReader::new(child.stderr.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    assert!(
+        line.contains("serving [\"hopper-random\", \"no-policy\"]"),
+        "{line}"
+    );
+    let addr = line
+        .split("http://")
+        .nth(1)
+        .unwrap()
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .to_string();
+    let health = reqwest::get(format!("http://{addr}/readyz")).await.unwrap();
+    assert_eq!(health.status(), StatusCode::OK);
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let exit = child.wait().unwrap();
+    assert!(exit.success(), "graceful shutdown exits 0, got {exit:?}");
+}
