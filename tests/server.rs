@@ -12,8 +12,8 @@ use nuno::artifact::{BEST_POLICY, PolicyProvenance, load_dynamics, save_policy};
 use nuno::envs::{TaskConfig, TaskName, TaskRules};
 use nuno::sde::BatchDynamics;
 use nuno::server::{
-    ActResponse, AppState, EvaluateResponse, Limits, ModelDetail, ModelList, RolloutResponse,
-    ServerConfig, StepResponse, ValidateResponse, openapi_json, serve,
+    ActResponse, AppState, BINARY, EvaluateResponse, Limits, ModelDetail, ModelList,
+    RolloutResponse, ServerConfig, StepResponse, ValidateResponse, openapi_json, serve,
 };
 use reqwest::StatusCode;
 use serde_json::{Value, json};
@@ -95,6 +95,21 @@ impl Server {
             .unwrap();
         let status = r.status();
         (status, r.json().await.unwrap())
+    }
+
+    async fn post_raw(
+        &self,
+        path: &str,
+        content_type: &str,
+        body: impl Into<reqwest::Body>,
+    ) -> reqwest::Response {
+        self.client
+            .post(format!("{}{path}", self.base))
+            .header("content-type", content_type)
+            .body(body)
+            .send()
+            .await
+            .unwrap()
     }
 
     async fn get(&self, path: &str) -> (StatusCode, Value) {
@@ -234,13 +249,8 @@ async fn step_matches_the_library_in_json_and_binary() {
     ]);
     let bytes = nuno::artifact::safetensors_bytes(&tensors, Some(metadata)).unwrap();
     let response = server
-        .client
-        .post(format!("{}/v1/models/{MODEL}/step", server.base))
-        .header("content-type", "application/octet-stream")
-        .body(bytes)
-        .send()
-        .await
-        .unwrap();
+        .post_raw(&format!("/v1/models/{MODEL}/step"), BINARY, bytes)
+        .await;
     assert_eq!(response.status(), StatusCode::OK);
     assert_eq!(
         response.headers()["content-type"],
@@ -356,10 +366,10 @@ async fn act_evaluate_and_validate() {
         .await;
     assert_eq!(status, StatusCode::OK, "{body}");
     let e: EvaluateResponse = serde_json::from_value(body).unwrap();
-    assert_eq!((e.returns.len(), e.lengths.len()), (3, 3));
-    assert!(e.lengths.iter().all(|&l| (1..=1000).contains(&l)));
-    let mean = e.returns.iter().sum::<f64>() / 3.0;
-    assert!((mean - e.mean_return).abs() < 1e-9);
+    assert_eq!((e.report.returns.len(), e.report.lengths.len()), (3, 3));
+    assert!(e.report.lengths.iter().all(|&l| (1..=1000).contains(&l)));
+    let mean = e.report.returns.iter().sum::<f64>() / 3.0;
+    assert!((mean - e.report.mean_return).abs() < 1e-9);
 
     let (status, body) = server
         .post("/v1/evaluate", &json!({"model": "no-policy"}))
@@ -514,31 +524,17 @@ async fn bad_input_gets_a_named_4xx() {
         assert!(error_code(&body).ends_with("not_found"), "{id}: {body}");
     }
     // Not JSON, the wrong type, too large, an unknown route.
-    let raw = |body: &'static str, content_type: &'static str| {
-        server
-            .client
-            .post(format!("{}{step}", server.base))
-            .header("content-type", content_type)
-            .body(body)
-            .send()
-    };
-    let r = raw("{\"states\": [[", "application/json").await.unwrap();
-    assert_eq!(r.status(), StatusCode::BAD_REQUEST);
-    let r = raw("states=1", "text/csv").await.unwrap();
-    assert_eq!(r.status(), StatusCode::UNSUPPORTED_MEDIA_TYPE);
-    let r = raw("not safetensors", "application/octet-stream")
-        .await
-        .unwrap();
-    assert_eq!(r.status(), StatusCode::BAD_REQUEST);
-    let big = vec![b' '; 2 << 20];
     let r = server
-        .client
-        .post(format!("{}{step}", server.base))
-        .header("content-type", "application/json")
-        .body(big)
-        .send()
-        .await
-        .unwrap();
+        .post_raw(&step, "application/json", "{\"states\": [[")
+        .await;
+    assert_eq!(r.status(), StatusCode::BAD_REQUEST);
+    let r = server.post_raw(&step, "text/csv", "states=1").await;
+    assert_eq!(r.status(), StatusCode::UNSUPPORTED_MEDIA_TYPE);
+    let r = server.post_raw(&step, BINARY, "not safetensors").await;
+    assert_eq!(r.status(), StatusCode::BAD_REQUEST);
+    let r = server
+        .post_raw(&step, "application/json", vec![b' '; 2 << 20])
+        .await;
     assert_eq!(r.status(), StatusCode::PAYLOAD_TOO_LARGE);
     let body: Value = r.json().await.unwrap();
     assert_eq!(error_code(&body), "body_too_large");
@@ -553,14 +549,7 @@ async fn bad_input_gets_a_named_4xx() {
         ("actions".to_string(), (vec![1, 3], vec![0.0; 3])),
     ]);
     let bytes = nuno::artifact::safetensors_bytes(&tensors, None).unwrap();
-    let r = server
-        .client
-        .post(format!("{}{step}", server.base))
-        .header("content-type", "application/octet-stream")
-        .body(bytes)
-        .send()
-        .await
-        .unwrap();
+    let r = server.post_raw(&step, BINARY, bytes).await;
     assert_eq!(r.status(), StatusCode::UNPROCESSABLE_ENTITY);
 }
 

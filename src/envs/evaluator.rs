@@ -37,7 +37,7 @@ impl EvaluationConfig {
 }
 
 /// Per-episode results and their summary.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct EvaluationReport {
     pub returns: Vec<f64>,
     pub lengths: Vec<usize>,

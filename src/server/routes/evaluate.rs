@@ -9,18 +9,12 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use super::defaults::{one, ten};
 use crate::agent::{ActionMode, ActorPolicy, RolloutActions, RolloutConfig, rollout_model};
-use crate::envs::{EvaluationConfig, MujocoTask, evaluate as run_episodes};
+use crate::envs::{EvaluationConfig, EvaluationReport, MujocoTask, evaluate as run_episodes};
 use crate::server::body::RawBody;
 use crate::server::validate::{matrix, within};
 use crate::server::{ApiError, AppState};
-
-fn ten() -> usize {
-    10
-}
-fn one() -> usize {
-    1
-}
 
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -41,14 +35,9 @@ pub struct EvaluateRequest {
 pub struct EvaluateResponse {
     pub model: String,
     pub task: String,
-    pub returns: Vec<f64>,
-    pub lengths: Vec<usize>,
-    /// D4RL normalised scores (× 100).
-    pub normalized_scores: Vec<f64>,
-    pub mean_return: f64,
-    pub std_return: f64,
-    pub mean_normalized_score: f64,
-    pub std_normalized_score: f64,
+    /// Returns, lengths and D4RL normalised scores (× 100) per episode, and their mean and std.
+    #[serde(flatten)]
+    pub report: EvaluationReport,
 }
 
 /// Runs the model's policy in the real MuJoCo task.
@@ -84,13 +73,7 @@ pub async fn evaluate(
     Ok(Json(EvaluateResponse {
         model: r.model,
         task: model.task.name.to_string(),
-        returns: report.returns,
-        lengths: report.lengths,
-        normalized_scores: report.normalized_scores,
-        mean_return: report.mean_return,
-        std_return: report.std_return,
-        mean_normalized_score: report.mean_normalized_score,
-        std_normalized_score: report.std_normalized_score,
+        report,
     }))
 }
 

@@ -3,6 +3,7 @@
 
 mod act;
 mod admin;
+mod defaults;
 mod evaluate;
 mod health;
 mod kserve;

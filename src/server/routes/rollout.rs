@@ -10,22 +10,13 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use super::defaults::{one, unit, unit_f32};
 use crate::agent::{
     ActionMode, ActorPolicy, RolloutActions, RolloutConfig, StepOutcome, rollout_model,
 };
 use crate::server::body::RawBody;
 use crate::server::validate::{matrix, non_negative, within};
 use crate::server::{ApiError, AppState};
-
-fn one() -> usize {
-    1
-}
-fn unit() -> f64 {
-    1.0
-}
-fn unit_f32() -> f32 {
-    1.0
-}
 
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]

@@ -12,21 +12,12 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use super::defaults::{one, unit, unit_f32};
 use crate::agent::{ParticleConfig, ParticleStep, step_particles};
 use crate::artifact::NamedTensors;
 use crate::server::body::{Format, RawBody, TensorBytes, tensors_response};
 use crate::server::validate::{flat, matrix, non_negative, within};
 use crate::server::{ApiError, AppState};
-
-fn one() -> usize {
-    1
-}
-fn unit() -> f64 {
-    1.0
-}
-fn unit_f32() -> f32 {
-    1.0
-}
 
 /// A batch of observations and actions to step.
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
