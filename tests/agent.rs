@@ -400,17 +400,22 @@ fn small_dataset() -> Dataset {
     generate(&config, &policy, "test", &|_| {}).unwrap()
 }
 
+/// The loop's context for D4RL hopper.
+fn hopper_context<'a>(model: &'a nuno::sde::NeuralSde, dataset: &'a Dataset) -> LoopContext<'a> {
+    let task = TaskConfig::d4rl(TaskName::Hopper);
+    LoopContext {
+        dataset,
+        dynamics: model,
+        task,
+        rules: TaskRules::new(task, &model.constants.spec.split),
+    }
+}
+
 #[test]
 fn batches_mix_real_and_model_data_at_beta() {
     let (model, metadata) = shipped_model();
     let dataset = small_dataset();
-    let task = TaskConfig::d4rl(TaskName::Hopper);
-    let ctx = LoopContext {
-        dataset: &dataset,
-        dynamics: &model,
-        task,
-        rules: TaskRules::new(task, &model.constants.spec.split),
-    };
+    let ctx = hopper_context(&model, &dataset);
     let mut config = tiny_config(0);
     config.sac.batch_size = 200;
     config.real_ratio = 0.05;
@@ -452,13 +457,7 @@ fn batches_mix_real_and_model_data_at_beta() {
 fn the_loop_runs_checkpoints_and_resumes_bit_exactly() {
     let (model, metadata) = shipped_model();
     let dataset = small_dataset();
-    let task = TaskConfig::d4rl(TaskName::Hopper);
-    let ctx = LoopContext {
-        dataset: &dataset,
-        dynamics: &model,
-        task,
-        rules: TaskRules::new(task, &model.constants.spec.split),
-    };
+    let ctx = hopper_context(&model, &dataset);
     let thresholds = metadata.provenance.thresholds.as_ref();
     let device = Device::flex();
 
