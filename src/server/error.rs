@@ -2,7 +2,6 @@
 //! JSON body `{ "error": { "code", "message" } }`.
 
 use axum::Json;
-use axum::extract::rejection::JsonRejection;
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
@@ -52,17 +51,6 @@ impl ApiError {
             ApiError::Unauthorized => (StatusCode::UNAUTHORIZED, "unauthorized"),
             ApiError::Timeout(_) => (StatusCode::SERVICE_UNAVAILABLE, "timeout"),
             ApiError::Internal(_) => (StatusCode::INTERNAL_SERVER_ERROR, "internal"),
-        }
-    }
-
-    /// A rejected JSON body: too large, not JSON, or not the expected shape.
-    pub fn from_json_rejection(rejection: JsonRejection, limit: usize) -> Self {
-        match rejection {
-            JsonRejection::MissingJsonContentType(_) => {
-                ApiError::UnsupportedMediaType("none".into())
-            }
-            other if other.status() == StatusCode::PAYLOAD_TOO_LARGE => ApiError::TooLarge(limit),
-            other => ApiError::Malformed(other.body_text()),
         }
     }
 }

@@ -78,10 +78,6 @@ impl ModelRegistry {
         (registry, report)
     }
 
-    pub fn dir(&self) -> &Path {
-        &self.dir
-    }
-
     /// The current set of models.
     pub fn snapshot(&self) -> Arc<ModelMap> {
         match self.models.read() {
