@@ -21,7 +21,7 @@ pub use model_rollout::{
     ModelRollout, RolloutActions, RolloutConfig, RolloutStats, RolloutTrace, StepOutcome,
     rollout_model,
 };
-pub use model_step::{ParticleConfig, ParticleStep, step_particles};
+pub use model_step::{ParticleConfig, ParticleStep, penalized_reward, step_particles};
 pub use policy::{BatchPolicy, RandomPolicy};
 pub use policy_loop::{
     EpochRecord, EtaProbe, EvalSummary, LoopContext, PolicyLoopConfig, PolicyTraining,

@@ -7,12 +7,11 @@
 //! `particles` times, each particle its own trajectory with its own
 //! accumulated η.
 
-use rand::Rng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
 use super::BatchPolicy;
+use super::model_step::{penalized_reward, scaled_noise};
 use crate::data::TransitionBatch;
 use crate::envs::TaskRules;
 use crate::sde::BatchDynamics;
@@ -155,17 +154,8 @@ pub fn rollout_model(
                 })
                 .collect(),
         };
-        // NUNO^R integrates r_c from 0 each step, so its increment is the reward.
-        let states: Vec<f32> = if learned_reward {
-            obs.chunks_exact(obs_dim)
-                .flat_map(|o| o.iter().copied().chain([0.0]))
-                .collect()
-        } else {
-            obs.clone()
-        };
-        let noise: Vec<f32> = (0..states.len())
-            .map(|_| rng.sample::<f32, _>(StandardNormal) * config.noise_scale)
-            .collect();
+        let states = dynamics.states_from_observations(&obs);
+        let noise = scaled_noise(states.len(), config.noise_scale, rng);
         let step = dynamics.step(&states, &actions, &noise);
 
         let mut still_active = Vec::with_capacity(active.len());
@@ -197,7 +187,7 @@ pub fn rollout_model(
             // Penalised reward r − λ_pen·η(s, a).
             transitions
                 .rewards
-                .push(reward - (config.penalty * f64::from(eta)) as f32);
+                .push(penalized_reward(reward, config.penalty, eta));
             transitions.next_observations.extend_from_slice(next_obs);
             transitions.terminals.push(if terminal { 1.0 } else { 0.0 });
             trace.kept[r] += 1;

@@ -34,6 +34,18 @@ pub struct ParticleStep {
     pub terminals: Vec<bool>,
 }
 
+/// NUNO's penalised reward r − λ_pen·η(s, a) (Section 4.3).
+pub fn penalized_reward(reward: f32, penalty: f64, eta: f32) -> f32 {
+    reward - (penalty * f64::from(eta)) as f32
+}
+
+/// `n` standard normal draws ε, multiplied by `scale`.
+pub(crate) fn scaled_noise(n: usize, scale: f32, rng: &mut ChaCha8Rng) -> Vec<f32> {
+    (0..n)
+        .map(|_| rng.sample::<f32, _>(StandardNormal) * scale)
+        .collect()
+}
+
 /// How a batch step samples and penalises.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ParticleConfig {
@@ -64,19 +76,17 @@ pub fn step_particles(
     let state_dim = dynamics.state_dim();
     let batch = observations.len() / obs_dim;
     let rows = batch * particles;
-    // Particle p of item b is row b·particles + p; NUNO^R's r_c starts at 0.
-    let mut states = Vec::with_capacity(rows * state_dim);
+    // Particle p of item b is row b·particles + p.
+    let mut row_observations = Vec::with_capacity(rows * obs_dim);
     let mut row_actions = Vec::with_capacity(rows * act_dim);
     for b in 0..batch {
         for _ in 0..particles {
-            states.extend_from_slice(&observations[b * obs_dim..(b + 1) * obs_dim]);
-            states.extend(std::iter::repeat_n(0.0, state_dim - obs_dim));
+            row_observations.extend_from_slice(&observations[b * obs_dim..(b + 1) * obs_dim]);
             row_actions.extend_from_slice(&actions[b * act_dim..(b + 1) * act_dim]);
         }
     }
-    let noise: Vec<f32> = (0..rows * state_dim)
-        .map(|_| rng.sample::<f32, _>(StandardNormal) * noise_scale)
-        .collect();
+    let states = dynamics.states_from_observations(&row_observations);
+    let noise = scaled_noise(rows * state_dim, noise_scale, rng);
     let step = dynamics.step(&states, &row_actions, &noise);
 
     let first_particle = |values: &[f32], width: usize| -> Vec<f32> {
@@ -111,7 +121,7 @@ pub fn step_particles(
         out.next_states.extend_from_slice(next_obs);
         out.rewards.push(reward);
         out.penalized_rewards
-            .push(reward - (penalty * f64::from(step.eta[row])) as f32);
+            .push(penalized_reward(reward, penalty, step.eta[row]));
         out.terminals.push(rules.terminal(next_obs));
     }
     out

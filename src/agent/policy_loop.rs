@@ -336,14 +336,7 @@ impl PolicyTraining {
 
 /// Mean η(s, a) over rows.
 fn mean_eta(dynamics: &dyn BatchDynamics, obs: &[f32], actions: &[f32]) -> f32 {
-    let obs_dim = dynamics.spec().obs_dim;
-    let states: Vec<f32> = if dynamics.learns_reward() {
-        obs.chunks_exact(obs_dim)
-            .flat_map(|o| o.iter().copied().chain([0.0]))
-            .collect()
-    } else {
-        obs.to_vec()
-    };
+    let states = dynamics.states_from_observations(obs);
     let noise = vec![0.0; states.len()];
     let eta = dynamics.step(&states, actions, &noise).eta;
     eta.iter().sum::<f32>() / eta.len().max(1) as f32

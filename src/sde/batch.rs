@@ -35,6 +35,20 @@ pub trait BatchDynamics: Sync {
     /// # Shapes
     /// - `states`, `noise`: `[batch, state_dim]`; `actions`: `[batch, act_dim]`
     fn step(&self, states: &[f32], actions: &[f32], noise: &[f32]) -> ModelStep;
+
+    /// State rows for observation rows (`[batch, obs_dim]`): NUNO^R's cumulative
+    /// reward r_c starts at 0, so its increment over a step is that step's reward.
+    fn states_from_observations(&self, observations: &[f32]) -> Vec<f32> {
+        let obs_dim = self.spec().obs_dim;
+        let extra = self.state_dim() - obs_dim;
+        if extra == 0 {
+            return observations.to_vec();
+        }
+        observations
+            .chunks_exact(obs_dim)
+            .flat_map(|o| o.iter().copied().chain(std::iter::repeat_n(0.0, extra)))
+            .collect()
+    }
 }
 
 impl BatchDynamics for NeuralSde {

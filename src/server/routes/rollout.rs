@@ -12,7 +12,8 @@ use utoipa::ToSchema;
 
 use super::defaults::{one, unit, unit_f32};
 use crate::agent::{
-    ActionMode, ActorPolicy, RolloutActions, RolloutConfig, StepOutcome, rollout_model,
+    ActionMode, ActorPolicy, RolloutActions, RolloutConfig, StepOutcome, penalized_reward,
+    rollout_model,
 };
 use crate::server::body::RawBody;
 use crate::server::validate::{matrix, non_negative, within};
@@ -231,7 +232,7 @@ pub async fn rollout(
                 penalized_rewards: t.rewards[row]
                     .iter()
                     .zip(&t.eta[row])
-                    .map(|(reward, eta)| reward - (r.penalty * f64::from(*eta)) as f32)
+                    .map(|(&reward, &eta)| penalized_reward(reward, r.penalty, eta))
                     .collect(),
                 length: t.kept[row],
                 terminal: t.outcome[row] == StepOutcome::Terminal,
