@@ -461,9 +461,13 @@ fn the_loop_runs_checkpoints_and_resumes_bit_exactly() {
     let thresholds = metadata.provenance.thresholds.as_ref();
     let device = Device::flex();
 
-    // Two epochs straight through.
+    // Two epochs straight through. Its initial state is saved too: burn draws
+    // initial weights from a process-wide generator that tests running in
+    // parallel share, so a second `new` would not start from the same weights.
     let mut straight = PolicyTraining::new(tiny_config(9), &ctx, thresholds, &device).unwrap();
     assert_eq!(straight.threshold, thresholds.unwrap().get(5, 1.0));
+    let initial = tempfile::tempdir().unwrap();
+    save_checkpoint(initial.path(), &straight).unwrap();
     for _ in 0..2 {
         straight.run_epoch(&ctx).unwrap();
     }
@@ -476,6 +480,9 @@ fn the_loop_runs_checkpoints_and_resumes_bit_exactly() {
     // One epoch, a checkpoint, a fresh process state, the second epoch.
     let dir = tempfile::tempdir().unwrap();
     let mut first = PolicyTraining::new(tiny_config(9), &ctx, thresholds, &device).unwrap();
+    let start = latest_checkpoint(initial.path()).unwrap().unwrap();
+    load_checkpoint(&start, &mut first).unwrap();
+    assert_eq!((first.epoch, first.step), (0, 0));
     first.run_epoch(&ctx).unwrap();
     save_checkpoint(dir.path(), &first).unwrap();
     drop(first);
