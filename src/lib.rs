@@ -10,6 +10,7 @@
 //! - [`agent`]: SAC on penalised, truncated model rollouts, behind the narrow
 //!   batched `act` and `step` interfaces;
 //! - [`nn`]: the MLP both use;
+//! - [`infer`]: the fused CPU path that rollouts and the server evaluate trained networks with;
 //! - [`artifact`]: atomic writes of everything nuno saves;
 //! - [`server`]: the HTTP model server (axum), a thin layer over the rest.
 
@@ -17,6 +18,7 @@ pub mod agent;
 pub mod artifact;
 pub mod data;
 pub mod envs;
+pub mod infer;
 pub mod nn;
 pub mod sde;
 pub mod server;

@@ -12,7 +12,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::BatchPolicy;
-use crate::nn::{Activation, Mlp, MlpConfig, normal, to_f32_vec};
+use crate::nn::{Activation, Mlp, MlpConfig, standard_normal, to_f32_vec};
 
 /// The actor's sizes and limits.
 #[derive(Config, Debug, PartialEq)]
@@ -33,6 +33,14 @@ pub struct ActorConfig {
 }
 
 impl ActorConfig {
+    /// The action box's half-width and centre: a = centre + half·tanh(u).
+    pub fn box_half_center(&self) -> (Vec<f32>, Vec<f32>) {
+        let bounds = self.action_low.iter().zip(&self.action_high);
+        let half = bounds.clone().map(|(l, h)| (h - l) / 2.0).collect();
+        let center = bounds.map(|(l, h)| (h + l) / 2.0).collect();
+        (half, center)
+    }
+
     pub fn init(&self, device: &Device) -> Actor {
         Actor {
             net: MlpConfig::new(
@@ -78,20 +86,9 @@ impl Actor {
 
     /// The box's half-width and centre, `[1, act_dim]` each.
     fn box_scale_center(&self, device: &Device) -> (Tensor<2>, Tensor<2>) {
-        let c = &self.config;
-        let half: Vec<f32> = c
-            .action_low
-            .iter()
-            .zip(&c.action_high)
-            .map(|(l, h)| (h - l) / 2.0)
-            .collect();
-        let center: Vec<f32> = c
-            .action_low
-            .iter()
-            .zip(&c.action_high)
-            .map(|(l, h)| (h + l) / 2.0)
-            .collect();
-        let row = |v: Vec<f32>| Tensor::from_data(TensorData::new(v, [1, c.act_dim]), device);
+        let (half, center) = self.config.box_half_center();
+        let row =
+            |v: Vec<f32>| Tensor::from_data(TensorData::new(v, [1, self.config.act_dim]), device);
         (row(half), row(center))
     }
 
@@ -173,12 +170,18 @@ impl BatchPolicy for ActorPolicy {
         let action = match self.mode {
             ActionMode::Deterministic => self.actor.mean_action(obs),
             ActionMode::Sampled => {
-                // Draw ε from the caller's stream through a local seeded generator.
-                let mut local = ChaCha8Rng::seed_from_u64(rng.next_u64());
-                let noise = normal([batch, self.act_dim()], &mut local, &device);
+                let noise = action_noise(batch * self.act_dim(), rng);
+                let noise =
+                    Tensor::from_data(TensorData::new(noise, [batch, self.act_dim()]), &device);
                 self.actor.sample(obs, noise).action
             }
         };
         to_f32_vec(action)
     }
+}
+
+/// ε ~ N(0, I) for `n` sampled action entries: drawn from a local generator
+/// seeded off the caller's stream, so every kernel draws the same ε.
+pub(crate) fn action_noise(n: usize, rng: &mut dyn RngCore) -> Vec<f32> {
+    standard_normal(n, &mut ChaCha8Rng::seed_from_u64(rng.next_u64()))
 }

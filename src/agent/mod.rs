@@ -14,6 +14,7 @@ mod presets;
 mod random_network;
 mod sac;
 
+pub(crate) use actor::action_noise;
 pub use actor::{ActionMode, Actor, ActorConfig, ActorPolicy, ActorSample};
 pub use buffer::ReplayBuffer;
 pub use critic::{Temperature, TwinCritic};

@@ -12,9 +12,13 @@ use rand_distr::StandardNormal;
 /// Standard normal noise of the given shape, from our own seeded generator
 /// (burn's random tensors would not follow the caller's seed).
 pub fn normal<const D: usize>(shape: [usize; D], rng: &mut impl Rng, device: &Device) -> Tensor<D> {
-    let n = shape.iter().product();
-    let values: Vec<f32> = (0..n).map(|_| rng.sample(StandardNormal)).collect();
+    let values = standard_normal(shape.iter().product(), rng);
     Tensor::from_data(TensorData::new(values, shape), device)
+}
+
+/// `n` standard normal draws, in the order [`normal`] fills its tensor.
+pub fn standard_normal(n: usize, rng: &mut impl Rng) -> Vec<f32> {
+    (0..n).map(|_| rng.sample(StandardNormal)).collect()
 }
 
 /// A tensor's values as f32, row-major (converting from the device's float type).

@@ -1,0 +1,298 @@
+//! The neural SDE's Euler–Maruyama step (eq. 5, 8) on the fused CPU path:
+//! the same arithmetic as [`NeuralSde::step`], over row tiles in parallel.
+
+use std::cell::RefCell;
+use std::sync::Mutex;
+
+use super::dense::{DenseMlp, GEMM_MIN_ROWS, MlpScratch, Rows};
+use super::tiles::{row_chunks, run_tiles, tile_rows, with_buffers};
+use crate::nn::to_f32_vec;
+use crate::sde::{BatchDynamics, DynamicsSpec, ModelStep, NeuralSde, SdeConstants};
+
+/// A [`NeuralSde`]'s weights laid out for [`BatchDynamics::step`] on the CPU.
+#[derive(Debug, Clone)]
+pub struct FusedSde {
+    constants: SdeConstants,
+    /// G(s_vel), H(s), f_res, f_rew, σ_ϕ and NN_ϕ of η_ϕ (μ_ϕ is only trained, never stepped).
+    g: DenseMlp,
+    h: DenseMlp,
+    res: DenseMlp,
+    reward: Option<DenseMlp>,
+    sigma: DenseMlp,
+    eta: DenseMlp,
+    /// W = 1 + softplus(raw) of h_ϕ, per state dimension.
+    h_weight: Vec<f32>,
+    /// b of h_ϕ.
+    h_bias: Vec<f32>,
+}
+
+/// One tile's inputs and the slices of the step's outputs it fills.
+struct Tile<'a> {
+    states: &'a [f32],
+    actions: &'a [f32],
+    noise: &'a [f32],
+    next: &'a mut [f32],
+    mean: &'a mut [f32],
+    sigma: &'a mut [f32],
+    h_eta: &'a mut [f32],
+    eta: &'a mut [f32],
+}
+
+/// A tile's intermediate values, one set per thread, reused across steps.
+#[derive(Debug, Default)]
+struct Scratch {
+    input: Vec<f32>,
+    g: Vec<f32>,
+    h: Vec<f32>,
+    res: Vec<f32>,
+    reward: Vec<f32>,
+    sigma: Vec<f32>,
+    eta: Vec<f32>,
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+    /// Hidden activations, apart from [`SCRATCH`]: networks of one step may run
+    /// on other threads.
+    static MLP_SCRATCH: RefCell<MlpScratch> = RefCell::new(MlpScratch::default());
+}
+
+/// One network to evaluate on a tile, and where its output goes.
+struct Job<'a> {
+    net: &'a DenseMlp,
+    input: Rows<'a>,
+    out: Mutex<&'a mut Vec<f32>>,
+}
+
+impl<'a> Job<'a> {
+    fn new(net: &'a DenseMlp, input: Rows<'a>, out: &'a mut Vec<f32>) -> Self {
+        Self {
+            net,
+            input,
+            out: Mutex::new(out),
+        }
+    }
+
+    fn run(&self) {
+        let mut out = self.out.lock().unwrap_or_else(|e| e.into_inner());
+        out.resize(self.input.rows * self.net.d_out(), 0.0);
+        with_buffers(&MLP_SCRATCH, |scratch| {
+            self.net.forward(self.input, &mut out, scratch)
+        });
+    }
+}
+
+/// Evaluates every job. A tile too small to split by rows is split by
+/// network instead, each core always taking the same networks: the model's
+/// ~2 MB of weights do not fit one core's L2 cache, but each core's share does.
+fn run_networks(jobs: &[Job], rows: usize) {
+    let threads = rayon::current_num_threads();
+    if rows >= GEMM_MIN_ROWS || threads < 2 {
+        jobs.iter().for_each(Job::run);
+        return;
+    }
+    // Largest first, each to the least loaded core (weights only count).
+    let mut order: Vec<usize> = (0..jobs.len()).collect();
+    order.sort_by_key(|&j| std::cmp::Reverse(jobs[j].net.weight_count()));
+    let mut load = vec![0usize; threads];
+    let mut owner = vec![0usize; jobs.len()];
+    for j in order {
+        let core = (0..threads).min_by_key(|&c| load[c]).unwrap_or(0);
+        owner[j] = core;
+        load[core] += jobs[j].net.weight_count();
+    }
+    rayon::broadcast(|ctx| {
+        for (job, &core) in jobs.iter().zip(&owner) {
+            if core == ctx.index() {
+                job.run();
+            }
+        }
+    });
+}
+
+fn sigmoid(z: f32) -> f32 {
+    1.0 / (1.0 + (-z).exp())
+}
+
+/// softplus(z) = log(1 + e^z), in the form that cannot overflow.
+fn softplus(z: f32) -> f32 {
+    z.max(0.0) + (-z.abs()).exp().ln_1p()
+}
+
+impl FusedSde {
+    /// The same model as `model`, its weights copied out of burn.
+    pub fn new(model: &NeuralSde) -> Self {
+        let w = burn::tensor::activation::softplus(model.h_weight.val(), 1.0) + 1.0;
+        Self {
+            constants: model.constants.clone(),
+            g: DenseMlp::from_burn(&model.g_net),
+            h: DenseMlp::from_burn(&model.h_net),
+            res: DenseMlp::from_burn(&model.res_net),
+            reward: model.reward_net.as_ref().map(DenseMlp::from_burn),
+            sigma: DenseMlp::from_burn(&model.sigma_net),
+            eta: DenseMlp::from_burn(&model.distance.eta_net),
+            h_weight: to_f32_vec(w),
+            h_bias: to_f32_vec(model.h_bias.val()),
+        }
+    }
+
+    /// Fills one tile: networks over all its rows, then eq. 8 and eq. 5 row by row.
+    fn step_tile(&self, tile: Tile, s: &mut Scratch) {
+        let c = &self.constants;
+        let spec = &c.spec;
+        let normalizer = &c.scales.normalizer;
+        let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
+        let (n_pos, n_vel) = (spec.n_pos(), spec.n_vel());
+        let state_dim = c.state_dim();
+        let width = obs_dim + act_dim;
+        let rows = tile.eta.len();
+
+        // Normalised (s, a), the input of every network.
+        s.input.clear();
+        for (state, action) in tile
+            .states
+            .chunks_exact(state_dim)
+            .zip(tile.actions.chunks_exact(act_dim))
+        {
+            let obs = state[..obs_dim].iter().zip(&normalizer.state.mean);
+            s.input.extend(
+                obs.zip(&normalizer.state.std)
+                    .map(|((x, m), sd)| (x - m) / sd),
+            );
+            let act = action.iter().zip(&normalizer.action.mean);
+            s.input.extend(
+                act.zip(&normalizer.action.std)
+                    .map(|((x, m), sd)| (x - m) / sd),
+            );
+        }
+        let input = Rows::dense(&s.input, width);
+        let mut jobs = vec![
+            Job::new(
+                &self.g,
+                Rows::columns(&s.input, width, n_pos, n_vel),
+                &mut s.g,
+            ),
+            Job::new(
+                &self.h,
+                Rows::columns(&s.input, width, 0, obs_dim),
+                &mut s.h,
+            ),
+            Job::new(&self.res, input, &mut s.res),
+            Job::new(&self.sigma, input, &mut s.sigma),
+            Job::new(&self.eta, input, &mut s.eta),
+        ];
+        if let Some(reward) = &self.reward {
+            jobs.push(Job::new(reward, input, &mut s.reward));
+        }
+        run_networks(&jobs, rows);
+
+        let dt = spec.dt as f32;
+        let sqrt_dt = spec.dt.sqrt() as f32;
+        let vel_std = &normalizer.state.std[n_pos..obs_dim];
+        let diffusion = &c.scales.diffusion[..state_dim];
+        let (eta_max, eta_offset) = (c.config.eta_max, c.config.eta_offset);
+        for r in 0..rows {
+            let state = &tile.states[r * state_dim..(r + 1) * state_dim];
+            let action = &tile.actions[r * act_dim..(r + 1) * act_dim];
+            let span = r * state_dim..(r + 1) * state_dim;
+            let (mean, next) = (&mut tile.mean[span.clone()], &mut tile.next[span.clone()]);
+            let (sigma, h_eta) = (&mut tile.sigma[span.clone()], &mut tile.h_eta[span.clone()]);
+            let noise = &tile.noise[span];
+            let res = &s.res[r * obs_dim..(r + 1) * obs_dim];
+            let g = &s.g[r * n_vel * act_dim..(r + 1) * n_vel * act_dim];
+            let h = &s.h[r * n_vel * n_vel..(r + 1) * n_vel * n_vel];
+
+            // eq. 8: f_pos = the velocities of the observed positions.
+            for (i, &v) in spec.split.position_velocity.iter().enumerate() {
+                mean[i] = state[i] + (state[v] + res[i] * c.scales.derivative[i]) * dt;
+            }
+            // eq. 8: f_vel = G(s_vel)·a + H(s)·s_vel, velocities scaled, not shifted.
+            let velocity = &state[n_pos..obs_dim];
+            for i in 0..n_vel {
+                let g_a: f32 = g[i * act_dim..(i + 1) * act_dim]
+                    .iter()
+                    .zip(action)
+                    .map(|(g, a)| g * a)
+                    .sum();
+                let h_v: f32 = h[i * n_vel..(i + 1) * n_vel]
+                    .iter()
+                    .zip(velocity.iter().zip(vel_std))
+                    .map(|(h, (v, sd))| h * (v / sd))
+                    .sum();
+                let d = n_pos + i;
+                let f_vel = (g_a + h_v) * c.scales.acceleration[i];
+                mean[d] = state[d] + (f_vel + res[d] * c.scales.derivative[d]) * dt;
+            }
+            if self.reward.is_some() {
+                // NUNO^R: dr_c = f_rew(s, a) dt.
+                let f_rew = s.reward[r] * c.scales.reward_rate;
+                mean[obs_dim] = state[obs_dim] + f_rew * dt;
+            }
+            // eq. 5: Σ = σ_ϕ(s, a) + h_ϕ(η_ϕ(s, a)), then s' = mean + Σ·sqrt(dt)·ε.
+            let eta = sigmoid(s.eta[r] - eta_offset) * eta_max;
+            tile.eta[r] = eta;
+            for d in 0..state_dim {
+                sigma[d] =
+                    (softplus(s.sigma[r * state_dim + d]) + c.config.sigma_min) * diffusion[d];
+                h_eta[d] = sigmoid(eta * self.h_weight[d] + self.h_bias[d])
+                    * diffusion[d]
+                    * c.config.w_max_scale;
+                next[d] = mean[d] + (sigma[d] + h_eta[d]) * noise[d] * sqrt_dt;
+            }
+        }
+    }
+}
+
+impl BatchDynamics for FusedSde {
+    fn spec(&self) -> &DynamicsSpec {
+        &self.constants.spec
+    }
+
+    fn state_dim(&self) -> usize {
+        self.constants.state_dim()
+    }
+
+    fn learns_reward(&self) -> bool {
+        self.reward.is_some()
+    }
+
+    fn step(&self, states: &[f32], actions: &[f32], noise: &[f32]) -> ModelStep {
+        let (state_dim, act_dim) = (self.state_dim(), self.constants.spec.act_dim);
+        let batch = states.len() / state_dim;
+        let zeros = vec![0.0; batch * state_dim];
+        let mut out = ModelStep {
+            next_states: zeros.clone(),
+            means: zeros.clone(),
+            sigma: zeros.clone(),
+            h_eta: zeros,
+            eta: vec![0.0; batch],
+        };
+        let rows = tile_rows(batch);
+        let tiles: Vec<Tile> = states
+            .chunks(rows * state_dim)
+            .zip(actions.chunks(rows * act_dim))
+            .zip(noise.chunks(rows * state_dim))
+            .zip(row_chunks(&mut out.next_states, rows, state_dim))
+            .zip(row_chunks(&mut out.means, rows, state_dim))
+            .zip(row_chunks(&mut out.sigma, rows, state_dim))
+            .zip(row_chunks(&mut out.h_eta, rows, state_dim))
+            .zip(row_chunks(&mut out.eta, rows, 1))
+            .map(
+                |(((((((states, actions), noise), next), mean), sigma), h_eta), eta)| Tile {
+                    states,
+                    actions,
+                    noise,
+                    next,
+                    mean,
+                    sigma,
+                    h_eta,
+                    eta,
+                },
+            )
+            .collect();
+        run_tiles(tiles, |tile| {
+            with_buffers(&SCRATCH, |scratch| self.step_tile(tile, scratch));
+        });
+        out
+    }
+}

@@ -1,0 +1,240 @@
+//! The fused CPU inference path against burn, the training code path: the same
+//! weights must give the same step, action and rollout within 1e-5 relative,
+//! on random inputs of freshly initialised models and on the shipped fitted model.
+
+use std::path::Path;
+
+use burn::tensor::Device;
+use nuno::agent::{
+    ActionMode, ActorConfig, ActorPolicy, BatchPolicy, RolloutActions, RolloutConfig, rollout_model,
+};
+use nuno::artifact::{BEST_POLICY, load_dynamics, load_policy};
+use nuno::data::{Dataset, GenerateConfig, generate};
+use nuno::envs::{MujocoTask, TaskConfig, TaskName, TaskRules};
+use nuno::infer::{Dense, FusedActor, FusedSde, GEMM_MIN_ROWS, MAX_TILE_ROWS, Rows};
+use nuno::sde::{BatchDynamics, DynamicsSpec, NeuralSde, PhysicalScales, SdeConfig};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+
+/// Relative tolerance of the issue: |fast − burn| ≤ 1e-5·(|burn| + floor), the
+/// floor being the value's typical size (RMS of its output), so entries that
+/// happen to be near zero are judged on the scale their errors live on.
+const TOLERANCE: f64 = 1e-5;
+
+fn assert_close(what: &str, fused: &[f32], burn: &[f32]) {
+    assert_eq!(fused.len(), burn.len(), "{what}: lengths");
+    let rms =
+        (burn.iter().map(|v| f64::from(*v).powi(2)).sum::<f64>() / burn.len().max(1) as f64).sqrt();
+    let mut worst = 0.0f64;
+    for (i, (f, b)) in fused.iter().zip(burn).enumerate() {
+        let (f, b) = (f64::from(*f), f64::from(*b));
+        let relative = (f - b).abs() / (b.abs() + rms);
+        assert!(
+            relative <= TOLERANCE,
+            "{what}[{i}]: fused {f}, burn {b} (relative {relative:.2e})"
+        );
+        worst = worst.max(relative);
+    }
+    eprintln!(
+        "{what}: worst relative difference {worst:.2e} over {}",
+        burn.len()
+    );
+}
+
+fn normal(n: usize, rng: &mut ChaCha8Rng) -> Vec<f32> {
+    (0..n).map(|_| rng.sample(StandardNormal)).collect()
+}
+
+fn hopper_spec() -> DynamicsSpec {
+    let task = MujocoTask::new(TaskConfig::d4rl(TaskName::Hopper)).unwrap();
+    DynamicsSpec {
+        obs_dim: 11,
+        act_dim: 3,
+        split: task.state_split(),
+        dt: task.dt(),
+    }
+}
+
+fn hopper_data() -> Dataset {
+    let policy = nuno::agent::RandomNetworkPolicy::new(11, 3, &[64, 64], 7);
+    let config = GenerateConfig::new(TaskConfig::d4rl(TaskName::Hopper), "random", 2000, 7);
+    generate(&config, &policy, "test", &|_| {}).unwrap()
+}
+
+fn shipped() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("models/hopper-random")
+}
+
+/// Batch sizes that cover the row loop, gemm, one tile and several.
+fn batches() -> [usize; 6] {
+    [
+        1,
+        3,
+        GEMM_MIN_ROWS - 1,
+        GEMM_MIN_ROWS,
+        MAX_TILE_ROWS + 1,
+        2 * MAX_TILE_ROWS + 37,
+    ]
+}
+
+/// Steps `burn` and its fused copy on dataset-like rows plus noise.
+fn compare_steps(name: &str, burn: &NeuralSde, data: &Dataset, seed: u64) {
+    let fused = FusedSde::new(burn);
+    let state_dim = burn.state_dim();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    for batch in batches() {
+        let rows: Vec<usize> = (0..batch)
+            .map(|_| rng.random_range(0..data.len()))
+            .collect();
+        let obs: Vec<f32> = rows
+            .iter()
+            .flat_map(|&i| data.observations.row(i).to_vec())
+            .collect();
+        let states = burn.states_from_observations(&obs);
+        assert_eq!(states.len(), batch * state_dim);
+        // Actions off the data too: the model must agree away from it.
+        let actions: Vec<f32> = normal(batch * 3, &mut rng);
+        let noise = normal(batch * state_dim, &mut rng);
+        let (a, b) = (
+            fused.step(&states, &actions, &noise),
+            BatchDynamics::step(burn, &states, &actions, &noise),
+        );
+        let label = |field: &str| format!("{name} batch {batch} {field}");
+        assert_close(&label("next_states"), &a.next_states, &b.next_states);
+        assert_close(&label("means"), &a.means, &b.means);
+        assert_close(&label("sigma"), &a.sigma, &b.sigma);
+        assert_close(&label("h_eta"), &a.h_eta, &b.h_eta);
+        assert_close(&label("eta"), &a.eta, &b.eta);
+        assert_eq!(a.eta.len(), batch);
+    }
+}
+
+#[test]
+fn fused_step_matches_burn_on_random_models() {
+    let data = hopper_data();
+    let spec = hopper_spec();
+    let device = Device::flex();
+    let scales = PhysicalScales::measure(&data, &spec, &Default::default());
+    for reward_model in [false, true] {
+        let mut config = SdeConfig::new();
+        config.reward_model = reward_model;
+        let model = NeuralSde::init(spec.clone(), scales.clone(), config, &device);
+        compare_steps(
+            &format!("random (reward model {reward_model})"),
+            &model,
+            &data,
+            1,
+        );
+    }
+}
+
+#[test]
+fn fused_step_matches_burn_on_the_shipped_model() {
+    let (model, _) = load_dynamics(&shipped(), &Device::flex()).unwrap();
+    compare_steps("shipped hopper-random", &model, &hopper_data(), 2);
+}
+
+#[test]
+fn fused_actions_match_burn_deterministic_and_sampled() {
+    let device = Device::flex();
+    let random = ActorConfig::new(11, 3, vec![-1.0, -0.5, 0.0], vec![1.0, 2.0, 0.5]).init(&device);
+    let (shipped, _) = load_policy(&shipped(), BEST_POLICY, &device).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    for (name, actor) in [("random", random), ("shipped", shipped)] {
+        for mode in [ActionMode::Deterministic, ActionMode::Sampled] {
+            let burn = ActorPolicy {
+                actor: actor.clone(),
+                mode,
+            };
+            let fused = FusedActor::new(&burn);
+            for batch in batches() {
+                let obs = normal(batch * 11, &mut rng);
+                let seed = rng.random();
+                let a = fused.act(&obs, &mut ChaCha8Rng::seed_from_u64(seed));
+                let b = burn.act(&obs, &mut ChaCha8Rng::seed_from_u64(seed));
+                assert_close(&format!("{name} {mode:?} batch {batch}"), &a, &b);
+            }
+        }
+    }
+}
+
+#[test]
+fn fused_ten_step_rollouts_match_burn_with_fixed_noise() {
+    let device = Device::flex();
+    let (model, _) = load_dynamics(&shipped(), &device).unwrap();
+    let (actor, _) = load_policy(&shipped(), BEST_POLICY, &device).unwrap();
+    let burn_policy = ActorPolicy {
+        actor,
+        mode: ActionMode::Sampled,
+    };
+    let fused_policy = FusedActor::new(&burn_policy);
+    let fused_model = FusedSde::new(&model);
+    let rules = TaskRules::new(TaskConfig::d4rl(TaskName::Hopper), &model.spec().split);
+    let data = hopper_data();
+    let starts: Vec<f32> = (0..40)
+        .flat_map(|i| data.observations.row(i * 37).to_vec())
+        .collect();
+    let config = RolloutConfig {
+        horizon: 10,
+        particles: 3,
+        penalty: 1.0,
+        threshold: None,
+        noise_scale: 1.0,
+    };
+    let run = |model: &dyn BatchDynamics, policy: &dyn BatchPolicy| {
+        rollout_model(
+            model,
+            RolloutActions::Policy(policy),
+            &rules,
+            &starts,
+            &config,
+            &mut ChaCha8Rng::seed_from_u64(5),
+        )
+    };
+    let fused = run(&fused_model, &fused_policy);
+    let burn = run(&model, &burn_policy);
+    assert_eq!(fused.trace.kept, burn.trace.kept, "trajectory lengths");
+    assert!(
+        burn.stats.transitions > 200,
+        "rollouts too short to compare"
+    );
+    let flat = |v: &Vec<Vec<f32>>| v.iter().flatten().copied().collect::<Vec<f32>>();
+    let (f, b) = (&fused.trace, &burn.trace);
+    assert_close(
+        "rollout observations",
+        &flat(&f.observations),
+        &flat(&b.observations),
+    );
+    assert_close("rollout actions", &flat(&f.actions), &flat(&b.actions));
+    assert_close("rollout eta", &flat(&f.eta), &flat(&b.eta));
+    assert_close(
+        "rollout rewards",
+        &fused.transitions.rewards,
+        &burn.transitions.rewards,
+    );
+}
+
+#[test]
+fn dense_layer_reads_a_column_window_of_wider_rows() {
+    // y = x[:, 1..3]·W + b on 9 rows (gemm) and 2 rows (row loop), by hand.
+    let layer = Dense::new(2, 3, &[1.0, 2.0, 3.0, -1.0, 0.5, 4.0], vec![0.1, 0.2, 0.3]);
+    for rows in [2usize, 9] {
+        let x: Vec<f32> = (0..rows * 4).map(|i| i as f32).collect();
+        let mut out = vec![0.0; rows * 3];
+        layer.forward(Rows::columns(&x, 4, 1, 2), &mut out);
+        for r in 0..rows {
+            let (a, b) = (x[r * 4 + 1], x[r * 4 + 2]);
+            let want = [
+                0.1 + a - b,
+                0.2 + 2.0 * a + 0.5 * b,
+                0.3 + 3.0 * a + 4.0 * b,
+            ];
+            assert_close(
+                &format!("window rows {rows} row {r}"),
+                &out[r * 3..r * 3 + 3],
+                &want,
+            );
+        }
+    }
+}
