@@ -14,6 +14,7 @@ use nuno::artifact::{
 };
 use nuno::data::{Dataset, GenerateConfig, TransitionBatch, generate};
 use nuno::envs::{MujocoTask, ObservationLayout, TaskConfig, TaskName, TaskRules};
+use nuno::infer::Kernel;
 use nuno::nn::{polyak_update, to_f32_vec};
 use nuno::sde::{BatchDynamics, DynamicsSpec, ModelStep};
 use rand::SeedableRng;
@@ -408,6 +409,8 @@ fn hopper_context<'a>(model: &'a nuno::sde::NeuralSde, dataset: &'a Dataset) -> 
         dynamics: model,
         task,
         rules: TaskRules::new(task, &model.constants.spec.split),
+        // burn throughout, like the dynamics (the fused path: tests/infer.rs, the CLI test).
+        kernel: Kernel::Burn,
     }
 }
 

@@ -10,6 +10,7 @@ use burn::tensor::Device;
 use nuno::agent::{ActionMode, ActorConfig, ActorPolicy, BatchPolicy};
 use nuno::artifact::{BEST_POLICY, PolicyProvenance, load_dynamics, save_policy};
 use nuno::envs::{TaskConfig, TaskName, TaskRules};
+use nuno::infer::{FusedActor, FusedSde, Kernel};
 use nuno::sde::BatchDynamics;
 use nuno::server::{
     ActResponse, AppState, BINARY, EvaluateResponse, Limits, ModelDetail, ModelList,
@@ -63,11 +64,16 @@ struct Server {
 
 impl Server {
     async fn start(limits: Limits, token: Option<&str>) -> Self {
+        Self::start_with_kernel(limits, token, Kernel::default()).await
+    }
+
+    async fn start_with_kernel(limits: Limits, token: Option<&str>, kernel: Kernel) -> Self {
         let models = models_dir();
         let config = ServerConfig {
             models_dir: models.path().to_path_buf(),
             limits,
             token: token.map(String::from),
+            kernel,
         };
         let (state, report) = AppState::new(config);
         assert_eq!(
@@ -202,7 +208,8 @@ async fn step_matches_the_library_in_json_and_binary() {
     let (model, metadata) = load_dynamics(&shipped(), &Device::flex()).unwrap();
     let flat_states: Vec<f32> = states.concat();
     let flat_actions: Vec<f32> = acts.concat();
-    let direct = BatchDynamics::step(&model, &flat_states, &flat_actions, &[0.0; 44]);
+    // The server runs the fused kernel by default; tests/infer.rs ties it to burn.
+    let direct = FusedSde::new(&model).step(&flat_states, &flat_actions, &[0.0; 44]);
     for (b, action) in acts.iter().enumerate() {
         for i in 0..11 {
             assert!((r.mean[b][i] - direct.means[b * 11 + i]).abs() < 1e-5);
@@ -350,10 +357,10 @@ async fn act_evaluate_and_validate() {
     let device = Device::flex();
     let (actor, _) =
         nuno::artifact::load_policy(&server.models_path.join(MODEL), BEST_POLICY, &device).unwrap();
-    let policy = ActorPolicy {
+    let policy = FusedActor::new(&ActorPolicy {
         actor,
         mode: ActionMode::Deterministic,
-    };
+    });
     let expected = policy.act(&states.concat(), &mut rand::rng());
     assert_eq!(r.actions.concat(), expected);
     assert!(r.actions.iter().flatten().all(|a| (-1.0..=1.0).contains(a)));
@@ -823,4 +830,41 @@ async fn the_binary_serves_and_stops_cleanly_on_sigterm() {
     assert!(status.success());
     let exit = child.wait().unwrap();
     assert!(exit.success(), "graceful shutdown exits 0, got {exit:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_burn_kernel_answers_with_burns_numbers() {
+    let server = Server::start_with_kernel(limits(), None, Kernel::Burn).await;
+    let (states, actions) = (upright(3), vec![vec![0.3f32, -0.2, 0.9]; 3]);
+    let request = json!({"states": states, "actions": actions, "noise_scale": 0.0});
+    let (status, body) = server
+        .post(&format!("/v1/models/{MODEL}/step"), &request)
+        .await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    let r: StepResponse = serde_json::from_value(body).unwrap();
+    let (model, _) = load_dynamics(&shipped(), &Device::flex()).unwrap();
+    let burn = BatchDynamics::step(&model, &states.concat(), &actions.concat(), &[0.0; 33]);
+    assert_eq!(r.mean.concat(), burn.means);
+    assert_eq!(r.eta, burn.eta);
+    let (_, body) = server
+        .post(
+            &format!("/v1/models/{MODEL}/act"),
+            &json!({"states": states}),
+        )
+        .await;
+    let r: ActResponse = serde_json::from_value(body).unwrap();
+    let (actor, _) = nuno::artifact::load_policy(
+        &server.models_path.join(MODEL),
+        BEST_POLICY,
+        &Device::flex(),
+    )
+    .unwrap();
+    let burn = ActorPolicy {
+        actor,
+        mode: ActionMode::Deterministic,
+    };
+    assert_eq!(
+        r.actions.concat(),
+        burn.act(&states.concat(), &mut rand::rng())
+    );
 }

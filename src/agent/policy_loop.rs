@@ -25,6 +25,7 @@ use super::sac::{Sac, SacConfig, SacLosses};
 use super::{AgentError, BatchPolicy};
 use crate::data::{Dataset, StartStateSampler, TransitionBatch, TransitionSampler};
 use crate::envs::{EvaluationConfig, TaskConfig, TaskRules, evaluate};
+use crate::infer::Kernel;
 use crate::sde::{BatchDynamics, ThresholdTable};
 
 /// Every knob of the loop; defaults are Appendix C.2–C.3's.
@@ -125,9 +126,13 @@ pub struct EpochRecord {
 /// What the loop reads but does not own.
 pub struct LoopContext<'a> {
     pub dataset: &'a Dataset,
+    /// The model as rollouts step it (see [`Kernel::dynamics`]).
     pub dynamics: &'a dyn BatchDynamics,
     pub task: TaskConfig,
     pub rules: TaskRules,
+    /// What runs the policy in rollouts and evaluation episodes (SAC's
+    /// updates are always burn's).
+    pub kernel: Kernel,
 }
 
 /// The loop's whole state: what a checkpoint saves.
@@ -247,11 +252,11 @@ impl PolicyTraining {
     fn model_rollout(&mut self, ctx: &LoopContext) -> RolloutStats {
         let starts =
             StartStateSampler::new(ctx.dataset).sample(self.config.rollout_batch, &mut self.rng);
-        let policy = self.policy(ActionMode::Sampled);
+        let policy = ctx.kernel.policy(self.policy(ActionMode::Sampled));
         let config = self.config.rollout(self.threshold);
         let result = rollout_model(
             ctx.dynamics,
-            RolloutActions::Policy(&policy),
+            RolloutActions::Policy(policy.as_ref()),
             &ctx.rules,
             &starts,
             &config,
@@ -286,7 +291,8 @@ impl PolicyTraining {
         }
         let seed = self.config.seed.wrapping_add(1_000_003 * self.epoch as u64);
         let config = EvaluationConfig::new(ctx.task, self.config.eval_episodes, seed);
-        let report = evaluate(&self.policy(ActionMode::Deterministic), &config)?;
+        let policy = ctx.kernel.policy(self.policy(ActionMode::Deterministic));
+        let report = evaluate(policy.as_ref(), &config)?;
         Ok(EvalSummary {
             mean_return: report.mean_return,
             std_return: report.std_return,

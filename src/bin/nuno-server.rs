@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
+use nuno::infer::Kernel;
 use nuno::server::{AppState, Limits, ServerConfig, openapi_json, serve};
 
 #[derive(Debug, Parser)]
@@ -40,6 +41,9 @@ struct Args {
     /// Model computations at once (default: the number of cores).
     #[arg(long, default_value_t = Limits::default().compute_slots)]
     compute_slots: usize,
+    /// What evaluates the models: the fused CPU path, or burn (the training code path).
+    #[arg(long, value_enum, default_value_t = Kernel::Fused, env = "NUNO_KERNEL")]
+    kernel: Kernel,
     /// Print the OpenAPI document and exit.
     #[arg(long)]
     print_openapi: bool,
@@ -65,6 +69,7 @@ fn main() -> ExitCode {
             compute_slots: args.compute_slots,
         },
         token: args.token.filter(|t| !t.is_empty()),
+        kernel: args.kernel,
     };
     let (state, report) = AppState::new(config);
     for failure in &report.failed {

@@ -2,6 +2,7 @@
 //! the same generator, over row tiles in parallel.
 
 use std::cell::RefCell;
+use std::sync::Arc;
 
 use rand::RngCore;
 
@@ -12,7 +13,8 @@ use crate::agent::{ActionMode, ActorConfig, ActorPolicy, BatchPolicy, action_noi
 /// A trained actor's weights laid out for [`BatchPolicy::act`] on the CPU.
 #[derive(Debug, Clone)]
 pub struct FusedActor {
-    net: DenseMlp,
+    /// Shared, so that the same weights in another [`ActionMode`] cost nothing.
+    net: Arc<DenseMlp>,
     config: ActorConfig,
     mode: ActionMode,
     /// Half-width and centre of the action box.
@@ -37,11 +39,19 @@ impl FusedActor {
     pub fn new(policy: &ActorPolicy) -> Self {
         let (half, center) = policy.actor.config.box_half_center();
         Self {
-            net: DenseMlp::from_burn(&policy.actor.net),
+            net: Arc::new(DenseMlp::from_burn(&policy.actor.net)),
             config: policy.actor.config.clone(),
             mode: policy.mode,
             half,
             center,
+        }
+    }
+
+    /// The same weights, choosing actions by `mode`.
+    pub fn with_mode(&self, mode: ActionMode) -> Self {
+        Self {
+            mode,
+            ..self.clone()
         }
     }
 

@@ -21,6 +21,9 @@ pub use sde::FusedSde;
 pub use tiles::{MAX_TILE_ROWS, tile_rows};
 pub use vector_math::activate;
 
+use crate::agent::{ActorPolicy, BatchPolicy};
+use crate::sde::{BatchDynamics, NeuralSde};
+
 /// Which code evaluates trained networks for rollouts and serving.
 #[derive(
     Debug,
@@ -41,4 +44,22 @@ pub enum Kernel {
     Fused,
     /// burn's tensors on the model's device (the training code path).
     Burn,
+}
+
+impl Kernel {
+    /// `model` behind the batch interface, evaluated by this kernel.
+    pub fn dynamics<'a>(self, model: &'a NeuralSde) -> Box<dyn BatchDynamics + 'a> {
+        match self {
+            Kernel::Fused => Box::new(FusedSde::new(model)),
+            Kernel::Burn => Box::new(model),
+        }
+    }
+
+    /// `policy` behind the batch interface, evaluated by this kernel.
+    pub fn policy(self, policy: ActorPolicy) -> Box<dyn BatchPolicy> {
+        match self {
+            Kernel::Fused => Box::new(FusedActor::new(&policy)),
+            Kernel::Burn => Box::new(policy),
+        }
+    }
 }

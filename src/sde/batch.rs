@@ -51,6 +51,24 @@ pub trait BatchDynamics: Sync {
     }
 }
 
+impl<T: BatchDynamics + ?Sized> BatchDynamics for &T {
+    fn spec(&self) -> &DynamicsSpec {
+        (**self).spec()
+    }
+
+    fn state_dim(&self) -> usize {
+        (**self).state_dim()
+    }
+
+    fn learns_reward(&self) -> bool {
+        (**self).learns_reward()
+    }
+
+    fn step(&self, states: &[f32], actions: &[f32], noise: &[f32]) -> ModelStep {
+        (**self).step(states, actions, noise)
+    }
+}
+
 impl BatchDynamics for NeuralSde {
     fn spec(&self) -> &DynamicsSpec {
         &self.constants.spec

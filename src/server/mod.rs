@@ -26,6 +26,8 @@ use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use tokio::sync::Semaphore;
+
+use crate::infer::Kernel;
 use utoipa::ToSchema;
 
 pub use body::{BINARY, TensorBytes};
@@ -77,6 +79,8 @@ pub struct ServerConfig {
     pub limits: Limits,
     /// When set, every route except health needs `Authorization: Bearer <token>`.
     pub token: Option<String>,
+    /// What evaluates the models: the fused CPU path (default) or burn.
+    pub kernel: Kernel,
 }
 
 /// Shared by every handler.
@@ -91,7 +95,7 @@ pub struct AppState {
 impl AppState {
     /// Loads the models in `config.models_dir`; the report says what failed.
     pub fn new(config: ServerConfig) -> (Self, ReloadReport) {
-        let (registry, report) = ModelRegistry::open(&config.models_dir);
+        let (registry, report) = ModelRegistry::open(&config.models_dir, config.kernel);
         let state = Self {
             compute: Arc::new(Semaphore::new(config.limits.compute_slots.max(1))),
             config: Arc::new(config),

@@ -12,12 +12,13 @@ use burn::tensor::Device;
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use crate::agent::Actor;
+use crate::agent::{ActionMode, Actor, ActorPolicy, BatchPolicy};
 use crate::artifact::{
     BEST_POLICY, DynamicsMetadata, PolicyMetadata, has_policy, load_dynamics, load_policy,
 };
 use crate::envs::{TaskConfig, TaskRules};
-use crate::sde::NeuralSde;
+use crate::infer::{FusedActor, FusedSde, Kernel};
+use crate::sde::{BatchDynamics, NeuralSde};
 
 /// One servable model.
 pub struct LoadedModel {
@@ -27,6 +28,30 @@ pub struct LoadedModel {
     pub task: TaskConfig,
     pub rules: TaskRules,
     pub policy: Option<(Actor, PolicyMetadata)>,
+    /// The same weights on the fused CPU path, when the server uses it.
+    fused: Option<(FusedSde, Option<FusedActor>)>,
+}
+
+impl LoadedModel {
+    /// The dynamics as requests step them (the server's [`Kernel`]).
+    pub fn batch_dynamics(&self) -> &dyn BatchDynamics {
+        match &self.fused {
+            Some((fused, _)) => fused,
+            None => &self.dynamics,
+        }
+    }
+
+    /// The policy as requests run it, choosing actions by `mode`.
+    pub fn batch_policy(&self, mode: ActionMode) -> Option<Box<dyn BatchPolicy>> {
+        if let Some((_, Some(actor))) = &self.fused {
+            return Some(Box::new(actor.with_mode(mode)));
+        }
+        let (actor, _) = self.policy.as_ref()?;
+        Some(Box::new(ActorPolicy {
+            actor: actor.clone(),
+            mode,
+        }))
+    }
 }
 
 /// A model that could not be (re)loaded, and why.
@@ -50,6 +75,7 @@ type ModelMap = BTreeMap<String, Arc<LoadedModel>>;
 /// The loaded models, swapped as a whole on reload.
 pub struct ModelRegistry {
     dir: PathBuf,
+    kernel: Kernel,
     models: RwLock<Arc<ModelMap>>,
     /// Serialises reloads (SIGHUP and the admin endpoint).
     reloading: std::sync::Mutex<()>,
@@ -67,10 +93,11 @@ pub fn valid_model_id(name: &str) -> bool {
 }
 
 impl ModelRegistry {
-    /// Loads every model in `dir`.
-    pub fn open(dir: &Path) -> (Self, ReloadReport) {
+    /// Loads every model in `dir`, to be evaluated by `kernel`.
+    pub fn open(dir: &Path, kernel: Kernel) -> (Self, ReloadReport) {
         let registry = Self {
             dir: dir.to_path_buf(),
+            kernel,
             models: RwLock::new(Arc::new(ModelMap::new())),
             reloading: std::sync::Mutex::new(()),
         };
@@ -115,7 +142,7 @@ impl ModelRegistry {
             if !dir.is_dir() || !valid_model_id(&id) || !dir.join("model.json").is_file() {
                 continue;
             }
-            match load_model(&id, &dir) {
+            match load_model(&id, &dir, self.kernel) {
                 Ok(model) => {
                     next.insert(id, Arc::new(model));
                 }
@@ -140,7 +167,7 @@ impl ModelRegistry {
     }
 }
 
-fn load_model(id: &str, dir: &Path) -> Result<LoadedModel, String> {
+fn load_model(id: &str, dir: &Path, kernel: Kernel) -> Result<LoadedModel, String> {
     let device = Device::flex();
     let (dynamics, metadata) = load_dynamics(dir, &device).map_err(|e| e.to_string())?;
     let task = metadata
@@ -161,6 +188,15 @@ fn load_model(id: &str, dir: &Path) -> Result<LoadedModel, String> {
     } else {
         None
     };
+    let fused = (kernel == Kernel::Fused).then(|| {
+        let actor = policy.as_ref().map(|(actor, _)| {
+            FusedActor::new(&ActorPolicy {
+                actor: actor.clone(),
+                mode: ActionMode::default(),
+            })
+        });
+        (FusedSde::new(&dynamics), actor)
+    });
     Ok(LoadedModel {
         id: id.to_string(),
         rules: TaskRules::new(task, &metadata.spec.split),
@@ -168,5 +204,6 @@ fn load_model(id: &str, dir: &Path) -> Result<LoadedModel, String> {
         dynamics,
         metadata,
         policy,
+        fused,
     })
 }

@@ -6,6 +6,7 @@ use anyhow::Context;
 use nuno::agent::{ActionMode, ActorPolicy, BatchPolicy, RandomPolicy};
 use nuno::artifact::{BEST_POLICY, load_policy};
 use nuno::envs::{EvaluationConfig, MujocoTask, TaskConfig, TaskName, evaluate};
+use nuno::infer::Kernel;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -34,6 +35,9 @@ pub struct Args {
     /// Print the full report as JSON instead of a table.
     #[arg(long)]
     json: bool,
+    /// What evaluates the policy: the fused CPU path or burn.
+    #[arg(long, value_enum, default_value_t = Kernel::Fused)]
+    kernel: Kernel,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -70,7 +74,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         } else {
             ActionMode::Deterministic
         };
-        (Box::new(ActorPolicy { actor, mode }), task)
+        (args.kernel.policy(ActorPolicy { actor, mode }), task)
     };
     let config = EvaluationConfig::new(task, args.episodes, args.seed);
     let report = evaluate(policy.as_ref(), &config)

@@ -13,6 +13,7 @@ use nuno::artifact::{
 };
 use nuno::data::{DatasetFormat, read_dataset};
 use nuno::envs::{TaskConfig, TaskRules};
+use nuno::infer::Kernel;
 use nuno::sde::ComputeDevice;
 
 use crate::plot::{Series, line_chart};
@@ -81,6 +82,10 @@ pub struct Args {
     /// Compute device: cpu, or wgpu in a build with the `wgpu` feature.
     #[arg(long, default_value_t = ComputeDevice::Cpu)]
     device: ComputeDevice,
+    /// What evaluates model rollouts and evaluation episodes: the fused CPU
+    /// path, or burn on --device (SAC's updates always run in burn).
+    #[arg(long, value_enum, default_value_t = Kernel::Fused)]
+    kernel: Kernel,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -140,11 +145,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     config.eval_episodes = args.eval_episodes;
     config.seed = args.seed;
 
+    let batch_dynamics = args.kernel.dynamics(&dynamics);
     let ctx = LoopContext {
         dataset: &dataset,
-        dynamics: &dynamics,
+        dynamics: batch_dynamics.as_ref(),
         task,
         rules: TaskRules::new(task, &dynamics.constants.spec.split),
+        kernel: args.kernel,
     };
     let thresholds = metadata.provenance.thresholds.as_ref();
     let mut training = PolicyTraining::new(config, &ctx, thresholds, &device)?;

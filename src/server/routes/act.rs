@@ -7,7 +7,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use crate::agent::{ActionMode, ActorPolicy, BatchPolicy};
+use crate::agent::ActionMode;
 use crate::server::body::RawBody;
 use crate::server::validate::{matrix, within};
 use crate::server::{ApiError, AppState};
@@ -60,13 +60,13 @@ pub async fn act(
         state.config.limits.max_batch,
     )?;
     state.metrics.batch("act", &id, r.states.len());
-    let policy = ActorPolicy {
-        actor: actor.clone(),
-        mode: r.mode,
-    };
-    let act_dim = policy.act_dim();
+    let act_dim = actor.config.act_dim;
+    let worker = model.clone();
     let actions = state
         .compute(move || {
+            let policy = worker
+                .batch_policy(r.mode)
+                .ok_or_else(|| ApiError::NoPolicy(worker.id.clone()))?;
             let mut rng = ChaCha8Rng::seed_from_u64(r.seed);
             Ok(policy.act(&states, &mut rng))
         })

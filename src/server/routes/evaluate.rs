@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::defaults::{one, ten};
-use crate::agent::{ActionMode, ActorPolicy, RolloutActions, RolloutConfig, rollout_model};
+use crate::agent::{ActionMode, RolloutActions, RolloutConfig, rollout_model};
 use crate::envs::{EvaluationConfig, EvaluationReport, MujocoTask, evaluate as run_episodes};
 use crate::server::body::RawBody;
 use crate::server::validate::{matrix, within};
@@ -55,19 +55,19 @@ pub async fn evaluate(
 ) -> Result<Json<EvaluateResponse>, ApiError> {
     let r: EvaluateRequest = body.json()?;
     let model = state.model(&r.model)?;
-    let Some((actor, _)) = model.policy.as_ref() else {
+    if model.policy.is_none() {
         return Err(ApiError::NoPolicy(r.model));
-    };
+    }
     within("episodes", r.episodes, state.config.limits.max_episodes)?;
     state.metrics.batch("evaluate", &r.model, r.episodes);
-    let policy = ActorPolicy {
-        actor: actor.clone(),
-        mode: r.mode,
-    };
     let config = EvaluationConfig::new(model.task, r.episodes, r.seed);
+    let worker = model.clone();
     let report = state
         .compute(move || {
-            run_episodes(&policy, &config).map_err(|e| ApiError::Internal(e.to_string()))
+            let policy = worker
+                .batch_policy(r.mode)
+                .ok_or_else(|| ApiError::NoPolicy(worker.id.clone()))?;
+            run_episodes(policy.as_ref(), &config).map_err(|e| ApiError::Internal(e.to_string()))
         })
         .await?;
     Ok(Json(EvaluateResponse {
@@ -167,7 +167,7 @@ pub async fn validate(
             };
             let mut rng = ChaCha8Rng::seed_from_u64(r.seed);
             let out = rollout_model(
-                &worker.dynamics,
+                worker.batch_dynamics(),
                 RolloutActions::Sequence(&actions),
                 &worker.rules,
                 &start,

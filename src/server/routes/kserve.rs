@@ -225,7 +225,7 @@ pub async fn infer(
         .compute(move || {
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
             Ok(step_particles(
-                &worker.dynamics,
+                worker.batch_dynamics(),
                 &worker.rules,
                 &states,
                 &actions,

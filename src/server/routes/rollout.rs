@@ -12,8 +12,7 @@ use utoipa::ToSchema;
 
 use super::defaults::{one, unit, unit_f32};
 use crate::agent::{
-    ActionMode, ActorPolicy, RolloutActions, RolloutConfig, StepOutcome, penalized_reward,
-    rollout_model,
+    ActionMode, RolloutActions, RolloutConfig, StepOutcome, penalized_reward, rollout_model,
 };
 use crate::server::body::RawBody;
 use crate::server::validate::{matrix, non_negative, within};
@@ -191,17 +190,14 @@ pub async fn rollout(
     let out = state
         .compute(move || {
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
-            let policy = worker.policy.as_ref().map(|(actor, _)| ActorPolicy {
-                actor: actor.clone(),
-                mode,
-            });
+            let policy = worker.batch_policy(mode);
             let source = match (&sequence, &policy) {
                 (Some(actions), _) => RolloutActions::Sequence(actions),
-                (None, Some(policy)) => RolloutActions::Policy(policy),
+                (None, Some(policy)) => RolloutActions::Policy(policy.as_ref()),
                 (None, None) => return Err(ApiError::NoPolicy(worker.id.clone())),
             };
             Ok(rollout_model(
-                &worker.dynamics,
+                worker.batch_dynamics(),
                 source,
                 &worker.rules,
                 &starts,

@@ -125,7 +125,7 @@ pub async fn step(
         .compute(move || {
             let mut rng = ChaCha8Rng::seed_from_u64(request.seed);
             Ok(step_particles(
-                &worker.dynamics,
+                worker.batch_dynamics(),
                 &worker.rules,
                 &observations,
                 &actions,
