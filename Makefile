@@ -38,6 +38,7 @@ lint: mujoco
 bench: mujoco
 	$(CARGO) bench --bench env_step
 	$(CARGO) bench --bench sde
+	$(CARGO) bench --bench infer
 	$(CARGO) bench --bench sac
 
 ## openapi: regenerate the committed spec (a test fails when it is stale).

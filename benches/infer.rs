@@ -10,37 +10,20 @@
 //! Run: `cargo bench --bench infer` (peer, same run:
 //! `.bench-venv/bin/python ../shared/bench/nuno_reference.py --envs hopper`).
 
+mod common;
+
 use std::time::Instant;
 
 use burn::tensor::{Device, Tensor, TensorData};
+use common::{ACT, Hopper, OBS, seconds_per_call};
 use nuno::agent::{
-    ActionMode, ActorConfig, ActorPolicy, BatchPolicy, RandomNetworkPolicy, RolloutActions,
-    RolloutConfig, rollout_model,
+    ActionMode, ActorConfig, ActorPolicy, BatchPolicy, RolloutActions, RolloutConfig, rollout_model,
 };
-use nuno::data::{GenerateConfig, generate};
-use nuno::envs::{MujocoTask, TaskConfig, TaskName, TaskRules};
+use nuno::envs::{TaskConfig, TaskName, TaskRules};
 use nuno::infer::{Dense, FusedActor, FusedSde, Rows};
-use nuno::sde::{BatchDynamics, DynamicsSpec, NeuralSde, PhysicalScales, SdeConfig};
+use nuno::sde::{BatchDynamics, NeuralSde, SdeConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-
-/// Seconds per call of `f`: the best of 5 rounds of enough calls for ~0.2 s.
-fn seconds_per_call(mut f: impl FnMut()) -> f64 {
-    f();
-    let start = Instant::now();
-    f();
-    let once = start.elapsed().as_secs_f64().max(1e-7);
-    let repeats = ((0.2 / once) as usize).clamp(1, 100_000);
-    (0..5)
-        .map(|_| {
-            let start = Instant::now();
-            for _ in 0..repeats {
-                f();
-            }
-            start.elapsed().as_secs_f64() / repeats as f64
-        })
-        .fold(f64::MAX, f64::min)
-}
 
 fn random(n: usize, rng: &mut ChaCha8Rng) -> Vec<f32> {
     (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
@@ -130,24 +113,16 @@ fn main() {
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     layer_kernels(&mut rng);
 
-    let task = MujocoTask::new(TaskConfig::d4rl(TaskName::Hopper)).expect("task");
-    let spec = DynamicsSpec {
-        obs_dim: 11,
-        act_dim: 3,
-        split: task.state_split(),
-        dt: task.dt(),
-    };
-    let policy = RandomNetworkPolicy::new(11, 3, &[256, 256], 0);
-    let config = GenerateConfig::new(TaskConfig::d4rl(TaskName::Hopper), "random", 20_000, 0);
-    let dataset = generate(&config, &policy, "bench", &|_| {}).expect("dataset");
+    let hopper = Hopper::generate();
     let device = Device::flex();
     device.seed(0);
-    let scales = PhysicalScales::measure(&dataset, &spec, &Default::default());
-    let burn_model = NeuralSde::init(spec.clone(), scales, SdeConfig::new(), &device);
+    let burn_model = NeuralSde::init(
+        hopper.spec.clone(),
+        hopper.scales.clone(),
+        SdeConfig::new(),
+        &device,
+    );
     let fused_model = FusedSde::new(&burn_model);
-    let cycled = |values: &ndarray::Array2<f32>, n: usize| -> Vec<f32> {
-        values.iter().cycle().take(n).copied().collect()
-    };
     let kernels: [(&str, &dyn BatchDynamics); 2] =
         [("burn flex", &burn_model), ("fused", &fused_model)];
 
@@ -155,9 +130,9 @@ fn main() {
     println!("| EM step (hopper) | batch | transitions/s | µs per step |");
     println!("|---|---|---|---|");
     for batch in [1usize, 256, 4096, 50_000] {
-        let states = cycled(&dataset.observations, batch * 11);
-        let actions = cycled(&dataset.actions, batch * 3);
-        let noise = random(batch * 11, &mut rng);
+        let states = hopper.states(batch);
+        let actions = hopper.actions(batch);
+        let noise = random(batch * OBS, &mut rng);
         for (name, model) in kernels {
             let seconds = seconds_per_call(|| {
                 let _ = model.step(&states, &actions, &noise);
@@ -170,16 +145,16 @@ fn main() {
         }
     }
 
-    let actor = ActorConfig::new(11, 3, vec![-1.0; 3], vec![1.0; 3]).init(&device);
+    let actor = ActorConfig::new(OBS, ACT, vec![-1.0; ACT], vec![1.0; ACT]).init(&device);
     let burn_policy = ActorPolicy {
         actor,
         mode: ActionMode::Sampled,
     };
     let fused_policy = FusedActor::new(&burn_policy);
     let policies: [&dyn BatchPolicy; 2] = [&burn_policy, &fused_policy];
-    let rules = TaskRules::new(TaskConfig::d4rl(TaskName::Hopper), &task.state_split());
+    let rules = TaskRules::new(TaskConfig::d4rl(TaskName::Hopper), &hopper.spec.split);
     let batch = 50_000;
-    let starts = cycled(&dataset.observations, batch * 11);
+    let starts = hopper.states(batch);
     let plan = RolloutConfig {
         horizon: 10,
         particles: 1,

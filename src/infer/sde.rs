@@ -24,6 +24,7 @@ pub struct FusedSde {
     h_weight: Vec<f32>,
     /// b of h_ϕ.
     h_bias: Vec<f32>,
+    split: NetworkSplit,
 }
 
 /// One tile's inputs and the slices of the step's outputs it fills.
@@ -82,27 +83,52 @@ impl<'a> Job<'a> {
     }
 }
 
-/// Evaluates every job. A tile too small to split by rows is split by
-/// network instead, each core always taking the same networks: the model's
-/// ~2 MB of weights do not fit one core's L2 cache, but each core's share does.
-fn run_networks(jobs: &[Job], rows: usize) {
+/// Which core evaluates which network when a tile is split by network, each
+/// core always taking the same networks: the model's ~2 MB of weights do not
+/// fit one core's L2 cache, but each core's share does.
+#[derive(Debug, Clone)]
+struct NetworkSplit {
+    threads: usize,
+    /// Per network (in [`FusedSde::networks`] order), its core.
+    owner: Vec<usize>,
+}
+
+impl NetworkSplit {
+    /// Largest first, each to the least loaded core (weights only count).
+    fn new(weights: &[usize], threads: usize) -> Self {
+        let mut order: Vec<usize> = (0..weights.len()).collect();
+        order.sort_by_key(|&j| std::cmp::Reverse(weights[j]));
+        let mut load = vec![0usize; threads];
+        let mut owner = vec![0usize; weights.len()];
+        for j in order {
+            let core = (0..threads).min_by_key(|&c| load[c]).unwrap_or(0);
+            owner[j] = core;
+            load[core] += weights[j];
+        }
+        Self { threads, owner }
+    }
+}
+
+/// Evaluates every job: by rows when the tile is big enough for the matmul
+/// kernel (the tiles themselves are already spread over the cores), else by
+/// network across the cores, as `split` assigns them.
+fn run_networks(split: &NetworkSplit, jobs: &[Job], rows: usize) {
     let threads = rayon::current_num_threads();
     if rows >= GEMM_MIN_ROWS || threads < 2 {
         jobs.iter().for_each(Job::run);
         return;
     }
-    // Largest first, each to the least loaded core (weights only count).
-    let mut order: Vec<usize> = (0..jobs.len()).collect();
-    order.sort_by_key(|&j| std::cmp::Reverse(jobs[j].net.weight_count()));
-    let mut load = vec![0usize; threads];
-    let mut owner = vec![0usize; jobs.len()];
-    for j in order {
-        let core = (0..threads).min_by_key(|&c| load[c]).unwrap_or(0);
-        owner[j] = core;
-        load[core] += jobs[j].net.weight_count();
-    }
+    let other_pool;
+    let split = if split.threads == threads {
+        split
+    } else {
+        // Called from a pool of another size than the one the model was built in.
+        let weights: Vec<usize> = jobs.iter().map(|job| job.net.weight_count()).collect();
+        other_pool = NetworkSplit::new(&weights, threads);
+        &other_pool
+    };
     rayon::broadcast(|ctx| {
-        for (job, &core) in jobs.iter().zip(&owner) {
+        for (job, &core) in jobs.iter().zip(&split.owner) {
             if core == ctx.index() {
                 job.run();
             }
@@ -123,7 +149,7 @@ impl FusedSde {
     /// The same model as `model`, its weights copied out of burn.
     pub fn new(model: &NeuralSde) -> Self {
         let w = burn::tensor::activation::softplus(model.h_weight.val(), 1.0) + 1.0;
-        Self {
+        let mut fused = Self {
             constants: model.constants.clone(),
             g: DenseMlp::from_burn(&model.g_net),
             h: DenseMlp::from_burn(&model.h_net),
@@ -133,7 +159,18 @@ impl FusedSde {
             eta: DenseMlp::from_burn(&model.distance.eta_net),
             h_weight: to_f32_vec(w),
             h_bias: to_f32_vec(model.h_bias.val()),
-        }
+            split: NetworkSplit::new(&[], 1),
+        };
+        let weights: Vec<usize> = fused.networks().map(DenseMlp::weight_count).collect();
+        fused.split = NetworkSplit::new(&weights, rayon::current_num_threads());
+        fused
+    }
+
+    /// The networks a step evaluates, in the order of its jobs.
+    fn networks(&self) -> impl Iterator<Item = &DenseMlp> {
+        [&self.g, &self.h, &self.res, &self.sigma, &self.eta]
+            .into_iter()
+            .chain(self.reward.as_ref())
     }
 
     /// Fills one tile: networks over all its rows, then eq. 8 and eq. 5 row by row.
@@ -166,6 +203,7 @@ impl FusedSde {
             );
         }
         let input = Rows::dense(&s.input, width);
+        // In [`FusedSde::networks`] order: `self.split` assigns cores by position.
         let mut jobs = vec![
             Job::new(
                 &self.g,
@@ -184,7 +222,7 @@ impl FusedSde {
         if let Some(reward) = &self.reward {
             jobs.push(Job::new(reward, input, &mut s.reward));
         }
-        run_networks(&jobs, rows);
+        run_networks(&self.split, &jobs, rows);
 
         let dt = spec.dt as f32;
         let sqrt_dt = spec.dt.sqrt() as f32;
