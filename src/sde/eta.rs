@@ -101,7 +101,8 @@ pub struct EtaLosses {
     pub grad: Tensor<1>,
     /// L_μ, eq. 3: 1/μ.
     pub mu: Tensor<1>,
-    /// L_far: mean of relu(far_target·η_max − η)² over the far points.
+    /// L_far: mean over the far points of relu(logit(far_target) − (NN_ϕ − offset))²,
+    /// zero exactly where η ≥ far_target·η_max.
     pub far: Tensor<1>,
 }
 
@@ -184,7 +185,11 @@ impl DistanceAware {
             .div_scalar(batch as f32);
         let grad_loss = (grad.square().sum_dim(1) + eta.square()).mean();
         let (far_points, far_mask) = far;
-        let shortfall = relu(self.eta(far_points).neg() + config.far_target * self.eta_max);
+        // On η's logit: where η ≈ 0 the sigmoid is flat, and a hinge on η itself
+        // could not lift it (a ring's interior stayed low that way).
+        let logit = self.eta_net.forward(far_points) - self.eta_offset;
+        let target = (config.far_target / (1.0 - config.far_target)).ln();
+        let shortfall = relu(logit.neg() + target);
         EtaLosses {
             sc,
             grad: grad_loss,
