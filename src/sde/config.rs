@@ -62,9 +62,11 @@ pub struct LossConfig {
     pub lambda_res: f32,
     /// Weight of L_far, the far-field hinge (not in the paper; see docs/paper-map.md):
     /// uniform points at least `far_radii`·r from every reference datum are pushed to
-    /// η ≥ `far_target`·η_max. Off by default (the paper's losses only); it lifts η
-    /// inside non-convex low-dimensional data (a ring's interior), but in high
-    /// dimensions a reference subset is too sparse to tell "far" from "between data".
+    /// η ≥ `far_target`·η_max, hinged on η's logit. Off by default (the paper's losses
+    /// only); it lifts η inside non-convex low-dimensional data (a ring's interior,
+    /// with ~0.02 here), but in high dimensions a reference subset is too sparse to
+    /// tell "far" from "between data". Too large a weight (≳ 0.05 on the toy sets)
+    /// can saturate η on whole clusters of data.
     #[config(default = 0.0)]
     pub lambda_far: f32,
     /// L_far's points are "far" beyond this many radii r from every reference datum.
@@ -85,6 +87,51 @@ pub struct LossConfig {
     /// Samples per datum for L_sc: 20.
     #[config(default = 20)]
     pub convexity_samples: usize,
+}
+
+impl LossConfig {
+    /// Refuses weights and sampling settings no fit can use, naming the field.
+    pub fn validate(&self) -> Result<(), super::SdeError> {
+        let weights = [
+            ("lambda_data", self.lambda_data),
+            ("lambda_sc", self.lambda_sc),
+            ("lambda_grad", self.lambda_grad),
+            ("lambda_mu", self.lambda_mu),
+            ("lambda_res", self.lambda_res),
+            ("lambda_far", self.lambda_far),
+        ];
+        for (name, value) in weights {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(invalid(format!(
+                    "{name} = {value}: must be finite and >= 0"
+                )));
+            }
+        }
+        if !(self.radius.is_finite() && self.radius > 0.0) {
+            return Err(invalid(format!("radius = {}: must be > 0", self.radius)));
+        }
+        if self.convexity_samples == 0 {
+            return Err(invalid("convexity_samples = 0: L_sc needs samples".into()));
+        }
+        if self.lambda_far > 0.0 {
+            if !(self.far_target > 0.0 && self.far_target < 1.0) {
+                return Err(invalid(format!(
+                    "far_target = {}: must lie strictly between 0 and 1 (a fraction of η_max)",
+                    self.far_target
+                )));
+            }
+            if self.far_reference == 0 {
+                return Err(invalid(
+                    "far_reference = 0: L_far needs reference points".into(),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn invalid(message: String) -> super::SdeError {
+    super::SdeError::Config(format!("loss config: {message}"))
 }
 
 /// The fitting procedure (Appendix C.4).

@@ -124,6 +124,7 @@ pub fn fit(
     on_record: &mut dyn FnMut(&FitRecord),
 ) -> Result<(NeuralSde, FitSummary), SdeError> {
     spec.validate()?;
+    config.loss.validate()?;
     let started = Instant::now();
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let train_windows = WindowSampler::new(train, config.horizon)?;
@@ -258,7 +259,14 @@ pub fn fit_eta(
     dim: usize,
     config: &FitConfig,
     device: &Device,
-) -> super::DistanceAware {
+) -> Result<super::DistanceAware, SdeError> {
+    config.loss.validate()?;
+    if dim == 0 || points.is_empty() || points.len() % dim != 0 {
+        return Err(SdeError::Spec(format!(
+            "fit_eta: {} values do not form rows of width {dim}",
+            points.len()
+        )));
+    }
     let train_device = device.clone().autodiff();
     train_device.seed(config.seed);
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
@@ -297,5 +305,5 @@ pub fn fit_eta(
         let grads = GradientsParams::from_grads(total.backward(), &model);
         model = optimizer.step(config.learning_rate(step), model, grads);
     }
-    model.valid()
+    Ok(model.valid())
 }

@@ -31,6 +31,8 @@ pub use threshold::{ThresholdConfig, ThresholdTable, accumulated_eta, compute_th
 pub enum SdeError {
     #[error("invalid dynamics spec: {0}")]
     Spec(String),
+    #[error("invalid {0}")]
+    Config(String),
     #[error(transparent)]
     Data(#[from] crate::data::DataError),
 }
