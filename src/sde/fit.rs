@@ -261,7 +261,7 @@ pub fn fit_eta(
     device: &Device,
 ) -> Result<super::DistanceAware, SdeError> {
     config.loss.validate()?;
-    if dim == 0 || points.is_empty() || points.len() % dim != 0 {
+    if dim == 0 || points.is_empty() || !points.len().is_multiple_of(dim) {
         return Err(SdeError::Spec(format!(
             "fit_eta: {} values do not form rows of width {dim}",
             points.len()
