@@ -48,6 +48,16 @@ pub struct Args {
     /// Hidden sizes of the drift networks G, H, f_res (paper: 256,256,256).
     #[arg(long, value_delimiter = ',', default_value = "256,256,256")]
     drift_hidden: Vec<usize>,
+    /// Ball radius r of L_sc's samples, in normalised units (default: the paper's 0.1).
+    #[arg(long)]
+    radius: Option<f32>,
+    /// λ_grad, weight of L_grad = ‖∇η‖² + η² (default: the paper's 1e-4).
+    #[arg(long)]
+    lambda_grad: Option<f32>,
+    /// λ_far, weight of the far-field hinge on η (not in the paper; default 0 = off;
+    /// see docs/paper-map.md before using it on high-dimensional data).
+    #[arg(long)]
+    lambda_far: Option<f32>,
     /// Windows per horizon used for the CVaR thresholds.
     #[arg(long, default_value_t = 4096)]
     threshold_windows: usize,
@@ -59,6 +69,12 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let mut loss = LossConfig::new();
+    loss.radius = args.radius.unwrap_or(loss.radius);
+    loss.lambda_grad = args.lambda_grad.unwrap_or(loss.lambda_grad);
+    loss.lambda_far = args.lambda_far.unwrap_or(loss.lambda_far);
+    loss.validate()
+        .context("check --radius, --lambda-grad and --lambda-far")?;
     anyhow::ensure!(args.max_steps > 0, "--max-steps must be at least 1");
     anyhow::ensure!(args.eval_every > 0, "--eval-every must be at least 1");
     anyhow::ensure!(
@@ -82,7 +98,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut model_config = SdeConfig::new();
     model_config.reward_model = args.reward_model;
     model_config.drift_hidden = args.drift_hidden.clone();
-    let mut config = FitConfig::new(model_config, LossConfig::new());
+    let mut config = FitConfig::new(model_config, loss);
     config.max_steps = args.max_steps;
     config.eval_every = args.eval_every;
     config.patience = args.patience;

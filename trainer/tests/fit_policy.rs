@@ -2,42 +2,11 @@
 //! the shipped model writes policies, metrics and checkpoints, refuses to
 //! overwrite a run, resumes to a longer one, and bad flags are named.
 
+mod common;
+
 use std::path::Path;
-use std::process::{Command, Output};
 
-fn trainer<S: AsRef<str>>(args: &[S]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_nuno-trainer"))
-        .args(args.iter().map(|a| a.as_ref()))
-        .output()
-        .expect("could not run nuno-trainer")
-}
-
-fn ok<S: AsRef<str>>(args: &[S]) -> String {
-    let out = trainer(args);
-    assert!(
-        out.status.success(),
-        "nuno-trainer {} failed:\n{}",
-        args.iter()
-            .map(|a| a.as_ref())
-            .collect::<Vec<_>>()
-            .join(" "),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn fails<S: AsRef<str>>(args: &[S]) -> String {
-    let out = trainer(args);
-    assert!(
-        !out.status.success(),
-        "nuno-trainer {} should fail",
-        args.iter()
-            .map(|a| a.as_ref())
-            .collect::<Vec<_>>()
-            .join(" ")
-    );
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
+use common::{fails, ok};
 
 fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
