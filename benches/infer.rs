@@ -104,7 +104,7 @@ fn layer_kernels(rng: &mut ChaCha8Rng) {
         );
         report(
             "nuno fused layer (bias + x·W)",
-            seconds_per_call(|| layer.forward(Rows::dense(&x, K), &mut out)),
+            seconds_per_call(|| layer.forward(Rows::dense(&x, K), &mut out, None)),
         );
     }
 }

@@ -222,7 +222,7 @@ fn dense_layer_reads_a_column_window_of_wider_rows() {
     for rows in [2usize, 9] {
         let x: Vec<f32> = (0..rows * 4).map(|i| i as f32).collect();
         let mut out = vec![0.0; rows * 3];
-        layer.forward(Rows::columns(&x, 4, 1, 2), &mut out);
+        layer.forward(Rows::columns(&x, 4, 1, 2), &mut out, None);
         for r in 0..rows {
             let (a, b) = (x[r * 4 + 1], x[r * 4 + 2]);
             let want = [

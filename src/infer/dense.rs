@@ -6,7 +6,7 @@
 //! the `gemm` crate's AVX-512 kernels from [`GEMM_MIN_ROWS`] rows up, a
 //! row-times-matrix loop below that, where packing would cost more than it saves.
 
-use super::vector_math::{Vectorized, activate, widest};
+use super::vector_math::{Vectorized, bias_then_activate, widest};
 use crate::nn::{Activation, Mlp, to_f32_vec};
 
 /// From this many rows a layer goes through `gemm`; fewer use the row loop.
@@ -94,15 +94,14 @@ impl Dense {
         self.d_out
     }
 
-    /// `out[r] = x[r]·W + b` for every row of `input`; `out` is `[rows, d_out]`.
-    pub fn forward(&self, input: Rows, out: &mut [f32]) {
+    /// `out[r] = activation(x[r]·W + b)` for every row of `input`; `out` is
+    /// `[rows, d_out]`. The bias joins the activation's pass over the output
+    /// (one pass fewer through memory than prefilling it).
+    pub fn forward(&self, input: Rows, out: &mut [f32], activation: Option<Activation>) {
         assert_eq!(input.width, self.d_in, "layer input width");
         let rows = input.rows;
         assert_eq!(out.len(), rows * self.d_out, "layer output size");
         assert!(rows == 0 || input.data.len() >= (rows - 1) * input.stride + input.width);
-        for row in out.chunks_exact_mut(self.d_out) {
-            row.copy_from_slice(&self.bias);
-        }
         if rows >= GEMM_MIN_ROWS {
             // SAFETY: the asserts above keep every index gemm touches inside
             // `input.data`, `self.weight` and `out`, which do not overlap.
@@ -114,7 +113,7 @@ impl Dense {
                     out.as_mut_ptr(),
                     1,
                     self.d_out as isize,
-                    true,
+                    false,
                     input.data.as_ptr(),
                     1,
                     input.stride as isize,
@@ -130,8 +129,10 @@ impl Dense {
                 );
             }
         } else {
+            out.fill(0.0);
             accumulate_rows(self, input, out);
         }
+        bias_then_activate(out, &self.bias, activation);
     }
 }
 
@@ -197,11 +198,10 @@ impl DenseMlp {
                 Rows::dense(&current[..rows * layer.d_in], layer.d_in)
             };
             if i == last {
-                layer.forward(source, out);
+                layer.forward(source, out, None);
             } else {
                 next.resize(rows * layer.d_out, 0.0);
-                layer.forward(source, &mut next);
-                activate(self.activation, &mut next);
+                layer.forward(source, &mut next, Some(self.activation));
                 std::mem::swap(&mut current, &mut next);
             }
         }

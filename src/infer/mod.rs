@@ -19,7 +19,7 @@ pub use actor::FusedActor;
 pub use dense::{Dense, DenseMlp, GEMM_MIN_ROWS, MlpScratch, Rows};
 pub use sde::FusedSde;
 pub use tiles::{MAX_TILE_ROWS, tile_rows};
-pub use vector_math::activate;
+pub use vector_math::bias_then_activate;
 
 use crate::agent::{ActorPolicy, BatchPolicy};
 use crate::sde::{BatchDynamics, NeuralSde};

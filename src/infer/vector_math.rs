@@ -11,12 +11,14 @@
 
 use crate::nn::Activation;
 
-/// Applies `activation` to every element of `values`, in place.
-pub fn activate(activation: Activation, values: &mut [f32]) {
+/// Adds `bias` to every row of `values` (rows as wide as `bias`), then
+/// applies `activation` (if any), in place: one pass over a layer's output.
+pub fn bias_then_activate(values: &mut [f32], bias: &[f32], activation: Option<Activation>) {
     match activation {
-        Activation::Swish => widest(Map(values, swish)),
-        Activation::Tanh => widest(Map(values, tanh)),
-        Activation::Relu => values.iter_mut().for_each(|v| *v = v.max(0.0)),
+        Some(Activation::Swish) => widest(BiasMap(values, bias, swish)),
+        Some(Activation::Tanh) => widest(BiasMap(values, bias, tanh)),
+        Some(Activation::Relu) => widest(BiasMap(values, bias, |v: f32| v.max(0.0))),
+        None => widest(BiasMap(values, bias, |v: f32| v)),
     }
 }
 
@@ -27,14 +29,17 @@ pub(crate) trait Vectorized {
     fn run(self);
 }
 
-/// `f` applied to every element in place.
-struct Map<'a, F>(&'a mut [f32], F);
+/// `v ← f(v + b)` for every element `v` of each row and `b` of the bias.
+struct BiasMap<'a, F>(&'a mut [f32], &'a [f32], F);
 
-impl<F: Fn(f32) -> f32> Vectorized for Map<'_, F> {
+impl<F: Fn(f32) -> f32> Vectorized for BiasMap<'_, F> {
     #[inline(always)]
     fn run(self) {
-        for v in self.0 {
-            *v = (self.1)(*v);
+        let BiasMap(values, bias, f) = self;
+        for row in values.chunks_exact_mut(bias.len()) {
+            for (v, b) in row.iter_mut().zip(bias) {
+                *v = f(*v + b);
+            }
         }
     }
 }
@@ -155,19 +160,27 @@ mod tests {
 
     #[test]
     fn dispatched_slices_equal_the_scalar_functions() {
-        let values: Vec<f32> = grid().step_by(97).collect();
+        let values: Vec<f32> = grid().step_by(97).take(330).collect();
+        let bias: Vec<f32> = (0..33).map(|i| i as f32 * 0.25 - 4.0).collect();
+        let biased = |x: &f32, i: usize| x + bias[i % bias.len()];
         for (activation, f) in [
             (Activation::Swish, swish as fn(f32) -> f32),
             (Activation::Tanh, tanh),
         ] {
             let mut out = values.clone();
-            activate(activation, &mut out);
-            for (x, y) in values.iter().zip(&out) {
-                assert!((f(*x) - y).abs() <= 1e-7 * y.abs().max(1e-30), "{x}");
+            bias_then_activate(&mut out, &bias, Some(activation));
+            for (i, (x, y)) in values.iter().zip(&out).enumerate() {
+                let want = f(biased(x, i));
+                assert!((want - y).abs() <= 1e-7 * y.abs().max(1e-30), "{x}");
             }
         }
+        let mut plain = values.clone();
+        bias_then_activate(&mut plain, &bias, None);
+        for (i, (x, y)) in values.iter().zip(&plain).enumerate() {
+            assert_eq!(*y, biased(x, i));
+        }
         let mut relu = vec![-1.0, 0.5];
-        activate(Activation::Relu, &mut relu);
-        assert_eq!(relu, [0.0, 0.5]);
+        bias_then_activate(&mut relu, &[0.25], Some(Activation::Relu));
+        assert_eq!(relu, [0.0, 0.75]);
     }
 }
