@@ -1,6 +1,6 @@
 //! The neural SDE: kinematic prior, η on toy data (Appendix B.2), fit quality
-//! on hopper against the constant-velocity predictor, thresholds, and the
-//! artifact round trip (Rust and Python's safetensors).
+//! on hopper against the constant-velocity predictor, thresholds, η's report on
+//! the shipped model, and the artifact round trip (Rust and Python's safetensors).
 
 mod common;
 
@@ -15,8 +15,9 @@ use nuno::artifact::{
 use nuno::data::{Dataset, GenerateConfig, generate};
 use nuno::envs::{MujocoTask, TaskConfig, TaskName};
 use nuno::sde::{
-    DynamicsSpec, FitConfig, LossConfig, NeuralSde, PhysicalScales, SdeConfig, ThresholdConfig,
-    compute_thresholds, cvar, fit, fit_eta, prediction_error,
+    DynamicsSpec, EtaReportConfig, FitConfig, LossConfig, NeuralSde, PhysicalScales, SdeConfig,
+    SdeError, ThresholdConfig, auroc, compute_thresholds, cvar, eta_report, fit, fit_eta,
+    prediction_error,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -146,23 +147,6 @@ fn kinematic_prior_holds_exactly_in_physical_units() {
     // The diffusion is positive and η lies in (0, η_max).
     assert!(to_vec(terms.diffusion()).iter().all(|&d| d > 0.0));
     assert!(to_vec(terms.eta).iter().all(|&e| e > 0.0 && e < 1.0));
-}
-
-/// Area under the ROC curve of `score` separating `positives` (should score high) from `negatives`.
-fn auroc(positives: &[f32], negatives: &[f32]) -> f64 {
-    let mut wins = 0.0;
-    for p in positives {
-        for n in negatives {
-            wins += if p > n {
-                1.0
-            } else if p == n {
-                0.5
-            } else {
-                0.0
-            };
-        }
-    }
-    wins / (positives.len() * negatives.len()) as f64
 }
 
 #[test]
@@ -602,4 +586,45 @@ fn shipped_default_model_loads_with_its_thresholds() {
         metadata.provenance.dataset.as_ref().unwrap().transitions,
         1_000_000
     );
+}
+
+#[test]
+fn eta_report_on_the_shipped_model_separates_perturbed_data_not_random_actions() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/hopper-random");
+    let device = Device::flex();
+    let (model, _) = load_dynamics(&dir, &device).unwrap();
+    let dataset = hopper_dataset(4_000, 5);
+    let config = EtaReportConfig::new().with_rows(400);
+    let report = eta_report(&model, &dataset, 0.1, &config, &device).unwrap();
+    assert_eq!(report.rows, 400);
+    assert_eq!(report.radius, 0.1);
+    assert_eq!(report.perturbed.len(), 2);
+    let (near, far) = (&report.perturbed[0], &report.perturbed[1]);
+    assert_eq!((near.0, far.0), (1.0, 3.0));
+    // η grows with the distance from the data (measured: ~0.95 and ~0.99) ...
+    assert!(near.1.auroc_vs_data > 0.85, "{report:?}");
+    assert!(far.1.auroc_vs_data > 0.95, "{report:?}");
+    assert!(report.data_mean_eta < near.1.mean_eta && near.1.mean_eta < far.1.mean_eta);
+    // ... but random actions are as close to hopper-random's near-uniform
+    // actions as its own (docs/paper-map.md, known gaps).
+    assert!(
+        (report.random_actions.auroc_vs_data - 0.5).abs() < 0.1,
+        "{report:?}"
+    );
+
+    let none = EtaReportConfig::new().with_rows(0);
+    let err = eta_report(&model, &dataset, 0.1, &none, &device).unwrap_err();
+    assert!(matches!(err, SdeError::Config(_)) && err.to_string().contains("0 rows"));
+    let zero = EtaReportConfig::new().with_radii(vec![1.0, 0.0]);
+    let err = eta_report(&model, &dataset, 0.1, &zero, &device).unwrap_err();
+    assert!(err.to_string().contains("perturbation scale 0"), "{err}");
+    let walker = generate(
+        &GenerateConfig::new(TaskConfig::d4rl(TaskName::Walker2d), "random", 200, 0),
+        &RandomNetworkPolicy::new(17, 6, &[16], 0),
+        "walker",
+        &|_| {},
+    )
+    .unwrap();
+    let err = eta_report(&model, &walker, 0.1, &config, &device).unwrap_err();
+    assert!(err.to_string().contains("17-D observations"), "{err}");
 }

@@ -3,6 +3,7 @@
 //! code lives here.
 
 mod dataset;
+mod eta_report;
 mod evaluate;
 mod fit_model;
 mod fit_policy;
@@ -30,6 +31,8 @@ enum Command {
     FitPolicy(fit_policy::Args),
     /// Run a policy in the real MuJoCo task and print returns and D4RL normalised scores.
     Evaluate(evaluate::Args),
+    /// How well a model's η separates a dataset from random actions and perturbed data.
+    EtaReport(eta_report::Args),
 }
 
 fn main() -> ExitCode {
@@ -37,6 +40,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Dataset(command) => dataset::run(command),
         Command::Evaluate(args) => evaluate::run(args),
+        Command::EtaReport(args) => eta_report::run(args),
         Command::FitModel(args) => fit_model::run(args),
         Command::FitPolicy(args) => fit_policy::run(args),
     };

@@ -6,7 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{fails, ok};
+use common::{fails, generate_hopper, ok};
 
 fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
@@ -34,18 +34,7 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
         dataset.to_str().unwrap(),
         run.to_str().unwrap(),
     );
-    ok(&[
-        "dataset",
-        "generate",
-        "--task",
-        "hopper",
-        "--kind",
-        "random",
-        "--transitions",
-        "2000",
-        "--out",
-        dataset_s,
-    ]);
+    generate_hopper(dataset_s, 2000, 0);
     let fit = |steps: &str, extra: &[&str]| -> Vec<String> {
         let mut args: Vec<&str> = vec![
             "fit-policy",

@@ -37,3 +37,21 @@ pub fn fails<S: AsRef<str>>(args: &[S]) -> String {
     );
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
+
+/// `nuno-trainer dataset generate`: a small hopper-random dataset at `out`.
+pub fn generate_hopper(out: &str, transitions: usize, seed: u64) {
+    ok(&[
+        "dataset",
+        "generate",
+        "--task",
+        "hopper",
+        "--kind",
+        "random",
+        "--transitions",
+        &transitions.to_string(),
+        "--seed",
+        &seed.to_string(),
+        "--out",
+        out,
+    ]);
+}
