@@ -269,6 +269,32 @@ async fn step_matches_the_library_in_json_and_binary() {
     let json_next: Vec<f32> = r.next_states.concat().concat();
     assert_eq!(out["next_states"].1, json_next);
     assert_eq!(out["eta"].1, r.eta);
+
+    // A body over 64 KiB is parsed off the async runtime: same numbers, same errors.
+    let (states, acts) = (upright(1200), actions(1200));
+    let big = json!({"states": states, "actions": acts, "noise_scale": 0.0});
+    let text = big.to_string();
+    assert!(text.len() > 64 * 1024, "{} bytes", text.len());
+    let (status, body) = server.post(&format!("/v1/models/{MODEL}/step"), &big).await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    let r: StepResponse = serde_json::from_value(body).unwrap();
+    let direct =
+        FusedSde::new(&model).step(&states.concat(), &acts.concat(), &vec![0.0; 1200 * 11]);
+    assert_eq!(r.batch, 1200);
+    for b in [0, 599, 1199] {
+        assert!((r.eta[b] - direct.eta[b]).abs() < 1e-6, "η of row {b}");
+        assert!(
+            (r.mean[b][5] - direct.means[b * 11 + 5]).abs() < 1e-5,
+            "mean of row {b}"
+        );
+    }
+    let cut = text[..text.len() - 10].to_string();
+    let response = server
+        .post_raw(&format!("/v1/models/{MODEL}/step"), "application/json", cut)
+        .await;
+    assert_eq!(response.status(), StatusCode::BAD_REQUEST);
+    let body: Value = response.json().await.unwrap();
+    assert_eq!(error_code(&body), "malformed_body", "{body}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -8,6 +8,7 @@ use axum::body::Bytes;
 use axum::extract::{FromRequest, Request};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
+use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use super::ApiError;
@@ -53,13 +54,24 @@ impl FromRequest<AppState> for RawBody {
     }
 }
 
+/// JSON bodies from this size up are parsed on a blocking thread: a batch of
+/// thousands of rows takes milliseconds to parse, which would stall every
+/// other request waiting on the async runtime's few threads.
+const OFF_RUNTIME_BYTES: usize = 64 * 1024;
+
 impl RawBody {
     /// The body as JSON of type `T` (binary bodies are refused for JSON-only routes).
-    pub fn json<T: DeserializeOwned>(&self) -> Result<T, ApiError> {
+    pub async fn json<T: DeserializeOwned + Send + 'static>(&self) -> Result<T, ApiError> {
         if self.format == Format::Binary {
             return Err(ApiError::UnsupportedMediaType(BINARY.into()));
         }
-        serde_json::from_slice(&self.bytes).map_err(|e| ApiError::Malformed(e.to_string()))
+        if self.bytes.len() < OFF_RUNTIME_BYTES {
+            return parse_json(&self.bytes);
+        }
+        let bytes = self.bytes.clone();
+        tokio::task::spawn_blocking(move || parse_json(&bytes))
+            .await
+            .map_err(|e| ApiError::Internal(format!("parsing the body failed: {e}")))?
     }
 
     /// The body as safetensors: named f32 tensors and the header's string metadata.
@@ -74,6 +86,17 @@ impl RawBody {
             .map_err(|e| ApiError::Malformed(e.to_string()))?;
         Ok((tensors, metadata))
     }
+}
+
+fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    serde_json::from_slice(bytes).map_err(|e| ApiError::Malformed(e.to_string()))
+}
+
+/// A JSON response body, serialised where this is called: routes with
+/// batch-sized answers call it inside their compute work, off the async runtime.
+pub fn json_response<T: Serialize>(value: &T) -> Result<Response, ApiError> {
+    let bytes = serde_json::to_vec(value).map_err(|e| ApiError::Internal(e.to_string()))?;
+    Ok(([(header::CONTENT_TYPE, "application/json")], bytes).into_response())
 }
 
 fn request_format(headers: &HeaderMap) -> Result<Format, ApiError> {

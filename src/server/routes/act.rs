@@ -47,7 +47,7 @@ pub async fn act(
     Path(id): Path<String>,
     body: RawBody,
 ) -> Result<Json<ActResponse>, ApiError> {
-    let r: ActRequest = body.json()?;
+    let r: ActRequest = body.json().await?;
     let model = state.model(&id)?;
     let Some((actor, _)) = model.policy.as_ref() else {
         return Err(ApiError::NoPolicy(id));

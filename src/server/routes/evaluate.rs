@@ -53,7 +53,7 @@ pub async fn evaluate(
     State(state): State<AppState>,
     body: RawBody,
 ) -> Result<Json<EvaluateResponse>, ApiError> {
-    let r: EvaluateRequest = body.json()?;
+    let r: EvaluateRequest = body.json().await?;
     let model = state.model(&r.model)?;
     if model.policy.is_none() {
         return Err(ApiError::NoPolicy(r.model));
@@ -122,7 +122,7 @@ pub async fn validate(
     Path(id): Path<String>,
     body: RawBody,
 ) -> Result<Json<ValidateResponse>, ApiError> {
-    let r: ValidateRequest = body.json()?;
+    let r: ValidateRequest = body.json().await?;
     let model = state.model(&id)?;
     let spec = &model.metadata.spec;
     let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);

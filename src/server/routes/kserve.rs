@@ -165,7 +165,7 @@ pub async fn infer(
     Path(id): Path<String>,
     body: RawBody,
 ) -> Result<Json<InferResponse>, V2Error> {
-    let r: InferRequest = body.json()?;
+    let r: InferRequest = body.json().await?;
     let model = state.model(&id)?;
     let spec = &model.metadata.spec;
     let input = |name: &str, width: usize| -> Result<Vec<f32>, ApiError> {

@@ -3,8 +3,8 @@
 //! policy, with η, accumulated η, penalised rewards, terminal flags and NUNO's
 //! truncation at ε(h, α).
 
-use axum::Json;
 use axum::extract::{Path, State};
+use axum::response::Response;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -14,7 +14,7 @@ use super::defaults::{one, unit, unit_f32};
 use crate::agent::{
     ActionMode, RolloutActions, RolloutConfig, StepOutcome, penalized_reward, rollout_model,
 };
-use crate::server::body::RawBody;
+use crate::server::body::{RawBody, json_response};
 use crate::server::validate::{matrix, non_negative, within};
 use crate::server::{ApiError, AppState};
 
@@ -103,8 +103,8 @@ pub async fn rollout(
     State(state): State<AppState>,
     Path(id): Path<String>,
     body: RawBody,
-) -> Result<Json<RolloutResponse>, ApiError> {
-    let r: RolloutRequest = body.json()?;
+) -> Result<Response, ApiError> {
+    let r: RolloutRequest = body.json().await?;
     let model = state.model(&id)?;
     let spec = &model.metadata.spec;
     let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
@@ -187,7 +187,9 @@ pub async fn rollout(
     };
     let (seed, mode) = (r.seed, r.policy_mode);
     let worker = model.clone();
-    let out = state
+    // The trajectories are built and serialised in the compute work too: at
+    // 4096 starts × 10 steps the JSON answer is megabytes.
+    state
         .compute(move || {
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
             let policy = worker.batch_policy(mode);
@@ -196,52 +198,51 @@ pub async fn rollout(
                 (None, Some(policy)) => RolloutActions::Policy(policy.as_ref()),
                 (None, None) => return Err(ApiError::NoPolicy(worker.id.clone())),
             };
-            Ok(rollout_model(
+            let out = rollout_model(
                 worker.batch_dynamics(),
                 source,
                 &worker.rules,
                 &starts,
                 &config,
                 &mut rng,
-            ))
+            );
+            let t = &out.trace;
+            let trajectories = (0..t.rows)
+                .map(|row| {
+                    let truncated = t.outcome[row] == StepOutcome::Truncated;
+                    Trajectory {
+                        start: row / r.particles,
+                        particle: row % r.particles,
+                        states: t.observations[row]
+                            .chunks(obs_dim)
+                            .map(<[f32]>::to_vec)
+                            .collect(),
+                        actions: t.actions[row]
+                            .chunks(act_dim)
+                            .map(<[f32]>::to_vec)
+                            .collect(),
+                        eta: t.eta[row].clone(),
+                        accumulated_eta: t.accumulated_eta[row].clone(),
+                        rewards: t.rewards[row].clone(),
+                        penalized_rewards: t.rewards[row]
+                            .iter()
+                            .zip(&t.eta[row])
+                            .map(|(&reward, &eta)| penalized_reward(reward, r.penalty, eta))
+                            .collect(),
+                        length: t.kept[row],
+                        terminal: t.outcome[row] == StepOutcome::Terminal,
+                        truncated,
+                        truncation_step: truncated.then_some(t.kept[row]),
+                    }
+                })
+                .collect();
+            json_response(&RolloutResponse {
+                model: id,
+                horizon: r.horizon,
+                particles: r.particles,
+                threshold,
+                trajectories,
+            })
         })
-        .await?;
-
-    let t = &out.trace;
-    let trajectories = (0..t.rows)
-        .map(|row| {
-            let truncated = t.outcome[row] == StepOutcome::Truncated;
-            Trajectory {
-                start: row / r.particles,
-                particle: row % r.particles,
-                states: t.observations[row]
-                    .chunks(obs_dim)
-                    .map(<[f32]>::to_vec)
-                    .collect(),
-                actions: t.actions[row]
-                    .chunks(act_dim)
-                    .map(<[f32]>::to_vec)
-                    .collect(),
-                eta: t.eta[row].clone(),
-                accumulated_eta: t.accumulated_eta[row].clone(),
-                rewards: t.rewards[row].clone(),
-                penalized_rewards: t.rewards[row]
-                    .iter()
-                    .zip(&t.eta[row])
-                    .map(|(&reward, &eta)| penalized_reward(reward, r.penalty, eta))
-                    .collect(),
-                length: t.kept[row],
-                terminal: t.outcome[row] == StepOutcome::Terminal,
-                truncated,
-                truncation_step: truncated.then_some(t.kept[row]),
-            }
-        })
-        .collect();
-    Ok(Json(RolloutResponse {
-        model: id,
-        horizon: r.horizon,
-        particles: r.particles,
-        threshold,
-        trajectories,
-    }))
+        .await
 }

@@ -4,9 +4,8 @@
 
 use std::collections::HashMap;
 
-use axum::Json;
 use axum::extract::{Path, State};
-use axum::response::{IntoResponse, Response};
+use axum::response::Response;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -15,7 +14,7 @@ use utoipa::ToSchema;
 use super::defaults::{one, unit, unit_f32};
 use crate::agent::{ParticleConfig, ParticleStep, step_particles};
 use crate::artifact::NamedTensors;
-use crate::server::body::{Format, RawBody, TensorBytes, tensors_response};
+use crate::server::body::{Format, RawBody, TensorBytes, json_response, tensors_response};
 use crate::server::validate::{flat, matrix, non_negative, within};
 use crate::server::{ApiError, AppState};
 
@@ -94,7 +93,7 @@ pub async fn step(
     let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
     let (observations, actions, request) = match body.format {
         Format::Json => {
-            let r: StepRequest = body.json()?;
+            let r: StepRequest = body.json().await?;
             let states = matrix("states", &r.states, obs_dim)?;
             let actions = matrix("actions", &r.actions, act_dim)?;
             (states, actions, r)
@@ -121,23 +120,26 @@ pub async fn step(
         noise_scale: request.noise_scale,
     };
     let worker = model.clone();
-    let result = state
+    let format = body.format;
+    // The answer is serialised in the compute work too: at batch 4096 its JSON
+    // is megabytes.
+    state
         .compute(move || {
             let mut rng = ChaCha8Rng::seed_from_u64(request.seed);
-            Ok(step_particles(
+            let result = step_particles(
                 worker.batch_dynamics(),
                 &worker.rules,
                 &observations,
                 &actions,
                 config,
                 &mut rng,
-            ))
+            );
+            match format {
+                Format::Json => json_response(&step_response(&id, &result)),
+                Format::Binary => tensors_response(&binary_response(&result)),
+            }
         })
-        .await?;
-    match body.format {
-        Format::Json => Ok(Json(json_response(&id, &result)).into_response()),
-        Format::Binary => tensors_response(&binary_response(&result)),
-    }
+        .await
 }
 
 fn binary_request(
@@ -189,7 +191,7 @@ fn rows(values: &[f32], width: usize) -> Vec<Vec<f32>> {
     values.chunks(width.max(1)).map(<[f32]>::to_vec).collect()
 }
 
-fn json_response(id: &str, s: &ParticleStep) -> StepResponse {
+fn step_response(id: &str, s: &ParticleStep) -> StepResponse {
     let (p, d) = (s.particles, s.obs_dim);
     StepResponse {
         model: id.to_string(),
