@@ -18,8 +18,7 @@ mod vector_math;
 pub use actor::FusedActor;
 pub use dense::{Dense, DenseMlp, GEMM_MIN_ROWS, MlpScratch, Rows};
 pub use sde::FusedSde;
-pub use tiles::{MAX_TILE_ROWS, tile_rows};
-pub use vector_math::bias_then_activate;
+pub use tiles::MAX_TILE_ROWS;
 
 use crate::agent::{ActorPolicy, BatchPolicy};
 use crate::sde::{BatchDynamics, NeuralSde};

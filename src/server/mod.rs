@@ -26,9 +26,9 @@ use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use tokio::sync::Semaphore;
+use utoipa::ToSchema;
 
 use crate::infer::Kernel;
-use utoipa::ToSchema;
 
 pub use body::{BINARY, TensorBytes};
 pub use error::{ApiError, ErrorBody, ErrorDetail};
