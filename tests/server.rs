@@ -5,6 +5,8 @@
 mod common;
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 
 use burn::tensor::Device;
 use nuno::agent::{ActionMode, ActorConfig, ActorPolicy, BatchPolicy};
@@ -13,7 +15,7 @@ use nuno::envs::{TaskConfig, TaskName, TaskRules};
 use nuno::infer::{FusedActor, FusedSde, Kernel};
 use nuno::sde::BatchDynamics;
 use nuno::server::{
-    ActResponse, AppState, BINARY, EvaluateResponse, Limits, ModelDetail, ModelList,
+    ActResponse, AppState, BINARY, ComputeHook, EvaluateResponse, Limits, ModelDetail, ModelList,
     RolloutResponse, ServerConfig, StepResponse, ValidateResponse, openapi_json, serve,
 };
 use reqwest::StatusCode;
@@ -68,13 +70,24 @@ impl Server {
     }
 
     async fn start_with_kernel(limits: Limits, token: Option<&str>, kernel: Kernel) -> Self {
+        Self::start_with_config(limits, |config| {
+            config.token = token.map(String::from);
+            config.kernel = kernel;
+        })
+        .await
+    }
+
+    /// A server on `limits`, with whatever else `adjust` sets.
+    async fn start_with_config(limits: Limits, adjust: impl FnOnce(&mut ServerConfig)) -> Self {
         let models = models_dir();
-        let config = ServerConfig {
+        let mut config = ServerConfig {
             models_dir: models.path().to_path_buf(),
             limits,
-            token: token.map(String::from),
-            kernel,
+            token: None,
+            kernel: Kernel::default(),
+            before_compute: None,
         };
+        adjust(&mut config);
         let (state, report) = AppState::new(config);
         assert_eq!(
             report.loaded,
@@ -790,29 +803,55 @@ async fn a_client_generated_from_the_spec_calls_the_server() {
     );
 }
 
+/// A compute hook that holds the first computation until `release` is sent (or a
+/// minute passes, so a failing test cannot hang), and counts every computation.
+fn hold_first_computation() -> (ComputeHook, std::sync::mpsc::Sender<()>, Arc<AtomicUsize>) {
+    let (release, released) = std::sync::mpsc::channel::<()>();
+    let released = Mutex::new(released);
+    let started = Arc::new(AtomicUsize::new(0));
+    let counter = started.clone();
+    let hook = ComputeHook(Arc::new(move || {
+        if counter.fetch_add(1, Ordering::SeqCst) == 0 {
+            let _ = released
+                .lock()
+                .unwrap()
+                .recv_timeout(std::time::Duration::from_secs(60));
+        }
+    }));
+    (hook, release, started)
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn slow_requests_time_out_with_a_json_error() {
+async fn slow_requests_time_out_with_a_json_error_and_keep_their_slot() {
     let limits = Limits {
         request_timeout_s: 1,
-        max_batch: 100_000,
-        max_body_bytes: 16 << 20,
+        compute_slots: 1,
         ..limits()
     };
-    let server = Server::start(limits, None).await;
-    // 80k sampled transitions: several seconds of model work, answered after one.
-    let body = json!({"states": upright(10_000), "actions": actions(10_000), "particles": 8});
-    let started = std::time::Instant::now();
-    let (status, body) = server
-        .post(&format!("/v1/models/{MODEL}/step"), &body)
-        .await;
+    let (hook, release, started) = hold_first_computation();
+    let server = Server::start_with_config(limits, |config| config.before_compute = Some(hook)).await;
+    let step = format!("/v1/models/{MODEL}/step");
+    let body = json!({"states": upright(2), "actions": actions(2)});
+    // The first computation is held until released: whatever the machine's speed,
+    // the answer can only come from the timeout.
+    let (status, answer) = server.post(&step, &body).await;
     assert_eq!(
-        (status, error_code(&body)),
+        (status, error_code(&answer)),
         (StatusCode::SERVICE_UNAVAILABLE, "timeout")
     );
-    assert!(
-        started.elapsed().as_secs_f64() < 3.0,
-        "answered when the limit passed"
+    // The abandoned work still holds the only slot: the next request waits for it,
+    // times out in turn, and its computation never starts.
+    let (status, answer) = server.post(&step, &body).await;
+    assert_eq!(
+        (status, error_code(&answer)),
+        (StatusCode::SERVICE_UNAVAILABLE, "timeout")
     );
+    assert_eq!(started.load(Ordering::SeqCst), 1, "a second computation ran");
+    // Once the held work ends, its slot is free again and requests are served.
+    release.send(()).unwrap();
+    let (status, answer) = server.post(&step, &body).await;
+    assert_eq!(status, StatusCode::OK, "{answer}");
+    assert_eq!(started.load(Ordering::SeqCst), 2);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -70,6 +70,7 @@ fn main() -> ExitCode {
         },
         token: args.token.filter(|t| !t.is_empty()),
         kernel: args.kernel,
+        before_compute: None,
     };
     let (state, report) = AppState::new(config);
     for failure in &report.failed {

@@ -81,6 +81,20 @@ pub struct ServerConfig {
     pub token: Option<String>,
     /// What evaluates the models: the fused CPU path (default) or burn.
     pub kernel: Kernel,
+    /// Runs before each computation, on its blocking thread and holding its compute
+    /// slot. `None` in production; tests use it to make work last exactly as long as
+    /// they need (timeouts, slots), whatever the machine's speed.
+    pub before_compute: Option<ComputeHook>,
+}
+
+/// A callback run at the start of every computation (see [`ServerConfig::before_compute`]).
+#[derive(Clone)]
+pub struct ComputeHook(pub Arc<dyn Fn() + Send + Sync>);
+
+impl std::fmt::Debug for ComputeHook {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("ComputeHook")
+    }
 }
 
 /// Shared by every handler.
@@ -113,19 +127,31 @@ impl AppState {
     }
 
     /// Runs `work` on the blocking pool once a compute slot is free.
+    ///
+    /// The slot belongs to the blocking work, not to the request's future: when a
+    /// request times out or its client hangs up, the future is dropped but the slot
+    /// stays taken until the work itself has finished, so abandoned requests cannot
+    /// pile up more computations than there are slots.
     pub async fn compute<T: Send + 'static>(
         &self,
         work: impl FnOnce() -> Result<T, ApiError> + Send + 'static,
     ) -> Result<T, ApiError> {
-        let _slot = self
+        let slot = self
             .compute
             .clone()
             .acquire_owned()
             .await
             .map_err(|e| ApiError::Internal(e.to_string()))?;
-        tokio::task::spawn_blocking(work)
-            .await
-            .map_err(|e| ApiError::Internal(format!("computation failed: {e}")))?
+        let hook = self.config.before_compute.clone();
+        tokio::task::spawn_blocking(move || {
+            let _slot = slot;
+            if let Some(ComputeHook(hook)) = hook {
+                hook();
+            }
+            work()
+        })
+        .await
+        .map_err(|e| ApiError::Internal(format!("computation failed: {e}")))?
     }
 }
 
