@@ -152,7 +152,11 @@ fn main() {
     };
     let fused_policy = FusedActor::new(&burn_policy);
     let policies: [&dyn BatchPolicy; 2] = [&burn_policy, &fused_policy];
-    let rules = TaskRules::new(TaskConfig::d4rl(TaskName::Hopper), &hopper.spec.split);
+    let rules = TaskRules::new(
+        TaskConfig::d4rl(TaskName::Hopper),
+        &hopper.spec.split,
+        hopper.spec.dt,
+    );
     let batch = 50_000;
     let starts = hopper.states(batch);
     let plan = RolloutConfig {

@@ -240,7 +240,7 @@ fn hopper() -> (TaskConfig, DynamicsSpec) {
 #[test]
 fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
     let (task, spec) = hopper();
-    let rules = TaskRules::new(task, &spec.split);
+    let rules = TaskRules::new(task, &spec.split, spec.dt);
     let dynamics = ConstantEta { spec: spec.clone() };
     let policy = Constant(vec![0.5, -0.5, 0.25], spec.obs_dim);
     // An upright hopper: z = 1.25, everything else 0.
@@ -282,7 +282,8 @@ fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
     // r̃ = r − λ·η with the task's known reward on the next observation.
     for i in 0..out.transitions.len() {
         let next = &out.transitions.next_observations[i * spec.obs_dim..(i + 1) * spec.obs_dim];
-        let reward = rules.reward(&[0.5, -0.5, 0.25], next);
+        let obs = &out.transitions.observations[i * spec.obs_dim..(i + 1) * spec.obs_dim];
+        let reward = rules.reward(obs, &[0.5, -0.5, 0.25], next);
         assert!((out.transitions.rewards[i] - (reward - 0.6)).abs() < 1e-5);
         assert_eq!(out.transitions.terminals[i], 0.0);
     }
@@ -315,11 +316,11 @@ fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
     assert_eq!(out.stats.terminated, 2);
 }
 
-#[test]
-fn known_rules_agree_with_the_simulator() {
-    let (task, spec) = hopper();
-    let rules = TaskRules::new(task, &spec.split);
+/// Steps `task` 3000 times with random actions, checking the known terminal rule
+/// on every step; returns the mean |known reward − simulator reward|.
+fn known_rules_against_the_simulator(task: TaskConfig) -> f64 {
     let mut sim = MujocoTask::new(task).unwrap();
+    let rules = TaskRules::new(task, &sim.state_split(), sim.dt());
     let mut obs = sim.reset(Some(1));
     let mut rng = ChaCha8Rng::seed_from_u64(2);
     let (mut steps, mut reward_error) = (0, 0.0f64);
@@ -329,10 +330,11 @@ fn known_rules_agree_with_the_simulator() {
             .map(|_| rand::Rng::random_range(&mut rng, -1.0..1.0))
             .collect();
         let t = sim.step(&action).unwrap();
+        let before: Vec<f32> = obs.iter().map(|&x| x as f32).collect();
         let next: Vec<f32> = t.observation.iter().map(|&x| x as f32).collect();
         let a32: Vec<f32> = action.iter().map(|&x| x as f32).collect();
         assert_eq!(rules.terminal(&next), t.terminated, "step {steps}");
-        reward_error += (f64::from(rules.reward(&a32, &next)) - t.reward).abs();
+        reward_error += (f64::from(rules.reward(&before, &a32, &next)) - t.reward).abs();
         terminals += usize::from(t.terminated);
         steps += 1;
         obs = if t.terminated || t.truncated {
@@ -341,17 +343,23 @@ fn known_rules_agree_with_the_simulator() {
             t.observation
         };
     }
-    let _ = obs;
     assert!(
         terminals > 10,
         "the random policy should fall often ({terminals})"
     );
-    // The velocity after the step stands in for (x' − x)/dt: close on average.
-    assert!(
-        reward_error / (steps as f64) < 0.15,
-        "mean |Δr| = {}",
-        reward_error / steps as f64
-    );
+    reward_error / steps as f64
+}
+
+#[test]
+fn known_rules_agree_with_the_simulator() {
+    // D4RL observations omit root x: the velocity after the step stands in for
+    // (x' − x)/dt, close on average.
+    let d4rl = known_rules_against_the_simulator(TaskConfig::d4rl(TaskName::Hopper));
+    assert!(d4rl < 0.15, "D4RL layout: mean |Δr| = {d4rl}");
+    // NeoRL observations hold root x: (x' − x)/dt is Gymnasium's own reward, up
+    // to the f32 rounding of x.
+    let neorl = known_rules_against_the_simulator(TaskConfig::neorl(TaskName::Hopper));
+    assert!(neorl < 1e-3, "NeoRL layout: mean |Δr| = {neorl}");
 }
 
 #[test]
@@ -408,7 +416,7 @@ fn hopper_context<'a>(model: &'a nuno::sde::NeuralSde, dataset: &'a Dataset) -> 
         dataset,
         dynamics: model,
         task,
-        rules: TaskRules::new(task, &model.constants.spec.split),
+        rules: TaskRules::new(task, &model.constants.spec.split, model.constants.spec.dt),
         // burn throughout, like the dynamics (the fused path: tests/infer.rs, the CLI test).
         kernel: Kernel::Burn,
     }
@@ -420,7 +428,7 @@ fn batches_mix_real_and_model_data_at_beta() {
     let dataset = small_dataset();
     let ctx = hopper_context(&model, &dataset);
     let mut config = tiny_config(0);
-    config.sac.batch_size = 200;
+    config.sac.batch_size = 256;
     config.real_ratio = 0.05;
     let device = Device::flex();
     let mut training = PolicyTraining::new(
@@ -432,7 +440,7 @@ fn batches_mix_real_and_model_data_at_beta() {
     .unwrap();
     // Empty model buffer: all real.
     let batch = training.mixed_batch(&dataset);
-    assert_eq!(batch.len(), 200);
+    assert_eq!(batch.len(), 256);
     let marker = 1234.5f32;
     let o = dataset.obs_dim();
     training.model_buffer.push(&TransitionBatch {
@@ -448,12 +456,12 @@ fn batches_mix_real_and_model_data_at_beta() {
         .chunks(o)
         .map(|row| row[0] == marker)
         .collect();
-    assert_eq!(batch.len(), 200);
+    assert_eq!(batch.len(), 256);
     assert!(
-        from_model[..10].iter().all(|m| !m),
-        "β·200 = 10 real rows first"
+        from_model[..12].iter().all(|m| !m),
+        "int(0.05·256) = 12 real rows first (NUNO's code), not 13"
     );
-    assert!(from_model[10..].iter().all(|&m| m), "then 190 model rows");
+    assert!(from_model[12..].iter().all(|&m| m), "then 244 model rows");
 }
 
 #[test]
@@ -524,7 +532,7 @@ fn sde_rollouts_with_truncation_keep_nothing_past_epsilon() {
     let (model, metadata) = shipped_model();
     let dataset = small_dataset();
     let (task, spec) = hopper();
-    let rules = TaskRules::new(task, &spec.split);
+    let rules = TaskRules::new(task, &spec.split, spec.dt);
     let device = Device::flex();
     let actor = Sac::new(
         small_actor(11, 3, -1.0, 1.0),

@@ -98,7 +98,13 @@ impl Server {
         tokio::spawn(serve(state, listener));
         Self {
             base,
-            client: reqwest::Client::new(),
+            // A fresh connection per request: the server may close one after an
+            // error answer (a refused body it never read), and a pooled connection
+            // reused in that instant fails with hyper's IncompleteMessage.
+            client: reqwest::Client::builder()
+                .pool_max_idle_per_host(0)
+                .build()
+                .unwrap(),
             models_path: models.path().to_path_buf(),
             _models: models,
         }
@@ -229,9 +235,13 @@ async fn step_matches_the_library_in_json_and_binary() {
             assert!((r.sigma[b][i] - direct.sigma[b * 11 + i]).abs() < 1e-6);
         }
         assert!((r.eta[b] - direct.eta[b]).abs() < 1e-6);
-        let rules = TaskRules::new(metadata.provenance.task.unwrap(), &metadata.spec.split);
+        let rules = TaskRules::new(
+            metadata.provenance.task.unwrap(),
+            &metadata.spec.split,
+            metadata.spec.dt,
+        );
         for p in 0..3 {
-            let reward = rules.reward(action, &r.next_states[b][p]);
+            let reward = rules.reward(&states[b], action, &r.next_states[b][p]);
             assert!((r.rewards[b][p] - reward).abs() < 1e-5);
             assert!((r.penalized_rewards[b][p] - (reward - 0.5 * r.eta[b])).abs() < 1e-5);
             assert_eq!(r.terminals[b][p], rules.terminal(&r.next_states[b][p]));
@@ -829,7 +839,8 @@ async fn slow_requests_time_out_with_a_json_error_and_keep_their_slot() {
         ..limits()
     };
     let (hook, release, started) = hold_first_computation();
-    let server = Server::start_with_config(limits, |config| config.before_compute = Some(hook)).await;
+    let server =
+        Server::start_with_config(limits, |config| config.before_compute = Some(hook)).await;
     let step = format!("/v1/models/{MODEL}/step");
     let body = json!({"states": upright(2), "actions": actions(2)});
     // The first computation is held until released: whatever the machine's speed,
@@ -846,7 +857,11 @@ async fn slow_requests_time_out_with_a_json_error_and_keep_their_slot() {
         (status, error_code(&answer)),
         (StatusCode::SERVICE_UNAVAILABLE, "timeout")
     );
-    assert_eq!(started.load(Ordering::SeqCst), 1, "a second computation ran");
+    assert_eq!(
+        started.load(Ordering::SeqCst),
+        1,
+        "a second computation ran"
+    );
     // Once the held work ends, its slot is free again and requests are served.
     release.send(()).unwrap();
     let (status, answer) = server.post(&step, &body).await;

@@ -166,7 +166,7 @@ pub fn rollout_model(
             let reward = if learned_reward {
                 next_state[obs_dim]
             } else {
-                rules.reward(action, next_obs)
+                rules.reward(&obs[i * obs_dim..(i + 1) * obs_dim], action, next_obs)
             };
             let eta = step.eta[i];
             accumulated[r] += eta;

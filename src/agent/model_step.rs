@@ -116,7 +116,11 @@ pub fn step_particles(
         let reward = if dynamics.learns_reward() {
             next[obs_dim]
         } else {
-            rules.reward(&row_actions[row * act_dim..(row + 1) * act_dim], next_obs)
+            rules.reward(
+                &row_observations[row * obs_dim..(row + 1) * obs_dim],
+                &row_actions[row * act_dim..(row + 1) * act_dim],
+                next_obs,
+            )
         };
         out.next_states.extend_from_slice(next_obs);
         out.rewards.push(reward);

@@ -44,8 +44,8 @@ pub struct PolicyLoopConfig {
     /// Gradient steps between model rollouts.
     #[config(default = 1000)]
     pub rollout_freq: usize,
-    /// Start states per model rollout (TATU+MOPO: 50000).
-    #[config(default = 50000)]
+    /// Start states per model rollout: NUNO's scripts' 5000 (the TATU+MOPO base uses 50000).
+    #[config(default = 5000)]
     pub rollout_batch: usize,
     /// SDE trajectories per start state.
     #[config(default = 1)]
@@ -191,8 +191,9 @@ impl PolicyTraining {
             low.iter().map(|&x| x as f32).collect(),
             high.iter().map(|&x| x as f32).collect(),
         );
-        device.seed(config.seed);
-        let sac = Sac::new(actor, config.sac.clone(), device);
+        let sac = crate::nn::seeded_init(device, config.seed, || {
+            Sac::new(actor, config.sac.clone(), device)
+        });
         let capacity =
             config.rollout_batch * config.horizon * config.particles * config.retain_epochs;
         Ok(Self {
@@ -266,14 +267,14 @@ impl PolicyTraining {
         result.stats
     }
 
-    /// A SAC batch: round(β·batch) real transitions first, then the rest
-    /// from the model buffer (all real while the model buffer is empty).
+    /// A SAC batch: ⌊β·batch⌋ real transitions first (NUNO's `int(256·0.05)` = 12),
+    /// then the rest from the model buffer (all real while the model buffer is empty).
     pub fn mixed_batch(&mut self, dataset: &Dataset) -> TransitionBatch {
         let batch_size = self.config.sac.batch_size;
         let real_count = if self.model_buffer.is_empty() {
             batch_size
         } else {
-            ((self.config.real_ratio * batch_size as f64).round() as usize).min(batch_size)
+            ((self.config.real_ratio * batch_size as f64) as usize).min(batch_size)
         };
         let mut batch = TransitionSampler::new(dataset).sample(real_count, &mut self.rng);
         batch.append(

@@ -43,14 +43,23 @@ pub struct SacConfig {
     /// H̄, the target entropy; `None` gives −|A| (NUNO's code uses −3 for every
     /// task through an argparse quirk; −|A| is SAC's rule).
     pub target_entropy: Option<f64>,
-    /// α before any update (NUNO's code: 0.2, then learned).
-    #[config(default = 0.2)]
+    /// α before any update: 1 (log α = 0), as NUNO's and TATU's SAC start when α
+    /// is learned (their 0.2 is the fixed α used only without auto-tuning).
+    #[config(default = 1.0)]
     pub initial_alpha: f64,
+    /// Adam's ε for actor, critics and α: PyTorch's and optax's 1e-8. Absent
+    /// (`None`) in policies and checkpoints written before it was a setting, whose
+    /// runs used burn's default 1e-5, so they resume with the ε they had.
+    #[config(default = "Some(1e-8)")]
+    pub adam_epsilon: Option<f32>,
     #[config(default = -5.0)]
     pub log_std_min: f32,
     #[config(default = 2.0)]
     pub log_std_max: f32,
 }
+
+/// burn's default Adam ε, which runs used before [`SacConfig::adam_epsilon`] existed.
+const BURN_ADAM_EPSILON: f32 = 1e-5;
 
 /// One update's losses, under CleanRL's metric names.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -105,15 +114,16 @@ impl Sac {
         };
         let (obs_dim, act_dim) = (actor_config.obs_dim, actor_config.act_dim);
         let critic = TwinCritic::init(obs_dim, act_dim, &config.critic_hidden, &device);
+        let adam = AdamConfig::new().with_epsilon(config.adam_epsilon.unwrap_or(BURN_ADAM_EPSILON));
         Self {
             target_critic: critic.valid(),
             actor: actor_config.init(&device),
             critic,
             temperature: Temperature::init(config.initial_alpha, &device),
             optimizers: SacOptimizers {
-                actor: AdamConfig::new().init(),
-                critic: AdamConfig::new().init(),
-                alpha: AdamConfig::new().init(),
+                actor: adam.init(),
+                critic: adam.init(),
+                alpha: adam.init(),
             },
             target_entropy: config.target_entropy.unwrap_or(-(act_dim as f64)),
             config,

@@ -22,11 +22,14 @@ use super::safetensors_file::{safetensors_bytes, write_bytes};
 use super::tensors::{collect_tensors, load_tensors};
 use crate::envs::TaskConfig;
 use crate::sde::{
-    DynamicsSpec, FitConfig, FitSummary, NeuralSde, PhysicalScales, SdeConfig, ThresholdTable,
+    CalibrationReport, DynamicsSpec, FitConfig, FitSummary, NeuralSde, PhysicalScales, SdeConfig,
+    ThresholdTable,
 };
 
-/// Version of the `model.json` layout this build reads and writes.
-pub const DYNAMICS_SCHEMA_VERSION: u32 = 1;
+/// Version of the `model.json` layout this build reads and writes. Version 2:
+/// h(η) reads η's logit and W^max is per dimension (`w_max`); version-1 models
+/// (h on the bounded η) are refused with a hint to refit, never reinterpreted.
+pub const DYNAMICS_SCHEMA_VERSION: u32 = 2;
 /// File names inside a model directory.
 pub const DYNAMICS_WEIGHTS: &str = "dynamics.safetensors";
 pub const DYNAMICS_METADATA: &str = "model.json";
@@ -48,6 +51,9 @@ pub struct DynamicsProvenance {
     pub thresholds: Option<ThresholdTable>,
     pub training: Option<FitSummary>,
     pub dataset: Option<DatasetInfo>,
+    /// How Σ and the truncation behave on the fit's held-out trajectories.
+    #[serde(default)]
+    pub calibration: Option<CalibrationReport>,
 }
 
 /// The contents of `model.json`.
@@ -136,6 +142,10 @@ pub fn load_dynamics(
     metadata
         .spec
         .validate()
+        .and_then(|()| {
+            let state_dim = metadata.spec.obs_dim + usize::from(metadata.model.reward_model);
+            metadata.model.validate(state_dim)
+        })
         .map_err(|e| ArtifactError::Invalid(e.to_string()))?;
     let skeleton = NeuralSde::init(
         metadata.spec.clone(),

@@ -42,7 +42,11 @@ pub enum ArtifactError {
     },
     #[error("{file}: invalid JSON metadata: {message}")]
     Json { file: PathBuf, message: String },
-    #[error("{file}: schema version {found}, this build reads version {expected}")]
+    #[error(
+        "{file}: schema version {found}, this build reads version {expected}; \
+         re-create it with this build (`nuno-trainer fit-model` for a model, \
+         `nuno-trainer fit-policy` for a policy)"
+    )]
     Schema {
         file: PathBuf,
         found: String,

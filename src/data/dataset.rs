@@ -153,6 +153,18 @@ impl Dataset {
         self.actions.ncols()
     }
 
+    /// Each action dimension's `(low, high)` over the dataset.
+    pub fn action_bounds(&self) -> Vec<(f32, f32)> {
+        self.actions
+            .columns()
+            .into_iter()
+            .map(|column| {
+                let low = column.fold(f32::INFINITY, |a, &b| a.min(b));
+                (low, column.fold(low, |a, &b| a.max(b)))
+            })
+            .collect()
+    }
+
     /// The trajectories, in file order.
     pub fn trajectories(&self) -> &[Trajectory] {
         &self.trajectories

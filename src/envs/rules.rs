@@ -2,9 +2,10 @@
 //! model rollouts use in place of the simulator (NUNO without a reward model;
 //! MOPO's `termination_fn`, written here from Gymnasium's own rules).
 //!
-//! Observations omit the root x position, so the forward reward uses the
-//! observed root x velocity after the step instead of Gymnasium's finite
-//! difference `(x' − x)/dt` (see docs/paper-map.md, deviations).
+//! The forward reward is Gymnasium's finite difference `(x' − x)/dt` where the
+//! observations hold the root x (NeoRL's layout, as NUNO's code does); D4RL's
+//! observations omit it, so there the observed root x velocity after the step
+//! stands in (see docs/paper-map.md, deviations).
 
 use super::mujoco_task::TaskConfig;
 use super::task::{ObservationLayout, StateSplit, TaskSpec};
@@ -17,29 +18,39 @@ pub struct TaskRules {
     root_z: usize,
     /// Observation index of qvel[0], the root x velocity.
     x_velocity: usize,
+    /// Observation index of qpos[0], the root x, where it is observed.
+    root_x: Option<usize>,
+    /// The task's dt between observations.
+    dt: f64,
 }
 
 impl TaskRules {
-    /// The rules of `task`, whose observations split as `split`.
-    pub fn new(task: TaskConfig, split: &StateSplit) -> Self {
+    /// The rules of `task`, whose observations split as `split`, `dt` apart.
+    pub fn new(task: TaskConfig, split: &StateSplit, dt: f64) -> Self {
         let spec = task.name.spec();
-        let root_z = match task.layout {
-            ObservationLayout::D4rl => 0,
-            ObservationLayout::Neorl => 1,
+        let (root_z, root_x) = match task.layout {
+            ObservationLayout::D4rl => (0, None),
+            ObservationLayout::Neorl => (1, Some(0)),
         };
         Self {
             spec,
             root_z,
             x_velocity: split.velocities[0],
+            root_x,
+            dt,
         }
     }
 
     /// `r(s, a, s')`: forward velocity, healthy bonus (paid on every step, as in
     /// Gymnasium v4) and control cost.
-    pub fn reward(&self, action: &[f32], next_obs: &[f32]) -> f32 {
+    pub fn reward(&self, obs: &[f32], action: &[f32], next_obs: &[f32]) -> f32 {
         let spec = self.spec;
         let control: f64 = action.iter().map(|&a| f64::from(a).powi(2)).sum();
-        let forward = spec.forward_reward_weight * f64::from(next_obs[self.x_velocity]);
+        let velocity = match self.root_x {
+            Some(x) => (f64::from(next_obs[x]) - f64::from(obs[x])) / self.dt,
+            None => f64::from(next_obs[self.x_velocity]),
+        };
+        let forward = spec.forward_reward_weight * velocity;
         (forward + spec.healthy_reward - spec.ctrl_cost_weight * control) as f32
     }
 

@@ -6,7 +6,6 @@ use std::sync::Mutex;
 
 use super::dense::{DenseMlp, GEMM_MIN_ROWS, MlpScratch, Rows};
 use super::tiles::{row_chunks, run_tiles, tile_rows, with_buffers};
-use crate::nn::to_f32_vec;
 use crate::sde::{BatchDynamics, DynamicsSpec, ModelStep, NeuralSde, SdeConstants};
 
 /// A [`NeuralSde`]'s weights laid out for [`BatchDynamics::step`] on the CPU.
@@ -20,10 +19,8 @@ pub struct FusedSde {
     reward: Option<DenseMlp>,
     sigma: DenseMlp,
     eta: DenseMlp,
-    /// W = 1 + softplus(raw) of h_ϕ, per state dimension.
-    h_weight: Vec<f32>,
-    /// b of h_ϕ.
-    h_bias: Vec<f32>,
+    /// W^max of h_ϕ per state dimension, in multiples of the diffusion scale.
+    w_max: Vec<f32>,
     split: NetworkSplit,
 }
 
@@ -148,7 +145,6 @@ fn softplus(z: f32) -> f32 {
 impl FusedSde {
     /// The same model as `model`, its weights copied out of burn.
     pub fn new(model: &NeuralSde) -> Self {
-        let w = burn::tensor::activation::softplus(model.h_weight.val(), 1.0) + 1.0;
         let mut fused = Self {
             constants: model.constants.clone(),
             g: DenseMlp::from_burn(&model.g_net),
@@ -157,8 +153,10 @@ impl FusedSde {
             reward: model.reward_net.as_ref().map(DenseMlp::from_burn),
             sigma: DenseMlp::from_burn(&model.sigma_net),
             eta: DenseMlp::from_burn(&model.distance.eta_net),
-            h_weight: to_f32_vec(w),
-            h_bias: to_f32_vec(model.h_bias.val()),
+            w_max: model
+                .constants
+                .config
+                .w_max_per_dimension(model.constants.state_dim()),
             split: NetworkSplit::new(&[], 1),
         };
         let weights: Vec<usize> = fused.networks().map(DenseMlp::weight_count).collect();
@@ -229,6 +227,8 @@ impl FusedSde {
         let vel_std = &normalizer.state.std[n_pos..obs_dim];
         let diffusion = &c.scales.diffusion[..state_dim];
         let (eta_max, eta_offset) = (c.config.eta_max, c.config.eta_offset);
+        let w_max = &self.w_max;
+        let (h_weight, h_bias) = (c.config.h_weight, c.config.h_bias);
         for r in 0..rows {
             let state = &tile.states[r * state_dim..(r + 1) * state_dim];
             let action = &tile.actions[r * act_dim..(r + 1) * act_dim];
@@ -267,14 +267,13 @@ impl FusedSde {
                 mean[obs_dim] = state[obs_dim] + f_rew * dt;
             }
             // eq. 5: Σ = σ_ϕ(s, a) + h_ϕ(η_ϕ(s, a)), then s' = mean + Σ·sqrt(dt)·ε.
-            let eta = sigmoid(s.eta[r] - eta_offset) * eta_max;
-            tile.eta[r] = eta;
+            // h_ϕ reads η's logit (see `sde::model`).
+            let logit = s.eta[r] - eta_offset;
+            tile.eta[r] = sigmoid(logit) * eta_max;
             for d in 0..state_dim {
                 sigma[d] =
                     (softplus(s.sigma[r * state_dim + d]) + c.config.sigma_min) * diffusion[d];
-                h_eta[d] = sigmoid(eta * self.h_weight[d] + self.h_bias[d])
-                    * diffusion[d]
-                    * c.config.w_max_scale;
+                h_eta[d] = sigmoid(logit * h_weight + h_bias) * diffusion[d] * w_max[d];
                 next[d] = mean[d] + (sigma[d] + h_eta[d]) * noise[d] * sqrt_dt;
             }
         }

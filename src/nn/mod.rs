@@ -6,6 +6,8 @@ pub use mlp::{Activation, Mlp, MlpConfig};
 
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
 use burn::tensor::{Device, Tensor, TensorData};
+use std::sync::Mutex;
+
 use rand::Rng;
 use rand_distr::StandardNormal;
 
@@ -19,6 +21,17 @@ pub fn normal<const D: usize>(shape: [usize; D], rng: &mut impl Rng, device: &De
 /// `n` standard normal draws, in the order [`normal`] fills its tensor.
 pub fn standard_normal(n: usize, rng: &mut impl Rng) -> Vec<f32> {
     (0..n).map(|_| rng.sample(StandardNormal)).collect()
+}
+
+/// Seeds burn's initialiser with `seed` and runs `init` under a process-wide
+/// lock. burn's generator is global: two fits (or tests) seeding and drawing at
+/// once would interleave, and neither would get the weights its seed gives alone.
+/// Code that draws initial weights without this lock can still interleave.
+pub fn seeded_init<T>(device: &Device, seed: u64, init: impl FnOnce() -> T) -> T {
+    static INIT: Mutex<()> = Mutex::new(());
+    let _guard = INIT.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    device.seed(seed);
+    init()
 }
 
 /// A tensor's values as f32, row-major (converting from the device's float type).

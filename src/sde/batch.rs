@@ -83,7 +83,7 @@ impl BatchDynamics for NeuralSde {
     }
 
     fn step(&self, states: &[f32], actions: &[f32], noise: &[f32]) -> ModelStep {
-        let device = self.h_bias.val().device();
+        let device = self.sigma_net.layers[0].weight.val().device();
         let state_dim = self.state_dim();
         let batch = states.len() / state_dim;
         let act_dim = self.constants.spec.act_dim;

@@ -24,22 +24,87 @@ pub struct SdeConfig {
     /// NUNO^R: augment the state with the cumulative reward r_c, dr_c = f_rew(s, a) dt.
     #[config(default = false)]
     pub reward_model: bool,
-    /// W^max of h(η) = W^max·sigmoid(W·η + b), as a multiple of each dimension's
-    /// diffusion scale (the std of its one-step change over sqrt(dt)).
-    #[config(default = 1.0)]
-    pub w_max_scale: f32,
+    /// W^max of h(η) = W^max·sigmoid(W·ℓ + b) (eq. 5, ℓ = η's logit): the diffusion
+    /// beyond the data, per state dimension, as a multiple of that dimension's
+    /// diffusion scale (the std of its one-step change over sqrt(dt)). One value
+    /// applies to every dimension. See docs/paper-map.md for why 1.
+    #[config(default = "vec![1.0]")]
+    pub w_max: Vec<f32>,
     /// Bound of η: η = η_max·sigmoid(NN(s, a) − η_offset), so η is high but bounded far from data.
     #[config(default = 1.0)]
     pub eta_max: f32,
     /// Offset inside η's sigmoid (NUNO's code uses 7).
     #[config(default = 7.0)]
     pub eta_offset: f32,
-    /// Initial b of h(η), so h(0) ≈ W^max·sigmoid(−7) is negligible on the data.
-    #[config(default = -7.0)]
-    pub h_bias_init: f32,
+    /// W of h(η) = W^max·sigmoid(W·ℓ + b) on η's logit ℓ: how sharply h rises, ≥ 1
+    /// (eq. 5; NUNO's code starts at ≈ 2).
+    #[config(default = 2.0)]
+    pub h_weight: f32,
+    /// b of h(η), set by the fit from the data (`NeuralSde::calibrate_h_bias`):
+    /// h is `h_on_data`·W^max at the `h_data_quantile` of η's logit on the
+    /// training data, so it is ≈ 0 there whatever η a fit reaches on its data,
+    /// and → W^max where η → η_max (docs/paper-map.md).
+    #[config(default = 0.0)]
+    pub h_bias: f32,
+    /// h/W^max at the data's `h_data_quantile` of η.
+    #[config(default = 0.01)]
+    pub h_on_data: f32,
+    /// The quantile of η on the training data where h is `h_on_data`·W^max.
+    #[config(default = 0.9)]
+    pub h_data_quantile: f64,
     /// Smallest σ_ϕ, as a fraction of each dimension's diffusion scale.
     #[config(default = 1e-3)]
     pub sigma_min: f32,
+}
+
+impl SdeConfig {
+    /// Refuses settings no model can use, naming the field; `state_dim` is the
+    /// width of the integrated state (W^max has one value or one per dimension).
+    pub fn validate(&self, state_dim: usize) -> Result<(), super::SdeError> {
+        let bad = |message: String| super::SdeError::Config(format!("model config: {message}"));
+        if self.w_max.len() != 1 && self.w_max.len() != state_dim {
+            return Err(bad(format!(
+                "w_max has {} values: give one, or one per state dimension ({state_dim})",
+                self.w_max.len()
+            )));
+        }
+        if let Some(w) = self.w_max.iter().find(|w| !(w.is_finite() && **w > 0.0)) {
+            return Err(bad(format!("w_max value {w}: must be finite and > 0")));
+        }
+        if !(self.h_weight.is_finite() && self.h_weight >= 1.0) {
+            return Err(bad(format!("h_weight = {}: must be >= 1", self.h_weight)));
+        }
+        if !self.h_bias.is_finite() {
+            return Err(bad(format!("h_bias = {}: must be finite", self.h_bias)));
+        }
+        if !(self.h_on_data > 0.0 && self.h_on_data < 1.0) {
+            return Err(bad(format!(
+                "h_on_data = {}: must lie strictly between 0 and 1",
+                self.h_on_data
+            )));
+        }
+        if !(self.h_data_quantile > 0.0 && self.h_data_quantile <= 1.0) {
+            return Err(bad(format!(
+                "h_data_quantile = {}: must lie in (0, 1]",
+                self.h_data_quantile
+            )));
+        }
+        if !(self.eta_max.is_finite() && self.eta_max > 0.0) {
+            return Err(bad(format!("eta_max = {}: must be > 0", self.eta_max)));
+        }
+        if !(self.sigma_min.is_finite() && self.sigma_min > 0.0) {
+            return Err(bad(format!("sigma_min = {}: must be > 0", self.sigma_min)));
+        }
+        Ok(())
+    }
+
+    /// W^max for each of `state_dim` dimensions, in multiples of the diffusion scale.
+    pub fn w_max_per_dimension(&self, state_dim: usize) -> Vec<f32> {
+        match self.w_max.as_slice() {
+            [one] => vec![*one; state_dim],
+            many => many.to_vec(),
+        }
+    }
 }
 
 /// Weights and sampling of the loss terms (eq. 3, 4, 6, 7; Appendix C.4).
@@ -152,6 +217,14 @@ pub struct FitConfig {
     pub lr_end: f64,
     #[config(default = 5000)]
     pub lr_decay_steps: usize,
+    /// Gradient steps between recalibrations of h(η)'s b on the training data.
+    #[config(default = 50)]
+    pub h_bias_every: usize,
+    /// Adam's ε. burn's 1e-5, not NUNO's (optax's) 1e-8: with 1e-8 the small fit
+    /// of `tests/sde.rs` on narrow-action hopper data no longer beat constant velocity
+    /// at horizon 1 after 1500 steps (docs/paper-map.md, deviations).
+    #[config(default = 1e-5)]
+    pub adam_epsilon: f32,
     /// Each parameter's gradient is clipped to this L2 norm before Adam's update.
     /// Not in the paper: the NLL's 1/Σ² makes early steps explode once Σ shrinks
     /// on near-deterministic dimensions (positions), and Adam at lr 1e-2 then diverges.

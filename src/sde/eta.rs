@@ -123,7 +123,16 @@ impl DistanceAware {
     /// # Shapes
     /// - `x`: `[batch, d_input]` → `[batch, 1]`
     pub fn eta(&self, x: Tensor<2>) -> Tensor<2> {
-        sigmoid(self.eta_net.forward(x) - self.eta_offset) * self.eta_max
+        sigmoid(self.logit(x)) * self.eta_max
+    }
+
+    /// η's logit ℓ = NN_ϕ(x) − offset, so η = η_max·sigmoid(ℓ); unbounded, it is
+    /// what h_ϕ reads (eq. 5).
+    ///
+    /// # Shapes
+    /// - `x`: `[batch, d_input]` → `[batch, 1]`
+    pub fn logit(&self, x: Tensor<2>) -> Tensor<2> {
+        self.eta_net.forward(x) - self.eta_offset
     }
 
     /// η_ϕ and ∇ₓη_ϕ, both differentiable with respect to the parameters.
@@ -187,7 +196,7 @@ impl DistanceAware {
         let (far_points, far_mask) = far;
         // On η's logit: where η ≈ 0 the sigmoid is flat, and a hinge on η itself
         // could not lift it (a ring's interior stayed low that way).
-        let logit = self.eta_net.forward(far_points) - self.eta_offset;
+        let logit = self.logit(far_points);
         let target = (config.far_target / (1.0 - config.far_target)).ln();
         let shortfall = relu(logit.neg() + target);
         EtaLosses {

@@ -58,15 +58,7 @@ pub fn eta_report(
     device: &Device,
 ) -> Result<EtaReport, SdeError> {
     let spec = &model.constants.spec;
-    if dataset.obs_dim() != spec.obs_dim || dataset.act_dim() != spec.act_dim {
-        return Err(SdeError::Spec(format!(
-            "the dataset has {}-D observations and {}-D actions, the model {} and {}",
-            dataset.obs_dim(),
-            dataset.act_dim(),
-            spec.obs_dim,
-            spec.act_dim
-        )));
-    }
+    check_dims(model, dataset)?;
     if config.rows == 0 || dataset.is_empty() {
         return Err(SdeError::Config(format!(
             "eta report: {} rows from a dataset of {} transitions",
@@ -89,23 +81,7 @@ pub fn eta_report(
     let (n, act_dim) = (rows.len(), spec.act_dim);
     let observations = gather(&dataset.observations);
     let actions = gather(&dataset.actions);
-    let bounds: Vec<(f32, f32)> = dataset
-        .actions
-        .columns()
-        .into_iter()
-        .map(|column| {
-            let low = column.fold(f32::INFINITY, |a, &b| a.min(b));
-            (low, column.fold(low, |a, &b| a.max(b)))
-        })
-        .collect();
-    let random_actions: Vec<f32> = (0..n)
-        .flat_map(|_| {
-            bounds
-                .iter()
-                .map(|(low, high)| low + (high - low) * rng.random::<f32>())
-                .collect::<Vec<_>>()
-        })
-        .collect();
+    let random_actions = uniform_actions(&dataset.action_bounds(), n, &mut rng);
 
     let matrix = |values: Vec<f32>, width: usize| {
         Tensor::<2>::from_data(TensorData::new(values, [n, width]), device)
@@ -144,7 +120,35 @@ pub fn eta_report(
     })
 }
 
-fn mean(values: &[f32]) -> f32 {
+/// Refuses a dataset whose widths are not the model's.
+pub(crate) fn check_dims(model: &NeuralSde, dataset: &Dataset) -> Result<(), SdeError> {
+    let spec = &model.constants.spec;
+    if dataset.obs_dim() != spec.obs_dim || dataset.act_dim() != spec.act_dim {
+        return Err(SdeError::Spec(format!(
+            "the dataset has {}-D observations and {}-D actions, the model {} and {}",
+            dataset.obs_dim(),
+            dataset.act_dim(),
+            spec.obs_dim,
+            spec.act_dim
+        )));
+    }
+    Ok(())
+}
+
+/// `rows` actions, each dimension uniform over its `(low, high)`.
+pub(crate) fn uniform_actions(bounds: &[(f32, f32)], rows: usize, rng: &mut impl Rng) -> Vec<f32> {
+    let mut actions = Vec::with_capacity(rows * bounds.len());
+    for _ in 0..rows {
+        actions.extend(
+            bounds
+                .iter()
+                .map(|(low, high)| low + (high - low) * rng.random::<f32>()),
+        );
+    }
+    actions
+}
+
+pub(crate) fn mean(values: &[f32]) -> f32 {
     values.iter().sum::<f32>() / values.len().max(1) as f32
 }
 

@@ -20,7 +20,7 @@ use super::losses::WindowTensors;
 use super::model::NeuralSde;
 use super::spec::{DynamicsSpec, PhysicalScales};
 use crate::data::{Dataset, NormalizerConfig, WindowBatch, WindowSampler};
-use crate::nn::normal;
+use crate::nn::{normal, seeded_init};
 
 /// Losses at one logged step (and the validation NLL when it was measured).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -124,7 +124,15 @@ pub fn fit(
     on_record: &mut dyn FnMut(&FitRecord),
 ) -> Result<(NeuralSde, FitSummary), SdeError> {
     spec.validate()?;
+    config
+        .model
+        .validate(spec.obs_dim + usize::from(config.model.reward_model))?;
     config.loss.validate()?;
+    if config.h_bias_every == 0 {
+        return Err(SdeError::Config(
+            "fit config: h_bias_every = 0: must be at least 1".into(),
+        ));
+    }
     let started = Instant::now();
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let train_windows = WindowSampler::new(train, config.horizon)?;
@@ -146,14 +154,22 @@ pub fn fit(
         },
     );
     let train_device = device.clone().autodiff();
-    train_device.seed(config.seed);
-    let mut model = NeuralSde::init(spec, scales, config.model.clone(), &train_device);
+    let mut model = seeded_init(&train_device, config.seed, || {
+        NeuralSde::init(spec, scales, config.model.clone(), &train_device)
+    });
     let mut optimizer = AdamConfig::new()
+        .with_epsilon(config.adam_epsilon)
         .with_grad_clipping(Some(GradientClippingConfig::Norm(config.grad_clip_norm)))
         .init();
     let state_dim = model.constants.state_dim();
     let input_dim = model.spec().obs_dim + model.spec().act_dim;
-    let far_field = far_field_of(&model, train, &config.loss, &mut rng);
+    let reference = training_inputs(&model, train, config.loss.far_reference, &mut rng);
+    let far_field = FarField::new(reference.clone(), input_dim, &config.loss);
+    let reference = Tensor::<2>::from_data(
+        TensorData::new(reference.clone(), [reference.len() / input_dim, input_dim]),
+        &train_device,
+    );
+    model.calibrate_h_bias(reference.clone());
 
     let mut best = model.valid();
     let mut best_nll = validation_nll(&best, &valid_windows, &valid_starts, config.seed, device);
@@ -180,6 +196,9 @@ pub fn fit(
         let grads = GradientsParams::from_grads(terms.total.backward(), &model);
         model = optimizer.step(lr, model, grads);
         step += 1;
+        if step % config.h_bias_every == 0 {
+            model.calibrate_h_bias(reference.clone());
+        }
 
         // Logging and early stopping, kept apart from the algorithm above.
         let evaluate = step % config.eval_every == 0 || step == config.max_steps;
@@ -226,17 +245,18 @@ pub fn fit(
     Ok((best, summary))
 }
 
-/// L_far's reference: a fixed random subset of the training data's normalised `(s, a)`.
-fn far_field_of(
+/// A fixed random subset of the training data's normalised `(s, a)`, row-major:
+/// L_far's reference, and where h(η)'s b is calibrated.
+fn training_inputs(
     model: &NeuralSde,
     train: &Dataset,
-    config: &super::LossConfig,
+    count: usize,
     rng: &mut ChaCha8Rng,
-) -> FarField {
+) -> Vec<f32> {
     let normalizer = &model.constants.scales.normalizer;
     let (obs_dim, act_dim) = (train.obs_dim(), train.act_dim());
-    let mut reference = Vec::with_capacity(config.far_reference * (obs_dim + act_dim));
-    for _ in 0..config.far_reference.min(train.len()) {
+    let mut reference = Vec::with_capacity(count * (obs_dim + act_dim));
+    for _ in 0..count.min(train.len()) {
         let i = rng.random_range(0..train.len());
         let mut state = train.observations.row(i).to_vec();
         let mut action = train.actions.row(i).to_vec();
@@ -245,7 +265,7 @@ fn far_field_of(
         reference.extend(state);
         reference.extend(action);
     }
-    FarField::new(reference, obs_dim + act_dim, config)
+    reference
 }
 
 /// Fits η_ϕ and μ_ϕ alone on points (already normalised), with the η terms of
@@ -268,10 +288,11 @@ pub fn fit_eta(
         )));
     }
     let train_device = device.clone().autodiff();
-    train_device.seed(config.seed);
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
-    let mut model = super::DistanceAware::init(dim, &config.model, &train_device);
-    let mut optimizer = AdamConfig::new().init();
+    let mut model = seeded_init(&train_device, config.seed, || {
+        super::DistanceAware::init(dim, &config.model, &train_device)
+    });
+    let mut optimizer = AdamConfig::new().with_epsilon(config.adam_epsilon).init();
     let n = points.len() / dim;
     let reference: Vec<f32> = (0..config.loss.far_reference.min(n))
         .flat_map(|_| {

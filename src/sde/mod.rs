@@ -3,6 +3,7 @@
 //! NLL of Euler–Maruyama rollouts, and the CVaR truncation thresholds.
 
 mod batch;
+mod calibration;
 mod config;
 mod device;
 mod eta;
@@ -16,6 +17,10 @@ mod spec;
 mod threshold;
 
 pub use batch::{BatchDynamics, ModelStep};
+pub use calibration::{
+    CalibrationConfig, CalibrationReport, DiffusionAt, DimensionCalibration, HorizonCalibration,
+    TruncationRate, Z_STD_BAND, calibration_report,
+};
 pub use config::{FitConfig, LossConfig, SdeConfig};
 pub use device::ComputeDevice;
 pub use eta::{DistanceAware, EtaLosses, FarField};
@@ -26,7 +31,10 @@ pub use losses::{LossTerms, WindowTensors};
 pub use model::{NeuralSde, SdeConstants, SdeTerms};
 pub use rollout::{OpenLoop, OpenLoopRollout};
 pub use spec::{DynamicsSpec, PhysicalScales};
-pub use threshold::{ThresholdConfig, ThresholdTable, accumulated_eta, compute_thresholds, cvar};
+pub use threshold::{
+    ThresholdConfig, ThresholdTable, accumulated_eta, accumulated_eta_along, compute_thresholds,
+    cvar, window_starts_and_actions,
+};
 
 /// Everything that can go wrong building, fitting, saving or loading a model.
 #[derive(Debug, thiserror::Error)]

@@ -3,22 +3,28 @@
 //! ```text
 //! ds = f_θ(s, a) dt + (σ_ϕ(s, a) + h_ϕ(η_ϕ(s, a))) dW                       (eq. 5)
 //! f_pos = s_vel,  f_vel = G(s_vel)·a + H(s)·s_vel,  f = [f_pos, f_vel] + f_res (eq. 8)
-//! h_ϕ(η) = W^max·sigmoid(W·η + b),  W ≥ 1
+//! h_ϕ(η) = W^max·sigmoid(W·logit(η/η_max) + b),  W ≥ 1   (on η's logit, W and b fixed; see below)
 //! s' = s + f·dt + Σ·sqrt(dt)·ε                                             (Euler–Maruyama)
 //! ```
 //!
 //! Networks see normalised inputs and produce outputs of order one, mapped to
 //! physical units by the [`PhysicalScales`]; integration happens in physical
 //! units, so with G, H and f_res at zero, `pos' = pos + vel·dt` exactly.
+//!
+//! h_ϕ takes η through its logit ℓ = NN_ϕ(s, a) − offset (η = η_max·sigmoid(ℓ)),
+//! as NUNO's code does: on the bounded η itself, `W·η + b` spans at most W and
+//! h could never reach W^max beyond the data. W and b are settings, not trained:
+//! L_data sees only the data, where it taught h to carry on-data noise (a third
+//! of Σ) instead of staying ≈ 0 there (docs/paper-map.md, deviations).
 
-use burn::module::{Module, Param};
+use burn::module::Module;
 use burn::tensor::activation::{sigmoid, softplus};
 use burn::tensor::{Device, Int, Tensor, TensorData};
 
 use super::config::SdeConfig;
 use super::eta::DistanceAware;
 use super::spec::{DynamicsSpec, PhysicalScales};
-use crate::nn::{Activation, Mlp, MlpConfig};
+use crate::nn::{Activation, Mlp, MlpConfig, to_f32_vec};
 
 /// What the model does not learn: the system and the data's scales.
 #[derive(Debug, Clone, PartialEq)]
@@ -74,10 +80,6 @@ pub struct NeuralSde {
     pub sigma_net: Mlp,
     /// η_ϕ and μ_ϕ.
     pub distance: DistanceAware,
-    /// Raw W of h_ϕ; W = 1 + softplus(raw) ≥ 1.
-    pub h_weight: Param<Tensor<1>>,
-    /// b of h_ϕ.
-    pub h_bias: Param<Tensor<1>>,
     #[module(skip)]
     pub constants: SdeConstants,
 }
@@ -122,8 +124,6 @@ impl NeuralSde {
             )
             .init(device),
             distance: DistanceAware::init(inputs, config, device),
-            h_weight: Param::from_tensor(Tensor::zeros([state_dim], device)),
-            h_bias: Param::from_tensor(Tensor::full([state_dim], config.h_bias_init, device)),
             constants,
         }
     }
@@ -200,13 +200,13 @@ impl NeuralSde {
         let diffusion_scale = constant(&c.scales.diffusion[..state_dim], &device).unsqueeze::<2>();
         let sigma = (softplus(self.sigma_net.forward(input.clone()), 1.0) + c.config.sigma_min)
             * diffusion_scale.clone();
-        let eta = self.distance.eta(input);
-        let w = softplus(self.h_weight.val(), 1.0) + 1.0;
-        // η is shaped by its own losses only: L_data trains h's W and b but does
-        // not pull η up to explain noise (see docs/paper-map.md, deviations).
-        let h_eta = sigmoid(eta.clone().detach() * w.unsqueeze() + self.h_bias.val().unsqueeze())
-            * diffusion_scale
-            * c.config.w_max_scale;
+        let logit = self.distance.logit(input);
+        let eta = sigmoid(logit.clone()) * self.distance.eta_max;
+        let w_max = constant(&c.config.w_max_per_dimension(state_dim), &device).unsqueeze::<2>();
+        // η is shaped by its own losses only: L_data does not pull η up to
+        // explain noise through h (see docs/paper-map.md, deviations).
+        let h_eta =
+            sigmoid(logit.detach() * c.config.h_weight + c.config.h_bias) * diffusion_scale * w_max;
         SdeTerms {
             mean: state + drift.clone() * spec.dt,
             drift,
@@ -215,6 +215,22 @@ impl NeuralSde {
             eta,
             residual,
         }
+    }
+
+    /// Sets b of h(η) so that h = `h_on_data`·W^max at the `h_data_quantile` of
+    /// η's logit over `inputs` (normalised training `(s, a)`, `[n, obs_dim + act_dim]`):
+    /// b = logit(h_on_data) − W·ℓ_q. The data decides where "near" ends, not a
+    /// constant, since the η a fit reaches on its data differs from task to task.
+    pub fn calibrate_h_bias(&mut self, inputs: Tensor<2>) {
+        let mut logits = to_f32_vec(self.distance.logit(inputs));
+        if logits.is_empty() {
+            return;
+        }
+        logits.sort_by(f32::total_cmp);
+        let config = &mut self.constants.config;
+        let at = ((logits.len() - 1) as f64 * config.h_data_quantile).round() as usize;
+        let target = (config.h_on_data / (1.0 - config.h_on_data)).ln();
+        config.h_bias = target - config.h_weight * logits[at];
     }
 
     /// One Euler–Maruyama step: `s' = s + f·dt + Σ·sqrt(dt)·ε`.

@@ -1,8 +1,10 @@
 //! Truncation thresholds ε(h, α) (Section 4.3): roll the SDE open-loop on the
 //! dataset's actions from the starts of each trajectory's non-overlapping
-//! windows of length h, accumulate η along each rollout (averaged over
-//! particles), and take the CVaR at level α of the accumulated values over the
-//! dataset (α = 1: the maximum).
+//! windows of length h (NUNO's code; the paper's Section 4.3 does not say how
+//! windows are cut), accumulate η along each particle's trajectory, and take
+//! the CVaR at level α of the accumulated values over all of them (α = 1: the
+//! maximum). Each particle trajectory is one sample, as in NUNO's code and as
+//! model rollouts compare their own trajectory's sum against ε.
 
 use burn::config::Config;
 use burn::tensor::Device;
@@ -51,6 +53,35 @@ pub struct ThresholdTable {
     pub particles: usize,
 }
 
+impl ThresholdConfig {
+    /// Refuses settings no threshold can be computed from, naming the field.
+    pub fn validate(&self) -> Result<(), SdeError> {
+        let bad = |message: String| SdeError::Config(format!("threshold config: {message}"));
+        if self.horizons.is_empty() || self.horizons.contains(&0) {
+            return Err(bad(format!(
+                "horizons {:?}: need at least one, each >= 1",
+                self.horizons
+            )));
+        }
+        if let Some(a) = self.alphas.iter().find(|a| !(**a > 0.0 && **a <= 1.0)) {
+            return Err(bad(format!("alpha {a}: must lie in (0, 1]")));
+        }
+        if self.alphas.is_empty() {
+            return Err(bad("alphas: need at least one level".into()));
+        }
+        for (name, value) in [
+            ("particles", self.particles),
+            ("max_windows", self.max_windows),
+            ("chunk", self.chunk),
+        ] {
+            if value == 0 {
+                return Err(bad(format!("{name} = 0: must be at least 1")));
+            }
+        }
+        Ok(())
+    }
+}
+
 impl ThresholdTable {
     /// ε(h, α), if it was computed.
     pub fn get(&self, horizon: usize, alpha: f64) -> Option<f32> {
@@ -60,20 +91,25 @@ impl ThresholdTable {
     }
 }
 
-/// CVaR_α of `values`: the mean of the values at or above the α-quantile; α ≥ 1 gives the maximum.
-pub fn cvar(values: &[f32], alpha: f64) -> f32 {
+/// CVaR_α of `values`: the mean of the values at or above the α-quantile; α ≥ 1
+/// gives the maximum. `None` for no values (there is no tail to average).
+pub fn cvar(values: &[f32], alpha: f64) -> Option<f32> {
     let mut sorted = values.to_vec();
     sorted.sort_by(f32::total_cmp);
-    if alpha >= 1.0 {
-        return *sorted.last().unwrap_or(&0.0);
-    }
     let n = sorted.len();
+    if n == 0 {
+        return None;
+    }
+    if alpha >= 1.0 {
+        return Some(sorted[n - 1]);
+    }
     let var_index = ((alpha * (n - 1) as f64).floor() as usize).min(n - 1);
     let tail = &sorted[var_index..];
-    tail.iter().sum::<f32>() / tail.len() as f32
+    Some(tail.iter().sum::<f32>() / tail.len() as f32)
 }
 
-/// Accumulated η of open-loop rollouts from each window start, averaged over particles.
+/// Accumulated η of open-loop rollouts from each window start on the dataset's
+/// actions: one value per particle trajectory, `particles` in a row per start.
 pub fn accumulated_eta(
     model: &NeuralSde,
     dataset: &Dataset,
@@ -83,29 +119,65 @@ pub fn accumulated_eta(
     rng: &mut ChaCha8Rng,
     device: &Device,
 ) -> Vec<f32> {
+    let (initial, actions) = window_starts_and_actions(model, dataset, starts, horizon);
+    accumulated_eta_along(model, &initial, &actions, horizon, config, rng, device)
+}
+
+/// The start state (with r_c = 0 for NUNO^R) and the `horizon` dataset actions
+/// of each window: `[starts, state_dim]` and `[starts, horizon, act_dim]`.
+pub fn window_starts_and_actions(
+    model: &NeuralSde,
+    dataset: &Dataset,
+    starts: &[usize],
+    horizon: usize,
+) -> (Vec<f32>, Vec<f32>) {
     let reward_model = model.constants.config.reward_model;
-    let mut totals = Vec::with_capacity(starts.len());
-    for chunk in starts.chunks(config.chunk.max(1)) {
-        let mut initial = Vec::new();
-        let mut actions = Vec::new();
-        for &t in chunk {
-            initial.extend(dataset.observations.row(t).iter());
-            if reward_model {
-                initial.push(0.0);
-            }
-            for k in t..t + horizon {
-                actions.extend(dataset.actions.row(k).iter());
-            }
+    let mut initial = Vec::with_capacity(starts.len() * model.constants.state_dim());
+    let mut actions = Vec::with_capacity(starts.len() * horizon * dataset.act_dim());
+    for &t in starts {
+        initial.extend(dataset.observations.row(t).iter());
+        if reward_model {
+            initial.push(0.0);
         }
-        let plan = OpenLoop {
-            horizon,
-            particles: config.particles,
-            noise_scale: 1.0,
-        };
-        let rollout = model.rollout_open_loop(&initial, &actions, plan, rng, device);
-        for eta in rollout.eta.chunks_exact(config.particles * horizon) {
-            totals.push(eta.iter().sum::<f32>() / config.particles as f32);
+        for k in t..t + horizon {
+            actions.extend(dataset.actions.row(k).iter());
         }
+    }
+    (initial, actions)
+}
+
+/// Accumulated η of open-loop rollouts from `initial` (`[n, state_dim]`) along
+/// `actions` (`[n, horizon, act_dim]`), `config.particles` trajectories each,
+/// stepped `config.chunk` starts at a time: one value per particle trajectory.
+pub fn accumulated_eta_along(
+    model: &NeuralSde,
+    initial: &[f32],
+    actions: &[f32],
+    horizon: usize,
+    config: &ThresholdConfig,
+    rng: &mut ChaCha8Rng,
+    device: &Device,
+) -> Vec<f32> {
+    let state_dim = model.constants.state_dim();
+    let plan_width = horizon * model.spec().act_dim;
+    let chunk = config.chunk.max(1);
+    let plan = OpenLoop {
+        horizon,
+        particles: config.particles,
+        noise_scale: 1.0,
+    };
+    let mut totals = Vec::with_capacity(initial.len() / state_dim * config.particles);
+    for (starts, actions) in initial
+        .chunks(chunk * state_dim)
+        .zip(actions.chunks(chunk * plan_width))
+    {
+        let rollout = model.rollout_open_loop(starts, actions, plan, rng, device);
+        totals.extend(
+            rollout
+                .eta
+                .chunks_exact(horizon)
+                .map(|eta| eta.iter().sum::<f32>()),
+        );
     }
     totals
 }
@@ -117,6 +189,7 @@ pub fn compute_thresholds(
     config: &ThresholdConfig,
     device: &Device,
 ) -> Result<ThresholdTable, SdeError> {
+    config.validate()?;
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let mut values = Vec::new();
     let mut windows = Vec::new();
@@ -130,14 +203,8 @@ pub fn compute_thresholds(
         starts.shuffle(&mut rng);
         starts.truncate(config.max_windows);
         let totals = accumulated_eta(model, dataset, &starts, h, config, &mut rng, device);
-        values.push(
-            config
-                .alphas
-                .iter()
-                .map(|&a| Some(cvar(&totals, a)))
-                .collect(),
-        );
-        windows.push(totals.len());
+        values.push(config.alphas.iter().map(|&a| cvar(&totals, a)).collect());
+        windows.push(starts.len());
     }
     Ok(ThresholdTable {
         horizons: config.horizons.clone(),

@@ -199,7 +199,7 @@ fn load_model(id: &str, dir: &Path, kernel: Kernel) -> Result<LoadedModel, Strin
     });
     Ok(LoadedModel {
         id: id.to_string(),
-        rules: TaskRules::new(task, &metadata.spec.split),
+        rules: TaskRules::new(task, &metadata.spec.split, metadata.spec.dt),
         task,
         dynamics,
         metadata,

@@ -1,19 +1,29 @@
-//! `nuno-trainer eta-report`: how well a fitted model's η separates a dataset
-//! from random actions and from perturbed data (AUROC), before any policy is trained.
+//! `nuno-trainer eta-report`: before any policy is trained, how well a fitted
+//! model's η separates a dataset from random actions and from perturbed data
+//! (AUROC), and how its diffusion and truncation are calibrated on held-out
+//! transitions (z-scores, h(η)'s share of Σ, Σ off the data, truncation rates).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use nuno::artifact::load_dynamics;
+use nuno::artifact::{load_dynamics, sha256_file};
 use nuno::data::{DatasetFormat, read_dataset};
-use nuno::sde::{ComputeDevice, EtaReportConfig, LossConfig, eta_report};
+use nuno::envs::MujocoTask;
+use nuno::sde::{
+    CalibrationConfig, CalibrationReport, ComputeDevice, EtaReport, EtaReportConfig, LossConfig,
+    Z_STD_BAND, calibration_report, eta_report,
+};
+use serde::Serialize;
+
+use crate::plot::{Series, line_chart};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Model directory (dynamics.safetensors + model.json).
     #[arg(long)]
     model: PathBuf,
-    /// Dataset file (D4RL .hdf5, NeoRL .npz) or Minari directory.
+    /// Dataset file (D4RL .hdf5, NeoRL .npz) or Minari directory. When it is the
+    /// model's training dataset, calibration uses the fit's held-out trajectories.
     #[arg(long)]
     dataset: PathBuf,
     /// Reader to use (default: detected).
@@ -25,38 +35,98 @@ pub struct Args {
     /// Perturbation scales, in multiples of the model's L_sc radius r.
     #[arg(long, value_delimiter = ',', default_value = "1,3")]
     radii: Vec<f32>,
+    /// Open-loop windows per horizon for the truncation rates.
+    #[arg(long, default_value_t = CalibrationConfig::new().windows)]
+    windows: usize,
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Print the report as JSON instead of a table.
+    /// Print the report as JSON instead of tables.
     #[arg(long)]
     json: bool,
 }
 
+/// What `--json` prints.
+#[derive(Serialize)]
+struct Report<'a> {
+    separation: &'a EtaReport,
+    calibration: &'a CalibrationReport,
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     let device = ComputeDevice::Cpu.device().map_err(anyhow::Error::msg)?;
+    let eta_config = EtaReportConfig {
+        rows: args.rows,
+        radii: args.radii.clone(),
+        seed: args.seed,
+    };
+    let calibration_config = CalibrationConfig {
+        rows: args.rows,
+        radii: args.radii,
+        windows: args.windows,
+        seed: args.seed,
+        ..CalibrationConfig::new()
+    };
+    calibration_config
+        .validate()
+        .context("check --rows, --radii and --windows")?;
     let (model, metadata) = load_dynamics(&args.model, &device)
         .with_context(|| format!("loading the model in {}", args.model.display()))?;
     let dataset = read_dataset(&args.dataset, args.format)?;
     if let Some(task) = &metadata.provenance.task {
         dataset.check_task(task, &args.dataset)?;
     }
+    let fit = metadata.provenance.fit.as_ref();
     // r as the model was fitted with (older artifacts: the paper's default).
-    let radius = metadata
-        .provenance
-        .fit
-        .as_ref()
-        .map_or(LossConfig::new().radius, |fit| fit.loss.radius);
-    let config = EtaReportConfig {
-        rows: args.rows,
-        radii: args.radii,
-        seed: args.seed,
-    };
-    let report = eta_report(&model, &dataset, radius, &config, &device)
+    let radius = fit.map_or(LossConfig::new().radius, |fit| fit.loss.radius);
+    let separation = eta_report(&model, &dataset, radius, &eta_config, &device)
         .context("check --rows and --radii")?;
+    // On the training dataset, only the trajectories the fit held out are new to the model.
+    let trained_on = metadata.provenance.dataset.as_ref().map(|d| &d.sha256);
+    let held_out = match fit {
+        Some(fit) if trained_on == Some(&sha256_file(&args.dataset)?) => {
+            dataset.split_by_trajectory(fit.valid_fraction, fit.seed).1
+        }
+        _ => dataset,
+    };
+    let thresholds = metadata.provenance.thresholds.as_ref();
+    // Random actions span the task's action space (older artifacts: the data's range).
+    let actions = match &metadata.provenance.task {
+        Some(task) => action_space(&MujocoTask::new(*task)?),
+        None => held_out.action_bounds(),
+    };
+    let calibration = calibration_report(
+        &model,
+        &held_out,
+        thresholds,
+        radius,
+        &actions,
+        &calibration_config,
+        &device,
+    )?;
     if args.json {
+        let report = Report {
+            separation: &separation,
+            calibration: &calibration,
+        };
         println!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
     }
+    print_separation(&separation);
+    println!();
+    print_calibration(&calibration);
+    Ok(())
+}
+
+/// The task's action box as `(low, high)` per dimension.
+pub fn action_space(task: &MujocoTask) -> Vec<(f32, f32)> {
+    let (low, high) = task.action_bounds();
+    low.iter()
+        .zip(&high)
+        .map(|(&l, &h)| (l as f32, h as f32))
+        .collect()
+}
+
+fn print_separation(report: &EtaReport) {
     println!(
         "η on {} dataset transitions (η_max {}, r {}): mean {:.4}",
         report.rows, report.eta_max, report.radius, report.data_mean_eta
@@ -69,6 +139,135 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     row("same states, random actions", &report.random_actions);
     for (k, comparison) in &report.perturbed {
         row(&format!("data + N(0, ({k}·r)²)"), comparison);
+    }
+}
+
+/// The calibration report as markdown tables (also printed by `fit-model`).
+pub fn print_calibration(report: &CalibrationReport) {
+    let (low, high) = Z_STD_BAND;
+    println!(
+        "Calibration on {} held-out transitions: z std in [{low}, {high}] for {:.0} % of \
+         dimensions; h(η) is {:.1} % of Σ at the median η ({:.4})",
+        report.rows,
+        100.0 * report.z_std_in_band,
+        100.0 * report.h_share_at_median_eta,
+        report.median_eta
+    );
+    println!("| dim | z mean | z std | |z| ≤ 1 | |z| ≤ 2 | h(η)/Σ |");
+    println!("|---|---|---|---|---|---|");
+    for (d, c) in report.dimensions.iter().enumerate() {
+        println!(
+            "| {d} | {:+.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
+            c.z_mean, c.z_std, c.within_one, c.within_two, c.h_share
+        );
+    }
+    println!();
+    println!("| points | mean η | mean Σ (diffusion scales) | Σ / Σ on data |");
+    println!("|---|---|---|---|");
+    for d in &report.diffusion {
+        let name = if d.radii == 0.0 {
+            "held-out data".to_string()
+        } else {
+            format!("data + N(0, ({}·r)²)", d.radii)
+        };
+        println!(
+            "| {name} | {:.4} | {:.4} | {:.2} |",
+            d.mean_eta, d.mean_sigma, d.ratio_to_data
+        );
+    }
+    println!(
+        "η one step ahead: {:.4} at real next states, {:.4} at model samples",
+        report.eta_next_real, report.eta_next_model
+    );
+    println!();
+    println!("| h | α | ε(h, α) | truncated, dataset actions | truncated, random actions |");
+    println!("|---|---|---|---|---|");
+    for h in &report.horizons {
+        for t in &h.truncation {
+            println!(
+                "| {} | {} | {:.3} | {:.1} % | {:.1} % |",
+                h.horizon,
+                t.alpha,
+                t.epsilon,
+                100.0 * t.dataset_actions,
+                100.0 * t.random_actions
+            );
+        }
+    }
+    for h in &report.horizons {
+        println!(
+            "h = {}: mean accumulated η {:.3} on dataset actions, {:.3} on random actions \
+             (bound h·η_max = {}; {} windows)",
+            h.horizon,
+            h.dataset_mean_accumulated_eta,
+            h.random_mean_accumulated_eta,
+            h.bound,
+            h.windows
+        );
+    }
+}
+
+/// `calibration.svg` (z std per dimension against the band) and `truncation.svg`
+/// (truncation rate against α, per horizon, dataset vs random actions) in `dir`.
+pub fn calibration_charts(dir: &Path, report: &CalibrationReport) -> anyhow::Result<()> {
+    let dims = report.dimensions.len() as f64;
+    let flat = |y: f32| vec![(0.0, f64::from(y)), (dims - 1.0, f64::from(y))];
+    line_chart(
+        &dir.join("calibration.svg"),
+        "Standardised residuals on held-out data",
+        "state dimension",
+        "std of (s' − mean)/(Σ·sqrt(dt))",
+        &[
+            Series {
+                name: "z std",
+                points: report
+                    .dimensions
+                    .iter()
+                    .enumerate()
+                    .map(|(d, c)| (d as f64, f64::from(c.z_std)))
+                    .collect(),
+            },
+            Series {
+                name: "band low",
+                points: flat(Z_STD_BAND.0),
+            },
+            Series {
+                name: "band high",
+                points: flat(Z_STD_BAND.1),
+            },
+        ],
+    )?;
+    let mut names = Vec::new();
+    for h in &report.horizons {
+        names.push((format!("h = {}, dataset actions", h.horizon), h, false));
+        names.push((format!("h = {}, random actions", h.horizon), h, true));
+    }
+    let series: Vec<Series> = names
+        .iter()
+        .map(|(name, h, random)| Series {
+            name,
+            points: h
+                .truncation
+                .iter()
+                .map(|t| {
+                    let rate = if *random {
+                        t.random_actions
+                    } else {
+                        t.dataset_actions
+                    };
+                    (t.alpha, f64::from(rate))
+                })
+                .collect(),
+        })
+        .collect();
+    if !series.is_empty() {
+        line_chart(
+            &dir.join("truncation.svg"),
+            "Open-loop rollouts truncated at ε(h, α), held-out windows",
+            "α",
+            "fraction truncated",
+            &series,
+        )?;
     }
     Ok(())
 }

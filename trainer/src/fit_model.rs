@@ -11,10 +11,11 @@ use nuno::artifact::{DatasetInfo, DynamicsProvenance, save_dynamics, sha256_file
 use nuno::data::{DatasetFormat, read_dataset};
 use nuno::envs::{MujocoTask, TaskConfig, TaskName};
 use nuno::sde::{
-    ComputeDevice, DynamicsSpec, FitConfig, LossConfig, SdeConfig, ThresholdConfig,
-    compute_thresholds, fit, prediction_error,
+    CalibrationConfig, ComputeDevice, DynamicsSpec, FitConfig, LossConfig, SdeConfig,
+    ThresholdConfig, calibration_report, compute_thresholds, fit, prediction_error,
 };
 
+use crate::eta_report::{action_space, calibration_charts, print_calibration};
 use crate::plot::{Series, line_chart};
 
 #[derive(Debug, clap::Args)]
@@ -58,8 +59,12 @@ pub struct Args {
     /// see docs/paper-map.md before using it on high-dimensional data).
     #[arg(long)]
     lambda_far: Option<f32>,
+    /// W^max of h(η): the diffusion beyond the data, in multiples of each state
+    /// dimension's diffusion scale; one value for all, or one per dimension.
+    #[arg(long, value_delimiter = ',', default_value = "1")]
+    w_max: Vec<f32>,
     /// Windows per horizon used for the CVaR thresholds.
-    #[arg(long, default_value_t = 4096)]
+    #[arg(long, default_value_t = ThresholdConfig::new().max_windows)]
     threshold_windows: usize,
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -69,6 +74,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // Every setting is checked before the data is read or any work starts.
     let mut loss = LossConfig::new();
     loss.radius = args.radius.unwrap_or(loss.radius);
     loss.lambda_grad = args.lambda_grad.unwrap_or(loss.lambda_grad);
@@ -86,8 +92,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         TaskConfig::d4rl(args.task)
     };
-    let dataset = read_dataset(&args.dataset, args.format)?;
-    dataset.check_task(&task, &args.dataset)?;
     let probe = MujocoTask::new(task)?;
     let spec = DynamicsSpec {
         obs_dim: probe.obs_dim(),
@@ -98,11 +102,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut model_config = SdeConfig::new();
     model_config.reward_model = args.reward_model;
     model_config.drift_hidden = args.drift_hidden.clone();
+    model_config.w_max = args.w_max.clone();
+    model_config
+        .validate(spec.obs_dim + usize::from(args.reward_model))
+        .context("check --w-max")?;
+    let threshold_config = ThresholdConfig {
+        max_windows: args.threshold_windows,
+        seed: args.seed,
+        ..ThresholdConfig::new()
+    };
+    threshold_config
+        .validate()
+        .context("check --threshold-windows")?;
     let mut config = FitConfig::new(model_config, loss);
     config.max_steps = args.max_steps;
     config.eval_every = args.eval_every;
     config.patience = args.patience;
     config.seed = args.seed;
+    let dataset = read_dataset(&args.dataset, args.format)?;
+    dataset.check_task(&task, &args.dataset)?;
     let (train, valid) = dataset.split_by_trajectory(config.valid_fraction, config.seed);
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
@@ -156,16 +174,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
 
     // Section 4.3: ε(h, α) over the whole dataset.
-    let threshold_config = ThresholdConfig {
-        max_windows: args.threshold_windows,
-        seed: args.seed,
-        ..ThresholdConfig::new()
-    };
     let thresholds = compute_thresholds(&model, &dataset, &threshold_config, &device)?;
+    // How Σ and truncation behave on the held-out trajectories.
+    let calibration = calibration_report(
+        &model,
+        &valid,
+        Some(&thresholds),
+        config.loss.radius,
+        &action_space(&probe),
+        &CalibrationConfig::new().with_seed(args.seed),
+        &device,
+    )?;
+    print_calibration(&calibration);
     let provenance = DynamicsProvenance {
         task: Some(task),
         fit: Some(config),
         thresholds: Some(thresholds),
+        calibration: Some(calibration.clone()),
         training: Some(summary),
         dataset: Some(DatasetInfo {
             path: args.dataset.display().to_string(),
@@ -196,6 +221,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             curve("L_mu", &|r| Some(r.mu)),
         ],
     )?;
+    calibration_charts(&args.out, &calibration)?;
     let errors = prediction_error(&model, &valid, 50, 256, args.seed, &device);
     if !errors.is_empty() {
         line_chart(

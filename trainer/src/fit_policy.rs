@@ -41,8 +41,8 @@ pub struct Args {
     /// Gradient steps between model rollouts.
     #[arg(long, default_value_t = 1000)]
     rollout_freq: usize,
-    /// Start states per model rollout.
-    #[arg(long, default_value_t = 50_000)]
+    /// Start states per model rollout (NUNO's scripts: 5000; TATU+MOPO: 50000).
+    #[arg(long, default_value_t = PolicyLoopConfig::new(SacConfig::new(), 0, 0.0, 0.0).rollout_batch)]
     rollout_batch: usize,
     /// SDE trajectories per start state.
     #[arg(long, default_value_t = 1)]
@@ -150,7 +150,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         dataset: &dataset,
         dynamics: batch_dynamics.as_ref(),
         task,
-        rules: TaskRules::new(task, &dynamics.constants.spec.split),
+        rules: TaskRules::new(
+            task,
+            &dynamics.constants.spec.split,
+            dynamics.constants.spec.dt,
+        ),
         kernel: args.kernel,
     };
     let thresholds = metadata.provenance.thresholds.as_ref();

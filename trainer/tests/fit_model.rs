@@ -1,4 +1,4 @@
-//! `nuno-trainer fit-model`'s η loss flags: bad values are named before any
+//! `nuno-trainer fit-model`'s η loss, h(η) and threshold flags: bad values are named before any
 //! work starts, and nothing is written.
 
 mod common;
@@ -14,6 +14,9 @@ fn fit_model_names_unusable_loss_flags_before_reading_anything() {
         ("--radius", "0", "radius = 0"),
         ("--lambda-grad", "-1", "lambda_grad = -1"),
         ("--lambda-far", "NaN", "lambda_far = NaN"),
+        ("--w-max", "1,2", "w_max has 2 values"),
+        ("--w-max", "0", "w_max value 0"),
+        ("--threshold-windows", "0", "max_windows = 0"),
     ] {
         let flag_value = format!("{flag}={value}");
         let stderr = fails(&[
