@@ -1,7 +1,7 @@
 //! Truncation thresholds ε(h, α) (Section 4.3): roll the SDE open-loop on the
 //! dataset's actions from the starts of each trajectory's non-overlapping
-//! windows of length h (NUNO's code; the paper's Section 4.3 does not say how
-//! windows are cut), accumulate η along each particle's trajectory, and take
+//! windows of length h (NUNO's code; Section 4.3 speaks of "all possible
+//! sequences of horizon h"), accumulate η along each particle's trajectory, and take
 //! the CVaR at level α of the accumulated values over all of them (α = 1: the
 //! maximum). Each particle trajectory is one sample, as in NUNO's code and as
 //! model rollouts compare their own trajectory's sum against ε.
