@@ -515,16 +515,18 @@ fn calibration_z_scores_follow_an_independent_gaussian_reference() {
     };
     let synthetic = Dataset::from_parts(parts, Path::new("model samples")).unwrap();
     assert_eq!(synthetic.trajectories().len(), trajectories);
-    let report = calibration_report(
-        &model,
-        &synthetic,
-        None,
-        0.1,
-        &[(-1.0, 1.0); 3],
-        &CalibrationConfig::new().with_rows(4000),
-        &device,
-    )
-    .unwrap();
+    let report_with = |config: &CalibrationConfig| {
+        calibration_report(
+            &model,
+            &synthetic,
+            None,
+            0.1,
+            &[(-1.0, 1.0); 3],
+            config,
+            &device,
+        )
+    };
+    let report = report_with(&CalibrationConfig::new().with_rows(4000)).unwrap();
     assert_eq!(report.dimensions.len(), 11);
     for (d, c) in report.dimensions.iter().enumerate() {
         assert!(c.z_mean.abs() < 0.06, "dim {d}: {c:?}");
@@ -537,16 +539,7 @@ fn calibration_z_scores_follow_an_independent_gaussian_reference() {
         report.horizons.is_empty(),
         "no thresholds, no truncation rates"
     );
-    let err = calibration_report(
-        &model,
-        &synthetic,
-        None,
-        0.1,
-        &[(-1.0, 1.0); 3],
-        &CalibrationConfig::new().with_windows(0),
-        &device,
-    )
-    .unwrap_err();
+    let err = report_with(&CalibrationConfig::new().with_windows(0)).unwrap_err();
     assert!(err.to_string().contains("windows = 0"), "{err}");
 }
 
