@@ -303,22 +303,15 @@ fn model_settings_no_fit_can_use_are_refused_by_name_before_fitting() {
 
 #[test]
 fn hopper_fit_beats_constant_velocity_and_flags_random_actions() {
-    let task = TaskConfig::d4rl(TaskName::Hopper);
-    let dataset = generate(
-        &GenerateConfig::new(task, "narrow", 20_000, 1),
-        &NarrowPolicy,
-        "narrow",
-        &|_| {},
-    )
-    .unwrap();
-    let (train, valid) = dataset.split_by_trajectory(0.2, 0);
+    let NarrowFit {
+        model,
+        summary,
+        records,
+        valid,
+        ..
+    } = narrow_hopper_fit(1500);
     let device = Device::flex();
     let config = small_config(1500);
-    let mut records = Vec::new();
-    let (model, summary) = fit(&train, &valid, hopper_spec(), &config, &device, &mut |r| {
-        records.push(r.clone())
-    })
-    .unwrap();
     assert_eq!(summary.steps, 1500);
     assert!(
         summary.best_valid_nll < records[0].data,
@@ -406,8 +399,17 @@ fn assert_not_overconfident(report: &nuno::sde::CalibrationReport, summary: &str
     }
 }
 
-/// The narrow-action hopper data of the fit test, fitted with small networks.
-fn narrow_hopper_fit(steps: usize) -> (NeuralSde, Dataset, Dataset) {
+/// The narrow-action hopper data (20k transitions, 20 % of trajectories held
+/// out) fitted with small networks, and how the fit went.
+struct NarrowFit {
+    model: NeuralSde,
+    summary: nuno::sde::FitSummary,
+    records: Vec<nuno::sde::FitRecord>,
+    dataset: Dataset,
+    valid: Dataset,
+}
+
+fn narrow_hopper_fit(steps: usize) -> NarrowFit {
     let task = TaskConfig::d4rl(TaskName::Hopper);
     let dataset = generate(
         &GenerateConfig::new(task, "narrow", 20_000, 1),
@@ -417,21 +419,33 @@ fn narrow_hopper_fit(steps: usize) -> (NeuralSde, Dataset, Dataset) {
     )
     .unwrap();
     let (train, valid) = dataset.split_by_trajectory(0.2, 0);
-    let (model, _) = fit(
+    let mut records = Vec::new();
+    let (model, summary) = fit(
         &train,
         &valid,
         hopper_spec(),
         &small_config(steps),
         &Device::flex(),
-        &mut |_| {},
+        &mut |r| records.push(r.clone()),
     )
     .unwrap();
-    (model, dataset, valid)
+    NarrowFit {
+        model,
+        summary,
+        records,
+        dataset,
+        valid,
+    }
 }
 
 #[test]
 fn diffusion_is_calibrated_on_the_data_and_truncation_spares_it_but_not_random_actions() {
-    let (model, dataset, valid) = narrow_hopper_fit(1500);
+    let NarrowFit {
+        model,
+        dataset,
+        valid,
+        ..
+    } = narrow_hopper_fit(1500);
     let device = Device::flex();
     // As fit-model does: thresholds over the whole dataset, report on held-out trajectories.
     let thresholds = compute_thresholds(

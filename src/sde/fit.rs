@@ -165,10 +165,9 @@ pub fn fit(
     let input_dim = model.spec().obs_dim + model.spec().act_dim;
     let reference = training_inputs(&model, train, config.loss.far_reference, &mut rng);
     let far_field = FarField::new(reference.clone(), input_dim, &config.loss);
-    let reference = Tensor::<2>::from_data(
-        TensorData::new(reference.clone(), [reference.len() / input_dim, input_dim]),
-        &train_device,
-    );
+    let rows = reference.len() / input_dim;
+    let reference =
+        Tensor::<2>::from_data(TensorData::new(reference, [rows, input_dim]), &train_device);
     model.calibrate_h_bias(reference.clone());
 
     let mut best = model.valid();
