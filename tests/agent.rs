@@ -15,7 +15,7 @@ use nuno::artifact::{
 use nuno::data::{Dataset, GenerateConfig, TransitionBatch, generate};
 use nuno::envs::{MujocoTask, ObservationLayout, TaskConfig, TaskName, TaskRules};
 use nuno::infer::Kernel;
-use nuno::nn::{polyak_update, to_f32_vec};
+use nuno::nn::{polyak_update, seeded_init, to_f32_vec};
 use nuno::sde::{BatchDynamics, DynamicsSpec, ModelStep};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -32,9 +32,8 @@ fn small_actor(obs_dim: usize, act_dim: usize, low: f32, high: f32) -> ActorConf
 #[test]
 fn tanh_gaussian_log_prob_matches_the_change_of_variables_by_hand() {
     let device = Device::flex();
-    device.seed(3);
     // A box [-2, 4]: half-width 3, centre 1.
-    let actor = small_actor(4, 3, -2.0, 4.0).init(&device);
+    let actor = seeded_init(&device, 3, || small_actor(4, 3, -2.0, 4.0).init(&device));
     let obs: Vec<f32> = (0..5 * 4).map(|i| (i as f32 * 0.37).sin()).collect();
     let noise: Vec<f32> = (0..5 * 3).map(|i| (i as f32 * 0.91).cos() * 1.5).collect();
     let sample = actor.sample(
@@ -93,14 +92,15 @@ fn sac_batch(n: usize, obs_dim: usize, act_dim: usize, terminal: f32) -> Transit
 #[test]
 fn twin_q_target_uses_the_smaller_target_critic_and_stops_at_terminals() {
     let device = Device::flex();
-    device.seed(5);
-    let sac = Sac::new(
-        small_actor(3, 2, -1.0, 1.0),
-        SacConfig::new()
-            .with_critic_hidden(vec![16, 16])
-            .with_initial_alpha(0.5),
-        &device,
-    );
+    let sac = seeded_init(&device, 5, || {
+        Sac::new(
+            small_actor(3, 2, -1.0, 1.0),
+            SacConfig::new()
+                .with_critic_hidden(vec![16, 16])
+                .with_initial_alpha(0.5),
+            &device,
+        )
+    });
     let (n, plain) = (6, device.clone());
     let next_obs = tensor(
         (0..n * 3).map(|i| (i as f32).sin()).collect(),
@@ -139,13 +139,14 @@ fn temperature_moves_toward_the_target_entropy() {
     let device = Device::flex();
     let batch = sac_batch(32, 3, 2, 0.0);
     for (target_entropy, rises) in [(100.0, true), (-100.0, false)] {
-        device.seed(7);
         let config = SacConfig::new()
             .with_actor_hidden(vec![16, 16])
             .with_critic_hidden(vec![16, 16])
             .with_target_entropy(Some(target_entropy))
             .with_alpha_lr(0.05);
-        let mut sac = Sac::new(small_actor(3, 2, -1.0, 1.0), config, &device);
+        let mut sac = seeded_init(&device, 7, || {
+            Sac::new(small_actor(3, 2, -1.0, 1.0), config, &device)
+        });
         let mut rng = ChaCha8Rng::seed_from_u64(0);
         let before = sac.update(&batch, &mut rng).alpha;
         let mut after = before;
@@ -160,15 +161,19 @@ fn temperature_moves_toward_the_target_entropy() {
         assert_eq!(sac.target_entropy, target_entropy);
     }
     // Default H̄ = −|A|.
-    let sac = Sac::new(small_actor(3, 2, -1.0, 1.0), SacConfig::new(), &device);
+    let sac = seeded_init(&device, 0, || {
+        Sac::new(small_actor(3, 2, -1.0, 1.0), SacConfig::new(), &device)
+    });
     assert_eq!(sac.target_entropy, -2.0);
 }
 
 #[test]
 fn polyak_update_blends_every_parameter() {
     let device = Device::flex();
-    let a = small_actor(3, 2, -1.0, 1.0).init(&device);
-    let b = small_actor(3, 2, -1.0, 1.0).init(&device);
+    let (a, b) = seeded_init(&device, 0, || {
+        let init = || small_actor(3, 2, -1.0, 1.0).init(&device);
+        (init(), init())
+    });
     let (ta, tb) = (collect_tensors(&a), collect_tensors(&b));
     let blended = collect_tensors(&polyak_update(a, &b, 0.25));
     assert_eq!(blended.len(), 6);
@@ -208,6 +213,100 @@ impl BatchDynamics for ConstantEta {
             eta: vec![0.3; n],
         }
     }
+}
+
+/// [`ConstantEta`] until its second call, then not finite on rows whose last
+/// observation is marked (≥ 0.5): NaN states where the first is above 1.2, an
+/// infinite η on the others.
+struct DivergesWhereMarked {
+    inner: ConstantEta,
+    calls: std::sync::atomic::AtomicUsize,
+}
+
+impl BatchDynamics for DivergesWhereMarked {
+    fn spec(&self) -> &DynamicsSpec {
+        self.inner.spec()
+    }
+    fn state_dim(&self) -> usize {
+        self.inner.state_dim()
+    }
+    fn learns_reward(&self) -> bool {
+        false
+    }
+    fn step(&self, states: &[f32], actions: &[f32], noise: &[f32]) -> ModelStep {
+        let mut step = self.inner.step(states, actions, noise);
+        let call = self.calls.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        let o = self.inner.spec.obs_dim;
+        if call >= 1 {
+            for (row, state) in states.chunks_exact(o).enumerate() {
+                if state[o - 1] < 0.5 {
+                    continue;
+                }
+                if state[0] > 1.2 {
+                    step.next_states[row * o + 3] = f32::NAN;
+                } else {
+                    step.eta[row] = f32::INFINITY;
+                }
+            }
+        }
+        step
+    }
+}
+
+#[test]
+fn a_diverging_model_ends_its_rollouts_and_keeps_nothing_that_is_not_finite() {
+    let (task, spec) = hopper();
+    let rules = TaskRules::new(task, &spec.split, spec.dt);
+    let dynamics = DivergesWhereMarked {
+        inner: ConstantEta { spec: spec.clone() },
+        calls: Default::default(),
+    };
+    let policy = Constant(vec![0.5, -0.5, 0.25], spec.obs_dim);
+    // Upright hoppers; even rows marked, rows 0, 4 higher up (NaN states).
+    let starts: Vec<f32> = (0..8)
+        .flat_map(|row| {
+            let mut start = vec![0.0f32; spec.obs_dim];
+            start[0] = if row % 4 == 0 { 1.25 } else { 1.15 };
+            start[spec.obs_dim - 1] = if row % 2 == 0 { 1.0 } else { 0.0 };
+            start
+        })
+        .collect();
+    let config = RolloutConfig {
+        horizon: 4,
+        particles: 1,
+        penalty: 1.0,
+        threshold: None,
+        noise_scale: 1.0,
+    };
+    let out = rollout_model(
+        &dynamics,
+        RolloutActions::Policy(&policy),
+        &rules,
+        &starts,
+        &config,
+        &mut ChaCha8Rng::seed_from_u64(0),
+    );
+    let diverged = StepOutcome::Diverged;
+    for row in 0..8 {
+        if row % 2 == 0 {
+            assert_eq!(out.trace.kept[row], 1, "row {row}");
+            assert_eq!(out.trace.outcome[row], diverged, "row {row}");
+        } else {
+            assert_eq!(out.trace.kept[row], 4, "row {row}");
+            assert_eq!(out.trace.outcome[row], StepOutcome::Continued, "row {row}");
+        }
+    }
+    assert_eq!(out.stats.diverged, 4);
+    assert_eq!(out.transitions.len(), 4 + 4 * 4);
+    let b = &out.transitions;
+    let all = [
+        &b.observations,
+        &b.actions,
+        &b.rewards,
+        &b.next_observations,
+    ];
+    assert!(all.iter().all(|v| v.iter().all(|x| x.is_finite())));
+    assert!(out.trace.eta.iter().flatten().all(|e| e.is_finite()));
 }
 
 struct Constant(Vec<f32>, usize);
@@ -465,10 +564,22 @@ fn batches_mix_real_and_model_data_at_beta() {
 }
 
 #[test]
-fn the_loop_runs_checkpoints_and_resumes_bit_exactly() {
+fn the_loop_runs_checkpoints_and_resumes_bit_exactly_with_burn() {
+    runs_checkpoints_and_resumes_bit_exactly(Kernel::Burn);
+}
+
+#[test]
+fn the_loop_runs_checkpoints_and_resumes_bit_exactly_with_the_fused_kernel() {
+    runs_checkpoints_and_resumes_bit_exactly(Kernel::Fused);
+}
+
+fn runs_checkpoints_and_resumes_bit_exactly(kernel: Kernel) {
     let (model, metadata) = shipped_model();
     let dataset = small_dataset();
-    let ctx = hopper_context(&model, &dataset);
+    let ctx = LoopContext {
+        kernel,
+        ..hopper_context(&model, &dataset)
+    };
     let thresholds = metadata.provenance.thresholds.as_ref();
     let device = Device::flex();
 
@@ -511,6 +622,7 @@ fn the_loop_runs_checkpoints_and_resumes_bit_exactly() {
         collect_tensors(&resumed.sac.critic),
         collect_tensors(&straight.sac.critic)
     );
+    assert_eq!(resumed.sac.adam, straight.sac.adam);
     assert_eq!(resumed.model_buffer, straight.model_buffer);
     let strip = |h: &[nuno::agent::EpochRecord]| -> Vec<String> {
         h.iter()
@@ -527,6 +639,86 @@ fn the_loop_runs_checkpoints_and_resumes_bit_exactly() {
     assert!(err.contains("different configuration"), "{err}");
 }
 
+/// Every network parameter and Adam moment of `a` within `tolerance` (relative,
+/// or absolute near zero) of `b`'s.
+fn assert_agents_close(a: &PolicyTraining, b: &PolicyTraining, tolerance: f32) {
+    let close = |what: &str, x: &[f32], y: &[f32]| {
+        assert_eq!(x.len(), y.len(), "{what}");
+        for (i, (x, y)) in x.iter().zip(y).enumerate() {
+            assert!(
+                (x - y).abs() <= tolerance * y.abs().max(1e-2),
+                "{what}[{i}]: {x} vs {y}"
+            );
+        }
+    };
+    for (name, (x, y)) in [
+        (
+            "actor",
+            (collect_tensors(&a.sac.actor), collect_tensors(&b.sac.actor)),
+        ),
+        (
+            "critic",
+            (
+                collect_tensors(&a.sac.critic),
+                collect_tensors(&b.sac.critic),
+            ),
+        ),
+        (
+            "temperature",
+            (
+                collect_tensors(&a.sac.temperature),
+                collect_tensors(&b.sac.temperature),
+            ),
+        ),
+    ] {
+        for (path, (_, values)) in &x {
+            close(&format!("{name}.{path}"), values, &y[path].1);
+        }
+    }
+    for (x, y) in [
+        (&a.sac.adam.actor, &b.sac.adam.actor),
+        (&a.sac.adam.critic, &b.sac.adam.critic),
+    ] {
+        assert_eq!(x.time, y.time);
+        for (path, m) in &x.moments {
+            close(path, &m.first, &y.moments[path].first);
+        }
+    }
+}
+
+#[test]
+fn either_kernel_resumes_the_others_checkpoint() {
+    let (model, metadata) = shipped_model();
+    let dataset = small_dataset();
+    let thresholds = metadata.provenance.thresholds.as_ref();
+    let device = Device::flex();
+    let context = |kernel| LoopContext {
+        kernel,
+        ..hopper_context(&model, &dataset)
+    };
+    for (first, second) in [(Kernel::Burn, Kernel::Fused), (Kernel::Fused, Kernel::Burn)] {
+        // One epoch with `first`, checkpointed.
+        let dir = tempfile::tempdir().unwrap();
+        let mut training =
+            PolicyTraining::new(tiny_config(11), &context(first), thresholds, &device).unwrap();
+        training.run_epoch(&context(first)).unwrap();
+        save_checkpoint(dir.path(), &training).unwrap();
+        let checkpoint = latest_checkpoint(dir.path()).unwrap().unwrap();
+        // The second epoch by both kernels from the same files.
+        let resume = |kernel| {
+            let mut t = PolicyTraining::new(tiny_config(11), &context(kernel), thresholds, &device)
+                .unwrap();
+            load_checkpoint(&checkpoint, &mut t).unwrap();
+            t.run_epoch(&context(kernel)).unwrap();
+            t
+        };
+        let (same, other) = (resume(first), resume(second));
+        assert_eq!(other.step, 30);
+        // 15 updates apart only by float rounding between the kernels.
+        assert_agents_close(&other, &same, 1e-3);
+    }
+}
+
 #[test]
 fn sde_rollouts_with_truncation_keep_nothing_past_epsilon() {
     let (model, metadata) = shipped_model();
@@ -534,11 +726,13 @@ fn sde_rollouts_with_truncation_keep_nothing_past_epsilon() {
     let (task, spec) = hopper();
     let rules = TaskRules::new(task, &spec.split, spec.dt);
     let device = Device::flex();
-    let actor = Sac::new(
-        small_actor(11, 3, -1.0, 1.0),
-        SacConfig::new().with_actor_hidden(vec![16, 16]),
-        &device,
-    )
+    let actor = seeded_init(&device, 1, || {
+        Sac::new(
+            small_actor(11, 3, -1.0, 1.0),
+            SacConfig::new().with_actor_hidden(vec![16, 16]),
+            &device,
+        )
+    })
     .actor
     .valid();
     let policy = nuno::agent::ActorPolicy {

@@ -43,8 +43,9 @@ fn models_dir() -> tempfile::TempDir {
     copy_model(&dir.path().join(MODEL));
     copy_model(&dir.path().join("no-policy"));
     let device = Device::flex();
-    device.seed(1);
-    let actor = ActorConfig::new(11, 3, vec![-1.0; 3], vec![1.0; 3]).init(&device);
+    let actor = nuno::nn::seeded_init(&device, 1, || {
+        ActorConfig::new(11, 3, vec![-1.0; 3], vec![1.0; 3]).init(&device)
+    });
     let task = TaskConfig::d4rl(TaskName::Hopper);
     save_policy(
         &dir.path().join(MODEL),

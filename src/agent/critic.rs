@@ -46,6 +46,15 @@ impl Temperature {
         }
     }
 
+    /// The same parameter (id and trainability kept) holding `log_alpha`.
+    pub fn with_log_alpha(&self, log_alpha: f32) -> Self {
+        let (id, old) = (self.log_alpha.id, self.log_alpha.val());
+        let value = Tensor::full([1], log_alpha, &old.device());
+        Self {
+            log_alpha: Param::initialized(id, value.set_require_grad(old.is_require_grad())),
+        }
+    }
+
     /// α as a `[1, 1]` tensor.
     pub fn alpha(&self) -> Tensor<2> {
         self.log_alpha.val().exp().unsqueeze()

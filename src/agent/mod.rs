@@ -6,6 +6,7 @@
 mod actor;
 mod buffer;
 mod critic;
+mod fused_sac;
 mod model_rollout;
 mod model_step;
 mod policy;
@@ -18,6 +19,7 @@ pub(crate) use actor::action_noise;
 pub use actor::{ActionMode, Actor, ActorConfig, ActorPolicy, ActorSample};
 pub use buffer::ReplayBuffer;
 pub use critic::{Temperature, TwinCritic};
+pub use fused_sac::{FusedGradients, FusedSac};
 pub use model_rollout::{
     ModelRollout, RolloutActions, RolloutConfig, RolloutStats, RolloutTrace, StepOutcome,
     rollout_model,
@@ -25,11 +27,11 @@ pub use model_rollout::{
 pub use model_step::{ParticleConfig, ParticleStep, penalized_reward, step_particles};
 pub use policy::{BatchPolicy, RandomPolicy};
 pub use policy_loop::{
-    EpochRecord, EtaProbe, EvalSummary, LoopContext, PolicyLoopConfig, PolicyTraining,
+    EpochRecord, EtaProbe, EvalSummary, LoopContext, PhaseSeconds, PolicyLoopConfig, PolicyTraining,
 };
 pub use presets::{PRESETS, Preset, preset};
 pub use random_network::RandomNetworkPolicy;
-pub use sac::{Sac, SacConfig, SacLosses, SacOptimizers};
+pub use sac::{Sac, SacAdam, SacConfig, SacLosses};
 
 /// Everything that can go wrong setting up or running policy optimisation.
 #[derive(Debug, thiserror::Error)]

@@ -49,6 +49,9 @@ pub enum StepOutcome {
     Terminal,
     /// Accumulated η passed ε(h, α); the transition is dropped.
     Truncated,
+    /// The model's next state, reward or η was not finite (its drift diverged
+    /// off the data); the transition is dropped.
+    Diverged,
 }
 
 /// Per-step records of a batch of rollouts, row-major `[rows, horizon]`
@@ -85,6 +88,9 @@ pub struct RolloutStats {
     pub mean_penalized_reward: f32,
     pub truncated: usize,
     pub terminated: usize,
+    /// Absent from records written before divergence was counted.
+    #[serde(default)]
+    pub diverged: usize,
 }
 
 /// The transitions kept and the trace of every trajectory.
@@ -169,6 +175,12 @@ pub fn rollout_model(
                 rules.reward(&obs[i * obs_dim..(i + 1) * obs_dim], action, next_obs)
             };
             let eta = step.eta[i];
+            if !(eta.is_finite() && reward.is_finite() && next_state.iter().all(|x| x.is_finite()))
+            {
+                trace.actions[r].extend_from_slice(action);
+                trace.outcome[r] = StepOutcome::Diverged;
+                continue;
+            }
             accumulated[r] += eta;
             trace.actions[r].extend_from_slice(action);
             trace.eta[r].push(eta);
@@ -225,5 +237,6 @@ fn summarize(trace: &RolloutTrace, transitions: &TransitionBatch) -> RolloutStat
         mean_penalized_reward: mean(&mut transitions.rewards.iter().copied()),
         truncated: count(StepOutcome::Truncated),
         terminated: count(StepOutcome::Terminal),
+        diverged: count(StepOutcome::Diverged),
     }
 }

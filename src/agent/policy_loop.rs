@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use super::actor::{ActionMode, ActorConfig, ActorPolicy};
 use super::buffer::ReplayBuffer;
+use super::fused_sac::FusedSac;
 use super::model_rollout::{RolloutActions, RolloutConfig, RolloutStats, rollout_model};
 use super::presets::Preset;
 use super::sac::{Sac, SacConfig, SacLosses};
@@ -107,6 +108,18 @@ pub struct EvalSummary {
     pub std_normalized_score: f64,
 }
 
+/// Wall-clock seconds each phase of one epoch took.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct PhaseSeconds {
+    /// SAC updates, their batches included.
+    pub updates: f64,
+    /// Model rollouts into the model buffer.
+    pub rollouts: f64,
+    /// Evaluation episodes in the real task.
+    pub evaluation: f64,
+    pub eta_probe: f64,
+}
+
 /// What one epoch did.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EpochRecord {
@@ -121,6 +134,9 @@ pub struct EpochRecord {
     pub sps: f64,
     pub eval: EvalSummary,
     pub eta: EtaProbe,
+    /// Absent from records written before phases were timed.
+    #[serde(default)]
+    pub seconds: PhaseSeconds,
 }
 
 /// What the loop reads but does not own.
@@ -130,8 +146,7 @@ pub struct LoopContext<'a> {
     pub dynamics: &'a dyn BatchDynamics,
     pub task: TaskConfig,
     pub rules: TaskRules,
-    /// What runs the policy in rollouts and evaluation episodes (SAC's
-    /// updates are always burn's).
+    /// What runs SAC's updates, and the policy in rollouts and evaluation episodes.
     pub kernel: Kernel,
 }
 
@@ -220,21 +235,42 @@ impl PolicyTraining {
     /// `rollout_freq` steps, then evaluation and the η probe.
     pub fn run_epoch(&mut self, ctx: &LoopContext) -> Result<EpochRecord, AgentError> {
         let started = Instant::now();
+        let mut seconds = PhaseSeconds::default();
         let mut losses = Vec::with_capacity(self.config.steps_per_epoch);
         let mut rollout = RolloutStats::default();
+        // The fused kernel trains on host buffers for the epoch and hands the
+        // agent back to `self.sac` for rollouts, evaluation and checkpoints.
+        let mut fused = (ctx.kernel == Kernel::Fused).then(|| FusedSac::from_sac(&self.sac));
         for _ in 0..self.config.steps_per_epoch {
             if self.step.is_multiple_of(self.config.rollout_freq.max(1)) {
+                if let Some(fused) = &fused {
+                    fused.write_actor_to(&mut self.sac);
+                }
+                let rolling = Instant::now();
                 rollout = self.model_rollout(ctx);
+                seconds.rollouts += rolling.elapsed().as_secs_f64();
             }
             let batch = self.mixed_batch(ctx.dataset);
-            losses.push(self.sac.update(&batch, &mut self.rng));
+            losses.push(match fused.as_mut() {
+                Some(fused) => fused.update(&batch, &mut self.rng),
+                None => self.sac.update(&batch, &mut self.rng),
+            });
             self.step += 1;
         }
-        let sps = losses.len() as f64 / started.elapsed().as_secs_f64();
+        if let Some(fused) = fused {
+            fused.write_to(&mut self.sac);
+        }
+        let elapsed = started.elapsed().as_secs_f64();
+        let sps = losses.len() as f64 / elapsed;
+        seconds.updates = elapsed - seconds.rollouts;
         self.epoch += 1;
 
+        let evaluating = Instant::now();
         let eval = self.evaluate(ctx)?;
+        seconds.evaluation = evaluating.elapsed().as_secs_f64();
+        let probing = Instant::now();
         let eta = self.eta_probe(ctx);
+        seconds.eta_probe = probing.elapsed().as_secs_f64();
         let record = EpochRecord {
             epoch: self.epoch,
             step: self.step,
@@ -244,6 +280,7 @@ impl PolicyTraining {
             sps,
             eval,
             eta,
+            seconds,
         };
         self.history.push(record.clone());
         Ok(record)

@@ -5,7 +5,7 @@
 
 use burn::config::Config;
 use burn::module::Module;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use super::actor::{Actor, ActorConfig};
 use super::critic::{Temperature, TwinCritic};
 use crate::data::TransitionBatch;
-use crate::nn::{normal, polyak_update};
+use crate::nn::{Adam, AdamState, normal, polyak_update};
 
 /// SAC's hyperparameters.
 #[derive(Config, Debug, PartialEq)]
@@ -79,12 +79,13 @@ pub struct SacLosses {
     pub entropy: f32,
 }
 
-/// The optimisers, kept apart so a checkpoint can save their state.
-#[derive(Clone)]
-pub struct SacOptimizers {
-    pub actor: ModuleOptimizer,
-    pub critic: ModuleOptimizer,
-    pub alpha: ModuleOptimizer,
+/// Adam's state for the actor, the critics and log α, by module path: what a
+/// checkpoint saves, and what both kernels step (`crate::nn::Adam`).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct SacAdam {
+    pub actor: AdamState,
+    pub critic: AdamState,
+    pub alpha: AdamState,
 }
 
 /// The agent: networks on the autodiff device, target critics off it.
@@ -95,7 +96,7 @@ pub struct Sac {
     /// Q̄₁, Q̄₂: Polyak averages of the critics, never differentiated.
     pub target_critic: TwinCritic,
     pub temperature: Temperature,
-    pub optimizers: SacOptimizers,
+    pub adam: SacAdam,
     /// H̄
     pub target_entropy: f64,
     device: Device,
@@ -114,17 +115,12 @@ impl Sac {
         };
         let (obs_dim, act_dim) = (actor_config.obs_dim, actor_config.act_dim);
         let critic = TwinCritic::init(obs_dim, act_dim, &config.critic_hidden, &device);
-        let adam = AdamConfig::new().with_epsilon(config.adam_epsilon.unwrap_or(BURN_ADAM_EPSILON));
         Self {
             target_critic: critic.valid(),
             actor: actor_config.init(&device),
             critic,
             temperature: Temperature::init(config.initial_alpha, &device),
-            optimizers: SacOptimizers {
-                actor: adam.init(),
-                critic: adam.init(),
-                alpha: adam.init(),
-            },
+            adam: SacAdam::default(),
             target_entropy: config.target_entropy.unwrap_or(-(act_dim as f64)),
             config,
             device,
@@ -133,6 +129,11 @@ impl Sac {
 
     pub fn device(&self) -> &Device {
         &self.device
+    }
+
+    /// Adam with this agent's ε (burn's old default for runs that predate it).
+    pub fn optimizer(&self) -> Adam {
+        Adam::new(self.config.adam_epsilon.unwrap_or(BURN_ADAM_EPSILON))
     }
 
     /// The critic target, off the graph:
@@ -154,6 +155,49 @@ impl Sac {
         rewards + (terminals.neg() + 1.0) * next_value * self.config.gamma
     }
 
+    /// L_Q = mean (Q₁(s, a) − y)² + mean (Q₂(s, a) − y)², returned as
+    /// (L_Q, its two terms, mean Q₁).
+    ///
+    /// # Shapes
+    /// - `obs`: `[batch, obs_dim]`, `actions`: `[batch, act_dim]`, `y`: `[batch, 1]`
+    pub fn critic_loss(
+        &self,
+        obs: Tensor<2>,
+        actions: Tensor<2>,
+        y: Tensor<2>,
+    ) -> (Tensor<1>, Tensor<1>, Tensor<1>, f32) {
+        let (q1, q2) = self.critic.forward(obs, actions);
+        let qf1_values = q1.clone().mean().into_scalar::<f32>();
+        let qf1_loss = (q1 - y.clone()).powi_scalar(2).mean();
+        let qf2_loss = (q2 - y).powi_scalar(2).mean();
+        (
+            qf1_loss.clone() + qf2_loss.clone(),
+            qf1_loss,
+            qf2_loss,
+            qf1_values,
+        )
+    }
+
+    /// L_π = mean α·log π(ã|s) − min_i Q_i(s, ã), ã ~ π(·|s) drawn with `noise`;
+    /// returns L_π and log π(ã|s) (`[batch, 1]`).
+    pub fn actor_loss(
+        &self,
+        obs: Tensor<2>,
+        noise: Tensor<2>,
+        alpha: Tensor<2>,
+    ) -> (Tensor<1>, Tensor<2>) {
+        let sample = self.actor.sample(obs.clone(), noise);
+        let log_prob = sample.log_prob.clone();
+        let min_q = self.critic.min_q(obs, sample.action);
+        ((sample.log_prob * alpha - min_q).mean(), log_prob)
+    }
+
+    /// L_α = mean −log α·(log π(ã|s) + H̄), for `log_prob` off the graph.
+    pub fn alpha_loss(&self, log_prob: Tensor<2>) -> Tensor<1> {
+        let log_alpha = self.temperature.log_alpha.val().unsqueeze::<2>();
+        (log_alpha.neg() * (log_prob + self.target_entropy)).mean()
+    }
+
     /// One SAC update on `batch`, drawing the policy's ε from `rng`.
     pub fn update(&mut self, batch: &TransitionBatch, rng: &mut ChaCha8Rng) -> SacLosses {
         let c = &self.actor.config;
@@ -166,6 +210,7 @@ impl Sac {
         };
         let obs = tensor(&batch.observations, obs_dim, &device);
         let actions = tensor(&batch.actions, act_dim, &device);
+        let adam = self.optimizer();
 
         let next_obs = tensor(&batch.next_observations, obs_dim, &plain);
         let y = self.critic_target(
@@ -176,41 +221,38 @@ impl Sac {
         );
         let alpha = self.temperature.alpha().inner();
 
-        // Critic step: L_Q = mean (Q₁(s, a) − y)² + mean (Q₂(s, a) − y)².
-        let (q1, q2) = self.critic.forward(obs.clone(), actions);
-        let qf1_values = q1.clone().mean().into_scalar::<f32>();
-        let qf1_loss = (q1 - y.clone()).powi_scalar(2).mean();
-        let qf2_loss = (q2 - y).powi_scalar(2).mean();
-        let qf_loss = qf1_loss.clone() + qf2_loss.clone();
+        // Critic step.
+        let (qf_loss, qf1_loss, qf2_loss, qf1_values) = self.critic_loss(obs.clone(), actions, y);
         let grads = GradientsParams::from_grads(qf_loss.backward(), &self.critic);
-        self.critic =
-            self.optimizers
-                .critic
-                .step(self.config.critic_lr, self.critic.clone(), grads);
+        self.critic = adam.step_module(
+            self.config.critic_lr,
+            self.critic.clone(),
+            grads,
+            &mut self.adam.critic,
+        );
 
-        // Actor step: L_π = mean α·log π(ã|s) − min_i Q_i(s, ã),  ã ~ π(·|s).
-        let sample = self
-            .actor
-            .sample(obs.clone(), normal([b, act_dim], rng, &device));
-        let log_prob = sample.log_prob.clone();
-        let min_q = self.critic.min_q(obs, sample.action);
-        let actor_loss = (sample.log_prob * alpha.clone() - min_q).mean();
+        // Actor step, through the updated critics.
+        let noise = normal([b, act_dim], rng, &device);
+        let (actor_loss, log_prob) = self.actor_loss(obs, noise, alpha.clone());
         let grads = GradientsParams::from_grads(actor_loss.backward(), &self.actor);
-        self.actor = self
-            .optimizers
-            .actor
-            .step(self.config.actor_lr, self.actor.clone(), grads);
+        self.actor = adam.step_module(
+            self.config.actor_lr,
+            self.actor.clone(),
+            grads,
+            &mut self.adam.actor,
+        );
 
-        // Temperature step: L_α = mean −log α·(log π(ã|s) + H̄).
+        // Temperature step.
         let log_prob = log_prob.inner();
         let entropy = -log_prob.clone().mean().into_scalar::<f32>();
-        let log_alpha = self.temperature.log_alpha.val().unsqueeze::<2>();
-        let alpha_loss = (log_alpha.neg() * (log_prob + self.target_entropy)).mean();
+        let alpha_loss = self.alpha_loss(log_prob);
         let grads = GradientsParams::from_grads(alpha_loss.backward(), &self.temperature);
-        self.temperature =
-            self.optimizers
-                .alpha
-                .step(self.config.alpha_lr, self.temperature.clone(), grads);
+        self.temperature = adam.step_module(
+            self.config.alpha_lr,
+            self.temperature.clone(),
+            grads,
+            &mut self.adam.alpha,
+        );
 
         // Targets: Q̄ ← τ·Q + (1 − τ)·Q̄.
         self.target_critic =

@@ -1,7 +1,7 @@
 //! Checkpoints of policy optimisation, one per finished epoch, so `--resume`
-//! loses nothing but the epoch in progress: every network (with the parameter
-//! ids the optimiser state is keyed by), the three Adam states, the model
-//! buffer, the random generator's position, the counters and the history.
+//! loses nothing but the epoch in progress: every network, the three Adam
+//! states (moments by module path, so either SAC kernel resumes either's run),
+//! the model buffer, the random generator's position, the counters and the history.
 //!
 //! Each checkpoint is a directory `checkpoints/epoch-NNNNNN/` written under a
 //! temporary name, fsynced and renamed; then `checkpoints/LATEST` is replaced
@@ -12,23 +12,25 @@ use std::collections::BTreeMap;
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
-use burn::optim::OptimizerRecord;
-use burn::tensor::Bytes;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::json_file::{read_checked_weights, read_versioned_json, write_json};
 use super::safetensors_file::safetensors_bytes;
-use super::tensors::{NamedTensors, collect_param_ids, collect_tensors, load_tensors_with_ids};
+use super::tensors::{NamedTensors, collect_tensors, load_tensors};
 use super::{ArtifactError, sha256_hex, write_atomically};
 use crate::agent::{EpochRecord, PolicyLoopConfig, PolicyTraining, ReplayBuffer};
 use crate::data::TransitionBatch;
+use crate::nn::{AdamState, Moments};
 
-pub const CHECKPOINT_SCHEMA_VERSION: u32 = 1;
+/// Version 2: Adam's moments by module path in `adam.safetensors` (version 1
+/// kept burn's optimiser records keyed by parameter id).
+pub const CHECKPOINT_SCHEMA_VERSION: u32 = 2;
 const LATEST: &str = "LATEST";
 const NETWORKS: &str = "networks.safetensors";
 const BUFFER: &str = "model_buffer.safetensors";
 const STATE: &str = "state.json";
+const ADAM: &str = "adam.safetensors";
 const OPTIMIZERS: [&str; 3] = ["actor", "critic", "alpha"];
 
 /// Where the generator stands: enough to continue its exact stream.
@@ -48,12 +50,13 @@ struct CheckpointState {
     epoch: usize,
     threshold: Option<f32>,
     rng: RngState,
-    /// Parameter ids by module path, per network.
-    param_ids: BTreeMap<String, BTreeMap<String, u64>>,
+    /// Adam steps taken, per optimiser.
+    adam_time: BTreeMap<String, u64>,
     buffer: BufferShape,
     history: Vec<EpochRecord>,
     networks_sha256: String,
     buffer_sha256: String,
+    adam_sha256: String,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -128,33 +131,15 @@ pub fn save_checkpoint(dir: &Path, training: &PolicyTraining) -> Result<PathBuf,
 fn write_contents(dir: &Path, training: &PolicyTraining) -> Result<(), ArtifactError> {
     let sac = &training.sac;
     let mut networks = NamedTensors::new();
-    let mut param_ids = BTreeMap::new();
-    let mut add = |prefix: &str, tensors: NamedTensors, ids: BTreeMap<String, u64>| {
+    let mut add = |prefix: &str, tensors: NamedTensors| {
         for (k, v) in tensors {
             networks.insert(format!("{prefix}.{k}"), v);
         }
-        param_ids.insert(prefix.to_string(), ids);
     };
-    add(
-        "actor",
-        collect_tensors(&sac.actor),
-        collect_param_ids(&sac.actor),
-    );
-    add(
-        "critic",
-        collect_tensors(&sac.critic),
-        collect_param_ids(&sac.critic),
-    );
-    add(
-        "target_critic",
-        collect_tensors(&sac.target_critic),
-        collect_param_ids(&sac.target_critic),
-    );
-    add(
-        "temperature",
-        collect_tensors(&sac.temperature),
-        collect_param_ids(&sac.temperature),
-    );
+    add("actor", collect_tensors(&sac.actor));
+    add("critic", collect_tensors(&sac.critic));
+    add("target_critic", collect_tensors(&sac.target_critic));
+    add("temperature", collect_tensors(&sac.temperature));
     let networks = safetensors_bytes(&networks, None)?;
     write_synced(&dir.join(NETWORKS), &networks)?;
 
@@ -162,14 +147,25 @@ fn write_contents(dir: &Path, training: &PolicyTraining) -> Result<(), ArtifactE
     let buffer_bytes = safetensors_bytes(&buffer_tensors(buffer), None)?;
     write_synced(&dir.join(BUFFER), &buffer_bytes)?;
 
-    let o = &sac.optimizers;
-    for (name, optimizer) in OPTIMIZERS.iter().zip([&o.actor, &o.critic, &o.alpha]) {
-        let bytes = optimizer
-            .to_record()
-            .into_bytes()
-            .map_err(|e| ArtifactError::Invalid(format!("optimizer `{name}`: {e}")))?;
-        write_synced(&dir.join(format!("optim-{name}.bpk")), &bytes)?;
+    let a = &sac.adam;
+    let mut adam = NamedTensors::new();
+    let mut adam_time = BTreeMap::new();
+    for (name, state) in OPTIMIZERS.iter().zip([&a.actor, &a.critic, &a.alpha]) {
+        adam_time.insert(name.to_string(), state.time);
+        for (path, moments) in &state.moments {
+            let n = moments.first.len();
+            adam.insert(
+                format!("{name}/{path}/first"),
+                (vec![n], moments.first.clone()),
+            );
+            adam.insert(
+                format!("{name}/{path}/second"),
+                (vec![n], moments.second.clone()),
+            );
+        }
     }
+    let adam = safetensors_bytes(&adam, None)?;
+    write_synced(&dir.join(ADAM), &adam)?;
 
     let rng = &training.rng;
     let state = CheckpointState {
@@ -183,7 +179,7 @@ fn write_contents(dir: &Path, training: &PolicyTraining) -> Result<(), ArtifactE
             stream: rng.get_stream(),
             word_pos: rng.get_word_pos(),
         },
-        param_ids,
+        adam_time,
         buffer: BufferShape {
             obs_dim: buffer.obs_dim,
             act_dim: buffer.act_dim,
@@ -194,6 +190,7 @@ fn write_contents(dir: &Path, training: &PolicyTraining) -> Result<(), ArtifactE
         history: training.history.clone(),
         networks_sha256: sha256_hex(&networks),
         buffer_sha256: sha256_hex(&buffer_bytes),
+        adam_sha256: sha256_hex(&adam),
     };
     write_json(&dir.join(STATE), &state)
 }
@@ -250,39 +247,23 @@ pub fn load_checkpoint(
             })
             .collect()
     };
-    let ids = |prefix: &str| state.param_ids.get(prefix);
     let sac = &mut training.sac;
     let device = sac.device().clone();
     let plain = device.clone().inner();
-    sac.actor = load_tensors_with_ids(sac.actor.clone(), &part("actor"), ids("actor"), &device)?;
-    sac.critic =
-        load_tensors_with_ids(sac.critic.clone(), &part("critic"), ids("critic"), &device)?;
-    sac.target_critic = load_tensors_with_ids(
-        sac.target_critic.clone(),
-        &part("target_critic"),
-        ids("target_critic"),
-        &plain,
-    )?;
-    sac.temperature = load_tensors_with_ids(
-        sac.temperature.clone(),
-        &part("temperature"),
-        ids("temperature"),
-        &device,
-    )?;
-    let o = &mut sac.optimizers;
+    sac.actor = load_tensors(sac.actor.clone(), &part("actor"), &device)?;
+    sac.critic = load_tensors(sac.critic.clone(), &part("critic"), &device)?;
+    sac.target_critic = load_tensors(sac.target_critic.clone(), &part("target_critic"), &plain)?;
+    sac.temperature = load_tensors(sac.temperature.clone(), &part("temperature"), &device)?;
+    let mut adam = read_checked_weights(&checkpoint.join(ADAM), &state.adam_sha256)?;
+    let a = &mut sac.adam;
     for (name, optimizer) in OPTIMIZERS
         .iter()
-        .zip([&mut o.actor, &mut o.critic, &mut o.alpha])
+        .zip([&mut a.actor, &mut a.critic, &mut a.alpha])
     {
-        let path = checkpoint.join(format!("optim-{name}.bpk"));
-        let bytes = std::fs::read(&path).map_err(|e| ArtifactError::io(&path, e))?;
-        let record = OptimizerRecord::from_bytes(Bytes::from_bytes_vec(bytes)).map_err(|e| {
-            ArtifactError::Corrupt {
-                file: path.clone(),
-                message: e.to_string(),
-            }
-        })?;
-        *optimizer = optimizer.clone().load_record(record);
+        *optimizer = read_adam(name, &mut adam, &state, &networks)?;
+    }
+    if let Some(extra) = adam.keys().next() {
+        return Err(ArtifactError::UnexpectedTensor(format!("{ADAM}: {extra}")));
     }
 
     training.model_buffer = read_buffer(checkpoint, &state)?;
@@ -295,6 +276,47 @@ pub fn load_checkpoint(
     training.threshold = state.threshold;
     training.history = state.history;
     Ok(())
+}
+
+/// Optimiser `name`'s state, taking its moments out of `adam`: every moment
+/// belongs to a saved parameter of the network `name` steps and has its size.
+fn read_adam(
+    name: &str,
+    adam: &mut NamedTensors,
+    state: &CheckpointState,
+    networks: &NamedTensors,
+) -> Result<AdamState, ArtifactError> {
+    let network = if name == "alpha" { "temperature" } else { name };
+    let prefix = format!("{name}/");
+    let paths: Vec<String> = adam
+        .keys()
+        .filter_map(|k| k.strip_prefix(&prefix)?.strip_suffix("/first"))
+        .map(str::to_string)
+        .collect();
+    let mut moments = BTreeMap::new();
+    for path in paths {
+        let first = adam.remove(&format!("{prefix}{path}/first"));
+        let second = adam.remove(&format!("{prefix}{path}/second"));
+        let size = networks
+            .get(&format!("{network}.{path}"))
+            .map(|(_, values)| values.len());
+        match (first, second, size) {
+            (Some((_, first)), Some((_, second)), Some(n))
+                if first.len() == n && second.len() == n =>
+            {
+                moments.insert(path, Moments { first, second });
+            }
+            _ => {
+                return Err(ArtifactError::Invalid(format!(
+                    "{ADAM}: the moments of `{name}/{path}` do not match a parameter of `{network}`"
+                )));
+            }
+        }
+    }
+    Ok(AdamState {
+        time: state.adam_time.get(name).copied().unwrap_or(0),
+        moments,
+    })
 }
 
 fn read_buffer(checkpoint: &Path, state: &CheckpointState) -> Result<ReplayBuffer, ArtifactError> {

@@ -17,13 +17,14 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use super::ArtifactError;
-use super::json_file::{read_checked_weights, read_versioned_json, write_json};
+use super::json_file::{read_checked_weights, read_versioned_json_filled, write_json};
 use super::safetensors_file::{safetensors_bytes, write_bytes};
 use super::tensors::{collect_tensors, load_tensors};
 use crate::envs::TaskConfig;
+use crate::nn::seeded_init;
 use crate::sde::{
-    CalibrationReport, DynamicsSpec, FitConfig, FitSummary, NeuralSde, PhysicalScales, SdeConfig,
-    ThresholdTable,
+    CalibrationReport, DynamicsSpec, FitConfig, FitSummary, LikelihoodPath, NeuralSde,
+    PhysicalScales, SdeConfig, ThresholdTable,
 };
 
 /// Version of the `model.json` layout this build reads and writes. Version 2:
@@ -127,9 +128,23 @@ pub fn save_dynamics(
     Ok(metadata)
 }
 
-/// Reads and validates `model.json` alone.
+/// Reads and validates `model.json` alone. Files written before
+/// `LossConfig::likelihood` existed were fitted on eq. 6's particle path, and
+/// say so once read.
 pub fn read_dynamics_metadata(dir: &Path) -> Result<DynamicsMetadata, ArtifactError> {
-    read_versioned_json(&dir.join(DYNAMICS_METADATA), DYNAMICS_SCHEMA_VERSION)
+    read_versioned_json_filled(
+        &dir.join(DYNAMICS_METADATA),
+        DYNAMICS_SCHEMA_VERSION,
+        |value| {
+            if let Some(loss) = value.pointer_mut("/fit/loss")
+                && let Some(fields) = loss.as_object_mut()
+            {
+                fields
+                    .entry("likelihood")
+                    .or_insert_with(|| serde_json::json!(LikelihoodPath::Particle));
+            }
+        },
+    )
 }
 
 /// Loads the model in `dir` onto `device` (no autodiff).
@@ -147,12 +162,16 @@ pub fn load_dynamics(
             metadata.model.validate(state_dim)
         })
         .map_err(|e| ArtifactError::Invalid(e.to_string()))?;
-    let skeleton = NeuralSde::init(
-        metadata.spec.clone(),
-        metadata.scales.clone(),
-        metadata.model.clone(),
-        device,
-    );
+    // The skeleton's random weights are replaced at once; drawing them under the
+    // initialiser's lock keeps a concurrent fit's initial weights its seed's.
+    let skeleton = seeded_init(device, 0, || {
+        NeuralSde::init(
+            metadata.spec.clone(),
+            metadata.scales.clone(),
+            metadata.model.clone(),
+            device,
+        )
+    });
     let model = load_tensors(skeleton, &tensors, device)?;
     Ok((model, metadata))
 }

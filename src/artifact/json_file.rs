@@ -24,12 +24,22 @@ pub fn read_versioned_json<T: DeserializeOwned>(
     path: &Path,
     expected: u32,
 ) -> Result<T, ArtifactError> {
+    read_versioned_json_filled(path, expected, |_| {})
+}
+
+/// As [`read_versioned_json`], with `fill` adding fields that files of the same
+/// schema written before the fields existed lack (their old meaning, stated).
+pub fn read_versioned_json_filled<T: DeserializeOwned>(
+    path: &Path,
+    expected: u32,
+    fill: impl FnOnce(&mut serde_json::Value),
+) -> Result<T, ArtifactError> {
     let bytes = std::fs::read(path).map_err(|e| ArtifactError::io(path, e))?;
     let json_error = |e: serde_json::Error| ArtifactError::Json {
         file: path.to_path_buf(),
         message: e.to_string(),
     };
-    let value: serde_json::Value = serde_json::from_slice(&bytes).map_err(json_error)?;
+    let mut value: serde_json::Value = serde_json::from_slice(&bytes).map_err(json_error)?;
     let version = value.get("schema_version").and_then(|v| v.as_u64());
     if version != Some(u64::from(expected)) {
         return Err(ArtifactError::Schema {
@@ -38,6 +48,7 @@ pub fn read_versioned_json<T: DeserializeOwned>(
             expected,
         });
     }
+    fill(&mut value);
     serde_json::from_value(value).map_err(json_error)
 }
 

@@ -27,9 +27,7 @@ pub use policy::{
     load_policy, save_policy,
 };
 pub use safetensors_file::{parse_safetensors, safetensors_bytes};
-pub use tensors::{
-    NamedTensors, collect_param_ids, collect_tensors, load_tensors, load_tensors_with_ids,
-};
+pub use tensors::{NamedTensors, collect_tensors, load_tensors};
 
 /// Everything that can be wrong with an artifact.
 #[derive(Debug, thiserror::Error)]

@@ -16,6 +16,7 @@ use super::tensors::{collect_tensors, load_tensors};
 use super::{ArtifactError, sha256_hex};
 use crate::agent::{Actor, ActorConfig, PolicyLoopConfig};
 use crate::envs::TaskConfig;
+use crate::nn::seeded_init;
 
 pub const POLICY_SCHEMA_VERSION: u32 = 1;
 /// File stem of the best policy (by evaluation score).
@@ -101,6 +102,8 @@ pub fn load_policy(
         &dir.join(format!("{stem}.safetensors")),
         &metadata.weights_sha256,
     )?;
-    let actor = load_tensors(a.init(device), &tensors, device)?;
+    // As for dynamics: the skeleton's draws stay out of concurrent fits' seeds.
+    let skeleton = seeded_init(device, 0, || a.init(device));
+    let actor = load_tensors(skeleton, &tensors, device)?;
     Ok((actor, metadata))
 }

@@ -4,7 +4,7 @@
 
 use std::collections::BTreeMap;
 
-use burn::module::{Module, ModuleMapper, ModuleVisitor, Param, ParamId};
+use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use super::ArtifactError;
@@ -46,34 +46,9 @@ pub fn collect_tensors<M: Module>(module: &M) -> NamedTensors {
     collector.tensors
 }
 
-/// Every float parameter's [`ParamId`] by path: optimiser state is keyed by
-/// these, so a checkpoint saves them with the weights.
-pub fn collect_param_ids<M: Module>(module: &M) -> BTreeMap<String, u64> {
-    #[derive(Default)]
-    struct Ids {
-        path: Vec<String>,
-        ids: BTreeMap<String, u64>,
-    }
-    impl ModuleVisitor for Ids {
-        fn enter_module(&mut self, name: &str, _container_type: &str) {
-            self.path.push(name.to_string());
-        }
-        fn exit_module(&mut self, _name: &str, _container_type: &str) {
-            self.path.pop();
-        }
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            self.ids.insert(self.path.join("."), param.id.val());
-        }
-    }
-    let mut ids = Ids::default();
-    module.visit(&mut ids);
-    ids.ids
-}
-
 struct Loader<'a> {
     path: Vec<String>,
     tensors: &'a NamedTensors,
-    ids: Option<&'a BTreeMap<String, u64>>,
     device: Device,
     used: Vec<String>,
     error: Option<ArtifactError>,
@@ -103,10 +78,7 @@ impl ModuleMapper for Loader<'_> {
             });
             return param;
         }
-        let id: ParamId = match self.ids.and_then(|ids| ids.get(&name)) {
-            Some(&saved) => ParamId::from(saved),
-            None => param.id,
-        };
+        let id = param.id;
         self.used.push(name);
         // Keep whether the parameter trains, so a module loaded onto an autodiff device still learns.
         let require_grad = param.val().is_require_grad();
@@ -123,20 +95,9 @@ pub fn load_tensors<M: Module>(
     tensors: &NamedTensors,
     device: &Device,
 ) -> Result<M, ArtifactError> {
-    load_tensors_with_ids(module, tensors, None, device)
-}
-
-/// [`load_tensors`], also restoring each parameter's saved [`ParamId`] where `ids` has it.
-pub fn load_tensors_with_ids<M: Module>(
-    module: M,
-    tensors: &NamedTensors,
-    ids: Option<&BTreeMap<String, u64>>,
-    device: &Device,
-) -> Result<M, ArtifactError> {
     let mut loader = Loader {
         path: Vec::new(),
         tensors,
-        ids,
         device: device.clone(),
         used: Vec::new(),
         error: None,

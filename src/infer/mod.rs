@@ -11,12 +11,14 @@
 
 mod actor;
 mod dense;
+mod mlp_grad;
 mod sde;
 mod tiles;
 mod vector_math;
 
 pub use actor::FusedActor;
 pub use dense::{Dense, DenseMlp, GEMM_MIN_ROWS, MlpScratch, Rows};
+pub use mlp_grad::{Layer, MlpTape, ReluMlp};
 pub use sde::FusedSde;
 pub use tiles::MAX_TILE_ROWS;
 

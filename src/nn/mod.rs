@@ -1,7 +1,9 @@
 //! Network building blocks shared by the neural SDE and the SAC agent.
 
+mod adam;
 mod mlp;
 
+pub use adam::{Adam, AdamState, AdamStep, Moments};
 pub use mlp::{Activation, Mlp, MlpConfig};
 
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
@@ -20,7 +22,15 @@ pub fn normal<const D: usize>(shape: [usize; D], rng: &mut impl Rng, device: &De
 
 /// `n` standard normal draws, in the order [`normal`] fills its tensor.
 pub fn standard_normal(n: usize, rng: &mut impl Rng) -> Vec<f32> {
-    (0..n).map(|_| rng.sample(StandardNormal)).collect()
+    let mut values = Vec::with_capacity(n);
+    fill_standard_normal(&mut values, n, rng);
+    values
+}
+
+/// [`standard_normal`] into `values` (resized to `n`), reusing its memory.
+pub fn fill_standard_normal(values: &mut Vec<f32>, n: usize, rng: &mut impl Rng) {
+    values.clear();
+    values.extend((0..n).map(|_| rng.sample::<f32, _>(StandardNormal)));
 }
 
 /// Seeds burn's initialiser with `seed` and runs `init` under a process-wide

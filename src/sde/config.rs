@@ -107,9 +107,51 @@ impl SdeConfig {
     }
 }
 
+/// Where each step of L_data's window starts (eq. 6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LikelihoodPath {
+    /// Eq. 6 as written (and NUNO's code): step k + 1 starts from step k's sampled
+    /// particle. The default: the drift learns from its own samples; Σ comes out
+    /// over-dispersed on one step, because later steps also see the noise earlier
+    /// steps drew (docs/paper-map.md, known gaps).
+    Particle,
+    /// Every step starts from the recorded state before it: the exact likelihood
+    /// of the Euler–Maruyama chain given the observed states. Σ is calibrated on
+    /// one step, but the drift is less exact, model samples leave the data sooner
+    /// (weaker truncation of off-data actions) and long rollouts can diverge.
+    Data,
+}
+
+impl std::str::FromStr for LikelihoodPath {
+    type Err = String;
+
+    fn from_str(name: &str) -> Result<Self, Self::Err> {
+        match name {
+            "data" => Ok(Self::Data),
+            "particle" => Ok(Self::Particle),
+            other => Err(format!(
+                "unknown likelihood path {other:?}: use data or particle"
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for LikelihoodPath {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Data => "data",
+            Self::Particle => "particle",
+        })
+    }
+}
+
 /// Weights and sampling of the loss terms (eq. 3, 4, 6, 7; Appendix C.4).
 #[derive(Config, Debug, PartialEq)]
 pub struct LossConfig {
+    /// Where each step of L_data's window starts (docs/paper-map.md, deviations).
+    #[config(default = "LikelihoodPath::Particle")]
+    pub likelihood: LikelihoodPath,
     /// λ_data, weight of L_data (eq. 6, 7).
     #[config(default = 1.0)]
     pub lambda_data: f32,

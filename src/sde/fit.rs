@@ -14,7 +14,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::SdeError;
-use super::config::FitConfig;
+use super::config::{FitConfig, LikelihoodPath};
 use super::eta::FarField;
 use super::losses::WindowTensors;
 use super::model::NeuralSde;
@@ -91,6 +91,7 @@ pub fn validation_nll(
     model: &NeuralSde,
     windows: &WindowSampler,
     starts: &[usize],
+    path: LikelihoodPath,
     seed: u64,
     device: &Device,
 ) -> f32 {
@@ -107,7 +108,7 @@ pub fn validation_nll(
             device,
         );
         let noise = normal([chunk.len(), batch.horizon, state_dim], &mut rng, device);
-        let (nll, _) = model.data_nll(&tensors, noise);
+        let (nll, _) = model.data_nll(&tensors, noise, path);
         total += nll.into_scalar::<f32>() * chunk.len() as f32;
     }
     total / starts.len() as f32
@@ -171,7 +172,14 @@ pub fn fit(
     model.calibrate_h_bias(reference.clone());
 
     let mut best = model.valid();
-    let mut best_nll = validation_nll(&best, &valid_windows, &valid_starts, config.seed, device);
+    let mut best_nll = validation_nll(
+        &best,
+        &valid_windows,
+        &valid_starts,
+        config.loss.likelihood,
+        config.seed,
+        device,
+    );
     let (mut best_step, mut evals_without_improvement, mut step) = (0, 0, 0);
     while step < config.max_steps {
         // eq. 7 on a batch of windows of horizon H.
@@ -216,8 +224,14 @@ pub fn fit(
             };
             if evaluate {
                 let current = model.valid();
-                let nll =
-                    validation_nll(&current, &valid_windows, &valid_starts, config.seed, device);
+                let nll = validation_nll(
+                    &current,
+                    &valid_windows,
+                    &valid_starts,
+                    config.loss.likelihood,
+                    config.seed,
+                    device,
+                );
                 record.valid_nll = Some(nll);
                 if nll < best_nll {
                     (best, best_nll, best_step, evals_without_improvement) =

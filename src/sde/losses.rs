@@ -3,7 +3,7 @@
 
 use burn::tensor::Tensor;
 
-use super::config::LossConfig;
+use super::config::{LikelihoodPath, LossConfig};
 use super::model::{NeuralSde, constant};
 
 /// One batch of training windows as tensors.
@@ -35,13 +35,19 @@ pub struct LossTerms {
 
 impl NeuralSde {
     /// L_data (eq. 6): the Gaussian NLL of the window under Euler–Maruyama
-    /// transitions along one particle, summed over steps and dimensions,
-    /// averaged over the batch; errors are measured in normalised units.
-    /// Also returns the mean squared residual drift along the way.
+    /// transitions, each step started where `path` says, summed over steps and
+    /// dimensions, averaged over the batch; errors are measured in normalised
+    /// units. Also returns the mean squared residual drift along the way.
     ///
     /// # Shapes
-    /// - `noise` (ε of each step's particle): `[batch, horizon, state_dim]`
-    pub fn data_nll(&self, windows: &WindowTensors, noise: Tensor<3>) -> (Tensor<1>, Tensor<1>) {
+    /// - `noise` (ε of each step's particle, read on the particle path):
+    ///   `[batch, horizon, state_dim]`
+    pub fn data_nll(
+        &self,
+        windows: &WindowTensors,
+        noise: Tensor<3>,
+        path: LikelihoodPath,
+    ) -> (Tensor<1>, Tensor<1>) {
         let [batch, steps_plus_one, state_dim] = windows.states.dims();
         let horizon = steps_plus_one - 1;
         let act_dim = windows.actions.dims()[2];
@@ -57,20 +63,24 @@ impl NeuralSde {
             t.clone().narrow(1, k, 1).reshape([batch, width])
         };
 
-        let mut particle = at(&windows.states, 0, state_dim);
+        let mut start = at(&windows.states, 0, state_dim);
         let mut nll = Tensor::<1>::zeros([1], &device);
         let mut residual = Tensor::<1>::zeros([1], &device);
         for k in 0..horizon {
             let action = at(&windows.actions, k, act_dim);
-            let terms = self.terms(particle, action);
+            let terms = self.terms(start, action);
             let variance = terms.diffusion().square() * c.spec.dt;
-            let error = at(&windows.states, k + 1, state_dim) - terms.mean.clone();
+            let next = at(&windows.states, k + 1, state_dim);
+            let error = next.clone() - terms.mean.clone();
             // Normalised units: error² / var is unchanged, log var shifts by a constant.
             let variance_hat = variance.clone() * inv_scale2.clone();
             let term = error.square() / variance.clone() + variance_hat.log();
             nll = nll + term.sum().div_scalar(batch as f32);
             residual = residual + terms.residual.square().sum_dim(1).mean();
-            particle = terms.mean + variance.sqrt() * at(&noise, k, state_dim);
+            start = match path {
+                LikelihoodPath::Data => next,
+                LikelihoodPath::Particle => terms.mean + variance.sqrt() * at(&noise, k, state_dim),
+            };
         }
         (nll, residual.div_scalar(horizon as f32))
     }
@@ -90,7 +100,7 @@ impl NeuralSde {
     ) -> LossTerms {
         let [batch, _, state_dim] = windows.states.dims();
         let act_dim = windows.actions.dims()[2];
-        let (data, residual) = self.data_nll(windows, step_noise);
+        let (data, residual) = self.data_nll(windows, step_noise, config.likelihood);
         let first_state = windows
             .states
             .clone()

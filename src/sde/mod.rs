@@ -21,7 +21,7 @@ pub use calibration::{
     CalibrationConfig, CalibrationReport, DiffusionAt, DimensionCalibration, HorizonCalibration,
     TruncationRate, Z_STD_BAND, calibration_report,
 };
-pub use config::{FitConfig, LossConfig, SdeConfig};
+pub use config::{FitConfig, LikelihoodPath, LossConfig, SdeConfig};
 pub use device::ComputeDevice;
 pub use eta::{DistanceAware, EtaLosses, FarField};
 pub use eta_report::{EtaComparison, EtaReport, EtaReportConfig, auroc, eta_report};

@@ -18,7 +18,7 @@ pub struct OpenLoopRollout {
     pub state_dim: usize,
     /// `[batch, particles, horizon + 1, state_dim]`
     pub states: Vec<f32>,
-    /// η_ϕ(s̃_k, a_k): `[batch, particles, horizon]`
+    /// η_ϕ(s̃_k, a_k), η_max where s̃_k is not finite: `[batch, particles, horizon]`
     pub eta: Vec<f32>,
 }
 
@@ -89,7 +89,13 @@ impl NeuralSde {
         }
         // [rows, horizon + 1, state_dim] and [rows, horizon], then flattened row-major.
         let states = to_f32_vec(Tensor::stack::<3>(states, 1));
-        let eta = to_f32_vec(Tensor::cat(etas, 1));
+        // A particle whose state stopped being finite (the drift diverged off the
+        // data) is as far from the data as η goes.
+        let eta_max = self.constants.config.eta_max;
+        let eta = to_f32_vec(Tensor::cat(etas, 1))
+            .into_iter()
+            .map(|eta| if eta.is_finite() { eta } else { eta_max })
+            .collect();
         OpenLoopRollout {
             batch,
             particles,

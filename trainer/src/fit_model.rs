@@ -11,8 +11,8 @@ use nuno::artifact::{DatasetInfo, DynamicsProvenance, save_dynamics, sha256_file
 use nuno::data::{DatasetFormat, read_dataset};
 use nuno::envs::{MujocoTask, TaskConfig, TaskName};
 use nuno::sde::{
-    CalibrationConfig, ComputeDevice, DynamicsSpec, FitConfig, LossConfig, SdeConfig,
-    ThresholdConfig, calibration_report, compute_thresholds, fit, prediction_error,
+    CalibrationConfig, ComputeDevice, DynamicsSpec, FitConfig, LikelihoodPath, LossConfig,
+    SdeConfig, ThresholdConfig, calibration_report, compute_thresholds, fit, prediction_error,
 };
 
 use crate::eta_report::{action_space, calibration_charts, print_calibration};
@@ -59,6 +59,10 @@ pub struct Args {
     /// see docs/paper-map.md before using it on high-dimensional data).
     #[arg(long)]
     lambda_far: Option<f32>,
+    /// Where L_data's steps start: particle (eq. 6 as written: the previous step's
+    /// sample) or data (the recorded state before each step; docs/paper-map.md).
+    #[arg(long, default_value_t = LikelihoodPath::Particle)]
+    likelihood: LikelihoodPath,
     /// W^max of h(η): the diffusion beyond the data, in multiples of each state
     /// dimension's diffusion scale; one value for all, or one per dimension.
     #[arg(long, value_delimiter = ',', default_value = "1")]
@@ -79,6 +83,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     loss.radius = args.radius.unwrap_or(loss.radius);
     loss.lambda_grad = args.lambda_grad.unwrap_or(loss.lambda_grad);
     loss.lambda_far = args.lambda_far.unwrap_or(loss.lambda_far);
+    loss.likelihood = args.likelihood;
     loss.validate()
         .context("check --radius, --lambda-grad and --lambda-far")?;
     anyhow::ensure!(args.max_steps > 0, "--max-steps must be at least 1");

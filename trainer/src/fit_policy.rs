@@ -82,10 +82,11 @@ pub struct Args {
     /// Compute device: cpu, or wgpu in a build with the `wgpu` feature.
     #[arg(long, default_value_t = ComputeDevice::Cpu)]
     device: ComputeDevice,
-    /// What evaluates model rollouts and evaluation episodes: the fused CPU
-    /// path, or burn on --device (SAC's updates always run in burn).
-    #[arg(long, value_enum, default_value_t = Kernel::Fused)]
-    kernel: Kernel,
+    /// What runs SAC's updates, model rollouts and evaluation episodes: the
+    /// fused CPU path, or burn on --device (default: fused on cpu, burn on wgpu).
+    /// Either kernel resumes the other's checkpoints.
+    #[arg(long, value_enum)]
+    kernel: Option<Kernel>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -145,7 +146,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     config.eval_episodes = args.eval_episodes;
     config.seed = args.seed;
 
-    let batch_dynamics = args.kernel.dynamics(&dynamics);
+    let kernel = args.kernel.unwrap_or(match args.device {
+        ComputeDevice::Cpu => Kernel::Fused,
+        ComputeDevice::Wgpu => Kernel::Burn,
+    });
+    let batch_dynamics = kernel.dynamics(&dynamics);
     let ctx = LoopContext {
         dataset: &dataset,
         dynamics: batch_dynamics.as_ref(),
@@ -155,7 +160,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             &dynamics.constants.spec.split,
             dynamics.constants.spec.dt,
         ),
-        kernel: args.kernel,
+        kernel,
     };
     let thresholds = metadata.provenance.thresholds.as_ref();
     let mut training = PolicyTraining::new(config, &ctx, thresholds, &device)?;
@@ -266,14 +271,15 @@ fn write_metrics(out: &Path, history: &[EpochRecord]) -> anyhow::Result<()> {
     let mut csv = String::from(
         "epoch,step,charts/SPS,charts/normalized_score,charts/normalized_score_std,charts/episodic_return,\
          losses/qf1_values,losses/qf1_loss,losses/qf2_loss,losses/actor_loss,losses/alpha,losses/alpha_loss,\
-         losses/entropy,rollout/mean_length,rollout/mean_eta,rollout/truncated,rollout/terminated,\
-         rollout/mean_penalized_reward,eta/policy,eta/dataset,eta/random,model_buffer\n",
+         losses/entropy,rollout/mean_length,rollout/mean_eta,rollout/truncated,rollout/terminated,rollout/diverged,\
+         rollout/mean_penalized_reward,eta/policy,eta/dataset,eta/random,model_buffer,\
+         time/updates,time/rollouts,time/evaluation,time/eta_probe\n",
     );
     let mut jsonl = String::new();
     for r in history {
         let (l, ro, e) = (&r.losses, &r.rollout, &r.eta);
         csv.push_str(&format!(
-            "{},{},{:.3},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{:.3},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3}\n",
             r.epoch,
             r.step,
             r.sps,
@@ -291,11 +297,16 @@ fn write_metrics(out: &Path, history: &[EpochRecord]) -> anyhow::Result<()> {
             ro.mean_eta,
             ro.truncated,
             ro.terminated,
+            ro.diverged,
             ro.mean_penalized_reward,
             e.policy,
             e.dataset,
             e.random,
-            r.model_buffer
+            r.model_buffer,
+            r.seconds.updates,
+            r.seconds.rollouts,
+            r.seconds.evaluation,
+            r.seconds.eta_probe
         ));
         jsonl.push_str(&serde_json::to_string(r)?);
         jsonl.push('\n');

@@ -17,6 +17,11 @@ fn fit_model_names_unusable_loss_flags_before_reading_anything() {
         ("--w-max", "1,2", "w_max has 2 values"),
         ("--w-max", "0", "w_max value 0"),
         ("--threshold-windows", "0", "max_windows = 0"),
+        (
+            "--likelihood",
+            "teacher",
+            "unknown likelihood path \"teacher\"",
+        ),
     ] {
         let flag_value = format!("{flag}={value}");
         let stderr = fails(&[

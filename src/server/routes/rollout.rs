@@ -75,6 +75,9 @@ pub struct Trajectory {
     /// Accumulated η passed the threshold at step `truncation_step` (that step is not kept).
     pub truncated: bool,
     pub truncation_step: Option<usize>,
+    /// The model's next state, reward or η stopped being finite after `length`
+    /// steps (its drift diverged off the data); that step is not kept.
+    pub diverged: bool,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
@@ -233,6 +236,7 @@ pub async fn rollout(
                         terminal: t.outcome[row] == StepOutcome::Terminal,
                         truncated,
                         truncation_step: truncated.then_some(t.kept[row]),
+                        diverged: t.outcome[row] == StepOutcome::Diverged,
                     }
                 })
                 .collect();

@@ -1,0 +1,464 @@
+//! SAC's update, the same as [`Sac::update`], on plain `f32` buffers: the actor
+//! and the twin critics as [`ReluMlp`]s (each product one `gemm` over the batch
+//! on all cores), the tanh-Gaussian's gradient written out, and Adam from
+//! [`crate::nn::Adam`], the one both kernels step with. A [`FusedSac`] starts
+//! from a burn [`Sac`] and writes back into it, so the policy loop, evaluation
+//! and checkpoints see one agent whichever kernel trains it.
+
+use rand_chacha::ChaCha8Rng;
+
+use super::sac::{Sac, SacAdam, SacLosses};
+use crate::data::TransitionBatch;
+use crate::infer::{MlpTape, ReluMlp};
+use crate::nn::{Adam, AdamState, fill_standard_normal, to_f32_vec};
+
+/// ½·log(2π), the Gaussian's normalising constant per dimension.
+const HALF_LOG_TWO_PI: f32 = 0.918_938_5;
+
+/// The agent's networks, temperature and Adam state as host buffers.
+pub struct FusedSac {
+    obs_dim: usize,
+    act_dim: usize,
+    gamma: f32,
+    tau: f64,
+    lr: (f64, f64, f64),
+    target_entropy: f32,
+    log_std: (f32, f32),
+    /// The action box: a = centre + half·tanh(u).
+    half: Vec<f32>,
+    center: Vec<f32>,
+    log_half_sum: f32,
+    adam: Adam,
+    actor: ReluMlp,
+    q1: ReluMlp,
+    q2: ReluMlp,
+    target_q1: ReluMlp,
+    target_q2: ReluMlp,
+    log_alpha: f32,
+    state: SacAdam,
+    work: Workspace,
+}
+
+/// Buffers reused by every update.
+struct Workspace {
+    actor_tape: MlpTape,
+    q1_tape: MlpTape,
+    q2_tape: MlpTape,
+    actor_grads: ReluMlp,
+    q1_grads: ReluMlp,
+    q2_grads: ReluMlp,
+    noise: Vec<f32>,
+    sample: Sample,
+    critic_input: Vec<f32>,
+    y: Vec<f32>,
+    grad_q1: Vec<f32>,
+    grad_q2: Vec<f32>,
+    grad_input: Vec<f32>,
+    grad_action: Vec<f32>,
+    grad_actor: Vec<f32>,
+}
+
+/// ã ~ π(·|s) for a batch, and what its gradient needs.
+#[derive(Default)]
+struct Sample {
+    action: Vec<f32>,
+    log_prob: Vec<f32>,
+    /// tanh(u)
+    squashed: Vec<f32>,
+    /// σ = exp(clamped log σ)
+    std: Vec<f32>,
+    /// Whether log σ lay inside its clamp (else its gradient is 0).
+    inside: Vec<bool>,
+}
+
+/// Gradients of one loss, by network, as [`FusedSac::gradients`] returns them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FusedGradients {
+    pub q1: ReluMlp,
+    pub q2: ReluMlp,
+    pub actor: ReluMlp,
+    pub log_alpha: f32,
+}
+
+impl FusedSac {
+    /// The state of `sac` (networks, temperature, Adam) on host buffers.
+    pub fn from_sac(sac: &Sac) -> Self {
+        let c = &sac.actor.config;
+        let (half, center) = c.box_half_center();
+        let actor = ReluMlp::from_burn(&sac.actor.net);
+        let q1 = ReluMlp::from_burn(&sac.critic.q1);
+        let q2 = ReluMlp::from_burn(&sac.critic.q2);
+        let work = Workspace {
+            actor_tape: MlpTape::default(),
+            q1_tape: MlpTape::default(),
+            q2_tape: MlpTape::default(),
+            actor_grads: actor.zeros_like(),
+            q1_grads: q1.zeros_like(),
+            q2_grads: q2.zeros_like(),
+            noise: Vec::new(),
+            sample: Sample::default(),
+            critic_input: Vec::new(),
+            y: Vec::new(),
+            grad_q1: Vec::new(),
+            grad_q2: Vec::new(),
+            grad_input: Vec::new(),
+            grad_action: Vec::new(),
+            grad_actor: Vec::new(),
+        };
+        Self {
+            obs_dim: c.obs_dim,
+            act_dim: c.act_dim,
+            gamma: sac.config.gamma as f32,
+            tau: sac.config.tau,
+            lr: (
+                sac.config.critic_lr,
+                sac.config.actor_lr,
+                sac.config.alpha_lr,
+            ),
+            target_entropy: sac.target_entropy as f32,
+            log_std: (c.log_std_min, c.log_std_max),
+            log_half_sum: half.iter().map(|h| h.ln()).sum(),
+            half,
+            center,
+            adam: sac.optimizer(),
+            actor,
+            q1,
+            q2,
+            target_q1: ReluMlp::from_burn(&sac.target_critic.q1),
+            target_q2: ReluMlp::from_burn(&sac.target_critic.q2),
+            log_alpha: to_f32_vec(sac.temperature.log_alpha.val())[0],
+            state: sac.adam.clone(),
+            work,
+        }
+    }
+
+    /// Writes every network, the temperature and the Adam state into `sac`.
+    pub fn write_to(&self, sac: &mut Sac) {
+        self.write_actor_to(sac);
+        sac.critic.q1 = self.q1.write_to(sac.critic.q1.clone());
+        sac.critic.q2 = self.q2.write_to(sac.critic.q2.clone());
+        sac.target_critic.q1 = self.target_q1.write_to(sac.target_critic.q1.clone());
+        sac.target_critic.q2 = self.target_q2.write_to(sac.target_critic.q2.clone());
+        sac.temperature = sac.temperature.with_log_alpha(self.log_alpha);
+        sac.adam = self.state.clone();
+    }
+
+    /// Writes the actor alone (what rollouts need) into `sac`.
+    pub fn write_actor_to(&self, sac: &mut Sac) {
+        sac.actor.net = self.actor.write_to(sac.actor.net.clone());
+    }
+
+    /// One SAC update on `batch`, drawing ε from `rng` exactly as [`Sac::update`] does.
+    pub fn update(&mut self, batch: &TransitionBatch, rng: &mut ChaCha8Rng) -> SacLosses {
+        let b = batch.rewards.len();
+        let alpha = self.log_alpha.exp();
+        fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
+        self.critic_target(batch, alpha);
+
+        // Critic step.
+        let critic = self.critic_gradients(batch);
+        let step = self.adam.begin(&mut self.state.critic, self.lr.0);
+        for (prefix, net, grads) in [
+            ("q1", &mut self.q1, &self.work.q1_grads),
+            ("q2", &mut self.q2, &self.work.q2_grads),
+        ] {
+            for (path, param, grad) in net.params_with(grads) {
+                let moments = self
+                    .state
+                    .critic
+                    .moments
+                    .entry(format!("{prefix}.{path}"))
+                    .or_default();
+                self.adam.update(step, param, grad, moments);
+            }
+        }
+
+        // Actor step, through the updated critics.
+        fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
+        let actor_loss = self.actor_gradients(&batch.observations, alpha);
+        let step = self.adam.begin(&mut self.state.actor, self.lr.1);
+        for (path, param, grad) in self.actor.params_with(&self.work.actor_grads) {
+            let moments = self
+                .state
+                .actor
+                .moments
+                .entry(format!("net.{path}"))
+                .or_default();
+            self.adam.update(step, param, grad, moments);
+        }
+
+        // Temperature step.
+        let (alpha_loss, alpha_grad, entropy) = self.alpha_gradient();
+        let mut log_alpha = [self.log_alpha];
+        let step = self.adam.begin(&mut self.state.alpha, self.lr.2);
+        let moments = self
+            .state
+            .alpha
+            .moments
+            .entry("log_alpha".into())
+            .or_default();
+        self.adam
+            .update(step, &mut log_alpha, &[alpha_grad], moments);
+        self.log_alpha = log_alpha[0];
+
+        // Targets: Q̄ ← τ·Q + (1 − τ)·Q̄, with burn's f32 factors.
+        let (tau, keep) = (self.tau as f32, (1.0 - self.tau) as f32);
+        for (target, online) in [
+            (&mut self.target_q1, &self.q1),
+            (&mut self.target_q2, &self.q2),
+        ] {
+            for (_, target, online) in target.params_with(online) {
+                for (t, o) in target.iter_mut().zip(online) {
+                    *t = o * tau + *t * keep;
+                }
+            }
+        }
+
+        SacLosses {
+            actor_loss,
+            alpha,
+            alpha_loss,
+            entropy,
+            ..critic
+        }
+    }
+
+    /// Every gradient of one update's three losses at the current weights
+    /// (the actor's through the current critics, not the stepped ones), with
+    /// ε drawn as [`FusedSac::update`] draws it: what the kernel-equivalence
+    /// tests compare with burn's autodiff.
+    pub fn gradients(&mut self, batch: &TransitionBatch, rng: &mut ChaCha8Rng) -> FusedGradients {
+        let b = batch.rewards.len();
+        let alpha = self.log_alpha.exp();
+        fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
+        self.critic_target(batch, alpha);
+        self.critic_gradients(batch);
+        fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
+        self.actor_gradients(&batch.observations, alpha);
+        let (_, log_alpha, _) = self.alpha_gradient();
+        FusedGradients {
+            q1: self.work.q1_grads.clone(),
+            q2: self.work.q2_grads.clone(),
+            actor: self.work.actor_grads.clone(),
+            log_alpha,
+        }
+    }
+
+    /// y = r + γ(1 − d)(min_i Q̄_i(s', ã') − α·log π(ã'|s')), ã' drawn with
+    /// `work.noise`, into `work.y`.
+    fn critic_target(&mut self, batch: &TransitionBatch, alpha: f32) {
+        let b = batch.rewards.len();
+        let w = &mut self.work;
+        self.actor
+            .forward(&batch.next_observations, b, &mut w.actor_tape);
+        sample(
+            &w.actor_tape.output,
+            &w.noise,
+            (&self.half, &self.center, self.log_half_sum),
+            self.log_std,
+            &mut w.sample,
+        );
+        concat_rows(
+            &batch.next_observations,
+            &w.sample.action,
+            self.obs_dim,
+            self.act_dim,
+            &mut w.critic_input,
+        );
+        self.target_q1.forward(&w.critic_input, b, &mut w.q1_tape);
+        self.target_q2.forward(&w.critic_input, b, &mut w.q2_tape);
+        w.y.clear();
+        for r in 0..b {
+            let min_q = w.q1_tape.output[r].min(w.q2_tape.output[r]);
+            let next_value = min_q - w.sample.log_prob[r] * alpha;
+            let not_done = -batch.terminals[r] + 1.0;
+            w.y.push(batch.rewards[r] + not_done * next_value * self.gamma);
+        }
+    }
+
+    /// ∂L_Q/∂θ of both critics into `work.q*_grads`; returns the critic's losses.
+    fn critic_gradients(&mut self, batch: &TransitionBatch) -> SacLosses {
+        let b = batch.rewards.len();
+        let w = &mut self.work;
+        concat_rows(
+            &batch.observations,
+            &batch.actions,
+            self.obs_dim,
+            self.act_dim,
+            &mut w.critic_input,
+        );
+        let mut losses = SacLosses::default();
+        for (net, tape, grads, grad_q, loss) in [
+            (
+                &self.q1,
+                &mut w.q1_tape,
+                &mut w.q1_grads,
+                &mut w.grad_q1,
+                &mut losses.qf1_loss,
+            ),
+            (
+                &self.q2,
+                &mut w.q2_tape,
+                &mut w.q2_grads,
+                &mut w.grad_q2,
+                &mut losses.qf2_loss,
+            ),
+        ] {
+            net.forward(&w.critic_input, b, tape);
+            grad_q.clear();
+            let mut squares = 0.0;
+            for (q, y) in tape.output.iter().zip(&w.y) {
+                squares += (q - y) * (q - y);
+                grad_q.push(2.0 * (q - y) / b as f32);
+            }
+            *loss = squares / b as f32;
+            net.backward(tape, grad_q, Some(grads), None);
+        }
+        losses.qf1_values = mean(&w.q1_tape.output);
+        losses
+    }
+
+    /// ∂L_π/∂θ of the actor into `work.actor_grads`, ã drawn with
+    /// `work.noise`; returns L_π. `work.sample` keeps log π(ã|s).
+    fn actor_gradients(&mut self, observations: &[f32], alpha: f32) -> f32 {
+        let (o, a) = (self.obs_dim, self.act_dim);
+        let b = observations.len() / o;
+        let w = &mut self.work;
+        self.actor.forward(observations, b, &mut w.actor_tape);
+        sample(
+            &w.actor_tape.output,
+            &w.noise,
+            (&self.half, &self.center, self.log_half_sum),
+            self.log_std,
+            &mut w.sample,
+        );
+        concat_rows(observations, &w.sample.action, o, a, &mut w.critic_input);
+        self.q1.forward(&w.critic_input, b, &mut w.q1_tape);
+        self.q2.forward(&w.critic_input, b, &mut w.q2_tape);
+
+        // min(Q₁, Q₂) passes −1/B to the smaller critic of each row.
+        let mut loss = 0.0;
+        w.grad_q1.clear();
+        w.grad_q2.clear();
+        for r in 0..b {
+            let (q1, q2) = (w.q1_tape.output[r], w.q2_tape.output[r]);
+            loss += w.sample.log_prob[r] * alpha - q1.min(q2);
+            let first = q1 <= q2;
+            w.grad_q1.push(if first { -1.0 / b as f32 } else { 0.0 });
+            w.grad_q2.push(if first { 0.0 } else { -1.0 / b as f32 });
+        }
+        // ∂L/∂ã through both critics (inputs only; the critics do not learn here).
+        w.grad_action.clear();
+        w.grad_action.resize(b * a, 0.0);
+        for (net, tape, grad_q) in [
+            (&self.q1, &mut w.q1_tape, &w.grad_q1),
+            (&self.q2, &mut w.q2_tape, &w.grad_q2),
+        ] {
+            net.backward(tape, grad_q, None, Some(&mut w.grad_input));
+            for (g, row) in w
+                .grad_action
+                .chunks_exact_mut(a)
+                .zip(w.grad_input.chunks_exact(o + a))
+            {
+                for (g, x) in g.iter_mut().zip(&row[o..]) {
+                    *g += x;
+                }
+            }
+        }
+        // Through ã = centre + half·tanh(u), u = μ + σ·ε, and log π's own terms:
+        // ∂log π/∂u = 2·tanh(u) (from −log(1 − tanh²u)), ∂log π/∂log σ = −1.
+        let per_row = alpha / b as f32;
+        w.grad_actor.resize(b * 2 * a, 0.0);
+        let s = &w.sample;
+        for r in 0..b {
+            for j in 0..a {
+                let i = r * a + j;
+                let t = s.squashed[i];
+                let g_u = w.grad_action[i] * self.half[j] * (1.0 - t * t) + per_row * 2.0 * t;
+                w.grad_actor[r * 2 * a + j] = g_u;
+                w.grad_actor[r * 2 * a + a + j] = if s.inside[i] {
+                    g_u * s.std[i] * w.noise[i] - per_row
+                } else {
+                    0.0
+                };
+            }
+        }
+        self.actor.backward(
+            &mut w.actor_tape,
+            &w.grad_actor,
+            Some(&mut w.actor_grads),
+            None,
+        );
+        loss / b as f32
+    }
+
+    /// L_α = mean −log α·(log π(ã|s) + H̄) on the actor step's sample: returns
+    /// (L_α, ∂L_α/∂log α, the entropy estimate −mean log π).
+    fn alpha_gradient(&self) -> (f32, f32, f32) {
+        let log_prob = &self.work.sample.log_prob;
+        let mean_log_prob = mean(log_prob);
+        let grad = -(mean_log_prob + self.target_entropy);
+        (self.log_alpha * grad, grad, -mean_log_prob)
+    }
+
+    /// Adam's state (for tests and checkpoints).
+    pub fn adam_state(&self) -> (&AdamState, &AdamState, &AdamState) {
+        (&self.state.actor, &self.state.critic, &self.state.alpha)
+    }
+}
+
+/// a = centre + half·tanh(μ + σ·ε) and log π(a|s) from the actor's output
+/// `[rows, 2·act_dim]` (μ, then log σ before its clamp), as `Actor::sample`.
+fn sample(
+    out: &[f32],
+    noise: &[f32],
+    (half, center, log_half_sum): (&[f32], &[f32], f32),
+    (low, high): (f32, f32),
+    s: &mut Sample,
+) {
+    let a = half.len();
+    let rows = out.len() / (2 * a);
+    for v in [&mut s.action, &mut s.squashed, &mut s.std] {
+        v.resize(rows * a, 0.0);
+    }
+    s.inside.resize(rows * a, false);
+    s.log_prob.resize(rows, 0.0);
+    for r in 0..rows {
+        let mut log_prob = 0.0;
+        for j in 0..a {
+            let i = r * a + j;
+            let (mean, raw) = (out[r * 2 * a + j], out[r * 2 * a + a + j]);
+            let log_std = raw.clamp(low, high);
+            let std = log_std.exp();
+            let eps = noise[i];
+            let u = mean + std * eps;
+            let t = u.tanh();
+            // log(1 − tanh²u) = 2·(log 2 − u − softplus(−2u)), stable for large |u|.
+            let squash = 2.0 * (std::f32::consts::LN_2 - u - softplus(-2.0 * u));
+            log_prob += -0.5 * eps * eps - log_std - HALF_LOG_TWO_PI - squash;
+            s.inside[i] = (low..=high).contains(&raw);
+            s.std[i] = std;
+            s.squashed[i] = t;
+            s.action[i] = t * half[j] + center[j];
+        }
+        s.log_prob[r] = log_prob - log_half_sum;
+    }
+}
+
+/// log(1 + eˣ) without overflow.
+fn softplus(x: f32) -> f32 {
+    x.max(0.0) + (-x.abs()).exp().ln_1p()
+}
+
+/// `[left | right]` row by row into `out`.
+fn concat_rows(left: &[f32], right: &[f32], lw: usize, rw: usize, out: &mut Vec<f32>) {
+    out.clear();
+    for (l, r) in left.chunks_exact(lw).zip(right.chunks_exact(rw)) {
+        out.extend_from_slice(l);
+        out.extend_from_slice(r);
+    }
+}
+
+fn mean(values: &[f32]) -> f32 {
+    values.iter().sum::<f32>() / values.len().max(1) as f32
+}

@@ -1,0 +1,304 @@
+//! Training a ReLU MLP on plain `f32` buffers: the forward pass keeps each
+//! layer's input, the backward pass turns the output's gradient into every
+//! weight's and bias's (`∂W = xᵀ·g`, `∂b = Σ_rows g`) and the input's
+//! (`g ← (g·Wᵀ) ⊙ relu'(z)`). Each product is one `gemm` over the whole batch,
+//! spread over the cores; buffers live in the tape and are reused every call.
+
+use burn::module::{Module, ModuleMapper, Param};
+use burn::tensor::{Tensor, TensorData};
+
+use crate::nn::{Activation, Mlp, to_f32_vec};
+
+/// From this many multiply-adds a product is split over the cores.
+const PARALLEL_MIN_FLOPS: usize = 1 << 18;
+
+/// One dense layer `y = x·W + b`, W row-major `[d_in, d_out]` (burn's layout).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Layer {
+    pub d_in: usize,
+    pub d_out: usize,
+    pub weight: Vec<f32>,
+    pub bias: Vec<f32>,
+}
+
+/// An MLP with ReLU between its layers and none after the last: SAC's actor and
+/// critics. Also holds gradients, which have the parameters' shapes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReluMlp {
+    pub layers: Vec<Layer>,
+}
+
+/// What a forward pass keeps for the backward pass, and the buffers both use.
+#[derive(Debug, Clone, Default)]
+pub struct MlpTape {
+    rows: usize,
+    /// The input of each layer, `[rows, d_in]` (the ReLU outputs past the first).
+    inputs: Vec<Vec<f32>>,
+    /// The last layer's output, `[rows, d_out]`.
+    pub output: Vec<f32>,
+    grad: Vec<f32>,
+    grad_next: Vec<f32>,
+}
+
+impl ReluMlp {
+    /// The weights of a burn [`Mlp`] with ReLU activations.
+    pub fn from_burn(mlp: &Mlp) -> Self {
+        assert_eq!(
+            mlp.activation,
+            Activation::Relu,
+            "ReluMlp needs ReLU layers"
+        );
+        let layers = mlp
+            .layers
+            .iter()
+            .map(|layer| {
+                let [d_in, d_out] = layer.weight.val().dims();
+                Layer {
+                    d_in,
+                    d_out,
+                    weight: to_f32_vec(layer.weight.val()),
+                    bias: layer
+                        .bias
+                        .as_ref()
+                        .map_or(vec![0.0; d_out], |b| to_f32_vec(b.val())),
+                }
+            })
+            .collect();
+        Self { layers }
+    }
+
+    /// `mlp` with these weights (parameter ids and trainability kept).
+    pub fn write_to(&self, mlp: Mlp) -> Mlp {
+        struct Writer<'a> {
+            layers: &'a [Layer],
+            path: Vec<String>,
+        }
+        impl ModuleMapper for Writer<'_> {
+            fn enter_module(&mut self, name: &str, _: &str) {
+                self.path.push(name.to_string());
+            }
+            fn exit_module(&mut self, _: &str, _: &str) {
+                self.path.pop();
+            }
+            fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+                let (id, old) = (param.id, param.val());
+                let values = match self.path.as_slice() {
+                    [_, index, leaf] => index.parse::<usize>().ok().and_then(|i| {
+                        let layer = self.layers.get(i)?;
+                        match leaf.as_str() {
+                            "weight" => Some(layer.weight.clone()),
+                            "bias" => Some(layer.bias.clone()),
+                            _ => None,
+                        }
+                    }),
+                    _ => None,
+                };
+                let values = values.expect("ReluMlp::write_to: the MLP's layout");
+                let require_grad = old.is_require_grad();
+                let tensor = Tensor::from_data(TensorData::new(values, old.dims()), &old.device());
+                Param::initialized(id, tensor.set_require_grad(require_grad))
+            }
+        }
+        mlp.map(&mut Writer {
+            layers: &self.layers,
+            path: Vec::new(),
+        })
+    }
+
+    /// Zeros of this network's shape.
+    pub fn zeros_like(&self) -> Self {
+        Self {
+            layers: self
+                .layers
+                .iter()
+                .map(|l| Layer {
+                    d_in: l.d_in,
+                    d_out: l.d_out,
+                    weight: vec![0.0; l.weight.len()],
+                    bias: vec![0.0; l.bias.len()],
+                })
+                .collect(),
+        }
+    }
+
+    /// Each parameter under its burn module path (`layers.0.weight`, ...),
+    /// mutably, with the same parameter of `other` (gradients, a target).
+    pub fn params_with<'a>(
+        &'a mut self,
+        other: &'a Self,
+    ) -> impl Iterator<Item = (String, &'a mut Vec<f32>, &'a Vec<f32>)> {
+        self.layers
+            .iter_mut()
+            .zip(&other.layers)
+            .enumerate()
+            .flat_map(|(i, (l, o))| {
+                [
+                    (format!("layers.{i}.weight"), &mut l.weight, &o.weight),
+                    (format!("layers.{i}.bias"), &mut l.bias, &o.bias),
+                ]
+            })
+    }
+
+    pub fn d_in(&self) -> usize {
+        self.layers[0].d_in
+    }
+
+    pub fn d_out(&self) -> usize {
+        self.layers[self.layers.len() - 1].d_out
+    }
+
+    /// The network on `rows` rows of `input` (`[rows, d_in]`), into `tape.output`,
+    /// keeping what [`ReluMlp::backward`] needs.
+    pub fn forward(&self, input: &[f32], rows: usize, tape: &mut MlpTape) {
+        assert_eq!(input.len(), rows * self.d_in(), "MLP input size");
+        let last = self.layers.len() - 1;
+        tape.rows = rows;
+        tape.inputs.resize_with(self.layers.len(), Vec::new);
+        tape.inputs[0].clear();
+        tape.inputs[0].extend_from_slice(input);
+        for (i, layer) in self.layers.iter().enumerate() {
+            let (before, after) = tape.inputs.split_at_mut(i + 1);
+            let out = if i == last {
+                &mut tape.output
+            } else {
+                &mut after[0]
+            };
+            out.resize(rows * layer.d_out, 0.0);
+            let x = &before[i];
+            // out = x·W
+            product(
+                (rows, layer.d_out, layer.d_in),
+                out,
+                (x, layer.d_in as isize, 1),
+                (&layer.weight, layer.d_out as isize, 1),
+            );
+            for row in out.chunks_exact_mut(layer.d_out) {
+                for (y, b) in row.iter_mut().zip(&layer.bias) {
+                    *y += b;
+                    if i != last {
+                        *y = y.max(0.0);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Back-propagates `grad_output` (`[rows, d_out]`, ∂L/∂output) through the
+    /// last [`ReluMlp::forward`]: writes ∂L/∂θ into `grads` (overwriting) and
+    /// ∂L/∂input into `grad_input` (`[rows, d_in]`), each only when asked.
+    pub fn backward(
+        &self,
+        tape: &mut MlpTape,
+        grad_output: &[f32],
+        mut grads: Option<&mut ReluMlp>,
+        grad_input: Option<&mut Vec<f32>>,
+    ) {
+        let rows = tape.rows;
+        assert_eq!(
+            grad_output.len(),
+            rows * self.d_out(),
+            "MLP output gradient size"
+        );
+        tape.grad.clear();
+        tape.grad.extend_from_slice(grad_output);
+        let wants_input = grad_input.is_some();
+        for (i, layer) in self.layers.iter().enumerate().rev() {
+            let x = &tape.inputs[i];
+            if let Some(grads) = grads.as_deref_mut() {
+                let g = &mut grads.layers[i];
+                // ∂W = xᵀ·g: x read column-major as a [d_in, rows] matrix.
+                product(
+                    (layer.d_in, layer.d_out, rows),
+                    &mut g.weight,
+                    (x, 1, layer.d_in as isize),
+                    (&tape.grad, layer.d_out as isize, 1),
+                );
+                g.bias.fill(0.0);
+                for row in tape.grad.chunks_exact(layer.d_out) {
+                    for (b, r) in g.bias.iter_mut().zip(row) {
+                        *b += r;
+                    }
+                }
+            }
+            if i == 0 && !wants_input {
+                break;
+            }
+            // g·Wᵀ: W read column-major as a [d_out, d_in] matrix.
+            tape.grad_next.resize(rows * layer.d_in, 0.0);
+            product(
+                (rows, layer.d_in, layer.d_out),
+                &mut tape.grad_next,
+                (&tape.grad, layer.d_out as isize, 1),
+                (&layer.weight, 1, layer.d_out as isize),
+            );
+            if i > 0 {
+                // relu'(z) = 1 where the layer's input (a ReLU output) is positive.
+                for (g, &a) in tape.grad_next.iter_mut().zip(x) {
+                    if a <= 0.0 {
+                        *g = 0.0;
+                    }
+                }
+            }
+            std::mem::swap(&mut tape.grad, &mut tape.grad_next);
+        }
+        if let Some(grad_input) = grad_input {
+            grad_input.clear();
+            grad_input.extend_from_slice(&tape.grad);
+        }
+    }
+}
+
+/// `dst = lhs·rhs` for `(m, n, k)`: dst row-major `[m, n]`, overwritten;
+/// `lhs` `[m, k]` and `rhs` `[k, n]` given as (values, row stride, column stride).
+fn product(
+    (m, n, k): (usize, usize, usize),
+    dst: &mut [f32],
+    lhs: (&[f32], isize, isize),
+    rhs: (&[f32], isize, isize),
+) {
+    assert_eq!(dst.len(), m * n, "product: destination size");
+    let last = |(values, rs, cs): (&[f32], isize, isize), r: usize, c: usize| {
+        let last = (r - 1) * rs as usize + (c - 1) * cs as usize;
+        assert!(last < values.len(), "product: operand too short");
+    };
+    if m == 0 || n == 0 {
+        return;
+    }
+    if k == 0 {
+        dst.fill(0.0);
+        return;
+    }
+    last(lhs, m, k);
+    last(rhs, k, n);
+    let parallelism = if m * n * k >= PARALLEL_MIN_FLOPS {
+        gemm::Parallelism::Rayon(0)
+    } else {
+        gemm::Parallelism::None
+    };
+    // SAFETY: the asserts above keep every index gemm reads inside `lhs` and
+    // `rhs` and every index it writes inside `dst`; `dst` is borrowed mutably,
+    // so it overlaps neither.
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            dst.as_mut_ptr(),
+            1,
+            n as isize,
+            false,
+            lhs.0.as_ptr(),
+            lhs.2,
+            lhs.1,
+            rhs.0.as_ptr(),
+            rhs.2,
+            rhs.1,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            parallelism,
+        );
+    }
+}

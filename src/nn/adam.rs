@@ -1,0 +1,141 @@
+//! Adam (Kingma & Ba, 2015) on plain `f32` buffers: the one implementation both
+//! SAC kernels step with, so the burn and fused paths share their optimiser
+//! state (and checkpoints) exactly. The arithmetic follows burn's `Adam`
+//! (bias corrections folded into one factor, ε scaled by √(1 − β₂ᵗ)), so the
+//! SDE fit, which keeps burn's optimiser, and SAC agree on what Adam means.
+
+use std::collections::BTreeMap;
+
+use burn::module::{Module, ModuleMapper, Param};
+use burn::optim::GradientsParams;
+use burn::tensor::{Tensor, TensorData};
+use serde::{Deserialize, Serialize};
+
+use super::to_f32_vec;
+
+/// Adam's constants.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Adam {
+    pub beta_1: f32,
+    pub beta_2: f32,
+    pub epsilon: f32,
+}
+
+/// One parameter's first and second moments.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Moments {
+    pub first: Vec<f32>,
+    pub second: Vec<f32>,
+}
+
+/// One optimiser's state: the steps taken and each parameter's moments, by
+/// module path (`q1.layers.0.weight`, ...).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct AdamState {
+    pub time: u64,
+    pub moments: BTreeMap<String, Moments>,
+}
+
+/// The step-dependent factors of one Adam step, shared by its parameters.
+#[derive(Debug, Clone, Copy)]
+pub struct AdamStep {
+    lr: f32,
+    /// √(1 − β₂ᵗ) / (1 − β₁ᵗ)
+    combined: f32,
+    /// ε·√(1 − β₂ᵗ)
+    epsilon: f32,
+}
+
+impl Adam {
+    /// PyTorch's and optax's β (0.9, 0.999) with the given ε.
+    pub fn new(epsilon: f32) -> Self {
+        Self {
+            beta_1: 0.9,
+            beta_2: 0.999,
+            epsilon,
+        }
+    }
+
+    /// Counts one step on `state` and returns its factors.
+    pub fn begin(&self, state: &mut AdamState, lr: f64) -> AdamStep {
+        state.time += 1;
+        let t = state.time as i32;
+        let correction_2 = (1.0 - self.beta_2.powi(t)).sqrt();
+        AdamStep {
+            lr: lr as f32,
+            combined: correction_2 / (1.0 - self.beta_1.powi(t)),
+            epsilon: self.epsilon * correction_2,
+        }
+    }
+
+    /// θ ← θ − lr·m̂/(√v̂ + ε) for one parameter; moments start at zero.
+    pub fn update(&self, step: AdamStep, params: &mut [f32], grads: &[f32], moments: &mut Moments) {
+        assert_eq!(
+            params.len(),
+            grads.len(),
+            "Adam: parameter and gradient sizes"
+        );
+        if moments.first.len() != params.len() {
+            moments.first = vec![0.0; params.len()];
+            moments.second = vec![0.0; params.len()];
+        }
+        let (b1, b2) = (self.beta_1, self.beta_2);
+        for (((p, &g), m), v) in params
+            .iter_mut()
+            .zip(grads)
+            .zip(&mut moments.first)
+            .zip(&mut moments.second)
+        {
+            *m = *m * b1 + g * (1.0 - b1);
+            *v = *v * b2 + g * g * (1.0 - b2);
+            *p -= *m * step.combined / (v.sqrt() + step.epsilon) * step.lr;
+        }
+    }
+
+    /// One step of every parameter of a burn `module` that has a gradient in
+    /// `grads`, through [`Adam::update`] on the host.
+    pub fn step_module<M: Module>(
+        &self,
+        lr: f64,
+        module: M,
+        mut grads: GradientsParams,
+        state: &mut AdamState,
+    ) -> M {
+        struct Stepper<'a> {
+            adam: &'a Adam,
+            step: AdamStep,
+            grads: &'a mut GradientsParams,
+            state: &'a mut AdamState,
+            path: Vec<String>,
+        }
+        impl ModuleMapper for Stepper<'_> {
+            fn enter_module(&mut self, name: &str, _: &str) {
+                self.path.push(name.to_string());
+            }
+            fn exit_module(&mut self, _: &str, _: &str) {
+                self.path.pop();
+            }
+            fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+                let Some(grad) = self.grads.remove::<D>(param.id) else {
+                    return param;
+                };
+                let (id, value) = (param.id, param.val());
+                let (shape, device) = (value.dims(), value.device());
+                let mut values = to_f32_vec(value);
+                let moments = self.state.moments.entry(self.path.join(".")).or_default();
+                self.adam
+                    .update(self.step, &mut values, &to_f32_vec(grad), moments);
+                let tensor = Tensor::from_data(TensorData::new(values, shape), &device);
+                Param::initialized(id, tensor.require_grad())
+            }
+        }
+        let step = self.begin(state, lr);
+        module.map(&mut Stepper {
+            adam: self,
+            step,
+            grads: &mut grads,
+            state,
+            path: Vec::new(),
+        })
+    }
+}
