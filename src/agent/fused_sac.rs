@@ -53,7 +53,8 @@ struct Workspace {
     y: Vec<f32>,
     grad_q1: Vec<f32>,
     grad_q2: Vec<f32>,
-    grad_input: Vec<f32>,
+    grad_input1: Vec<f32>,
+    grad_input2: Vec<f32>,
     grad_action: Vec<f32>,
     grad_actor: Vec<f32>,
 }
@@ -101,7 +102,8 @@ impl FusedSac {
             y: Vec::new(),
             grad_q1: Vec::new(),
             grad_q2: Vec::new(),
-            grad_input: Vec::new(),
+            grad_input1: Vec::new(),
+            grad_input2: Vec::new(),
             grad_action: Vec::new(),
             grad_actor: Vec::new(),
         };
@@ -265,8 +267,11 @@ impl FusedSac {
             self.act_dim,
             &mut w.critic_input,
         );
-        self.target_q1.forward(&w.critic_input, b, &mut w.q1_tape);
-        self.target_q2.forward(&w.critic_input, b, &mut w.q2_tape);
+        let input = &w.critic_input;
+        rayon::join(
+            || self.target_q1.forward(input, b, &mut w.q1_tape),
+            || self.target_q2.forward(input, b, &mut w.q2_tape),
+        );
         w.y.clear();
         for r in 0..b {
             let min_q = w.q1_tape.output[r].min(w.q2_tape.output[r]);
@@ -287,33 +292,29 @@ impl FusedSac {
             self.act_dim,
             &mut w.critic_input,
         );
-        let mut losses = SacLosses::default();
-        for (net, tape, grads, grad_q, loss) in [
-            (
-                &self.q1,
-                &mut w.q1_tape,
-                &mut w.q1_grads,
-                &mut w.grad_q1,
-                &mut losses.qf1_loss,
-            ),
-            (
-                &self.q2,
-                &mut w.q2_tape,
-                &mut w.q2_grads,
-                &mut w.grad_q2,
-                &mut losses.qf2_loss,
-            ),
-        ] {
-            net.forward(&w.critic_input, b, tape);
-            grad_q.clear();
-            let mut squares = 0.0;
-            for (q, y) in tape.output.iter().zip(&w.y) {
-                squares += (q - y) * (q - y);
-                grad_q.push(2.0 * (q - y) / b as f32);
-            }
-            *loss = squares / b as f32;
-            net.backward(tape, grad_q, Some(grads), None);
-        }
+        // Each critic on its own core: forward, (Q − y)², backward.
+        let (input, y) = (&w.critic_input, &w.y);
+        let step =
+            |net: &ReluMlp, tape: &mut MlpTape, grads: &mut ReluMlp, grad_q: &mut Vec<f32>| {
+                net.forward(input, b, tape);
+                grad_q.clear();
+                let mut squares = 0.0;
+                for (q, y) in tape.output.iter().zip(y) {
+                    squares += (q - y) * (q - y);
+                    grad_q.push(2.0 * (q - y) / b as f32);
+                }
+                net.backward(tape, grad_q, Some(grads), None);
+                squares / b as f32
+            };
+        let (qf1_loss, qf2_loss) = rayon::join(
+            || step(&self.q1, &mut w.q1_tape, &mut w.q1_grads, &mut w.grad_q1),
+            || step(&self.q2, &mut w.q2_tape, &mut w.q2_grads, &mut w.grad_q2),
+        );
+        let mut losses = SacLosses {
+            qf1_loss,
+            qf2_loss,
+            ..SacLosses::default()
+        };
         losses.qf1_values = mean(&w.q1_tape.output);
         losses
     }
@@ -333,8 +334,11 @@ impl FusedSac {
             &mut w.sample,
         );
         concat_rows(observations, &w.sample.action, o, a, &mut w.critic_input);
-        self.q1.forward(&w.critic_input, b, &mut w.q1_tape);
-        self.q2.forward(&w.critic_input, b, &mut w.q2_tape);
+        let input = &w.critic_input;
+        rayon::join(
+            || self.q1.forward(input, b, &mut w.q1_tape),
+            || self.q2.forward(input, b, &mut w.q2_tape),
+        );
 
         // min(Q₁, Q₂) passes −1/B to the smaller critic of each row.
         let mut loss = 0.0;
@@ -347,23 +351,26 @@ impl FusedSac {
             w.grad_q1.push(if first { -1.0 / b as f32 } else { 0.0 });
             w.grad_q2.push(if first { 0.0 } else { -1.0 / b as f32 });
         }
-        // ∂L/∂ã through both critics (inputs only; the critics do not learn here).
+        // ∂L/∂ã through both critics, each on its own core (inputs only; the
+        // critics do not learn here).
+        rayon::join(
+            || {
+                self.q1
+                    .backward(&mut w.q1_tape, &w.grad_q1, None, Some(&mut w.grad_input1))
+            },
+            || {
+                self.q2
+                    .backward(&mut w.q2_tape, &w.grad_q2, None, Some(&mut w.grad_input2))
+            },
+        );
         w.grad_action.clear();
-        w.grad_action.resize(b * a, 0.0);
-        for (net, tape, grad_q) in [
-            (&self.q1, &mut w.q1_tape, &w.grad_q1),
-            (&self.q2, &mut w.q2_tape, &w.grad_q2),
-        ] {
-            net.backward(tape, grad_q, None, Some(&mut w.grad_input));
-            for (g, row) in w
-                .grad_action
-                .chunks_exact_mut(a)
-                .zip(w.grad_input.chunks_exact(o + a))
-            {
-                for (g, x) in g.iter_mut().zip(&row[o..]) {
-                    *g += x;
-                }
-            }
+        for (row1, row2) in w
+            .grad_input1
+            .chunks_exact(o + a)
+            .zip(w.grad_input2.chunks_exact(o + a))
+        {
+            w.grad_action
+                .extend(row1[o..].iter().zip(&row2[o..]).map(|(x, y)| x + y));
         }
         // Through ã = centre + half·tanh(u), u = μ + σ·ε, and log π's own terms:
         // ∂log π/∂u = 2·tanh(u) (from −log(1 − tanh²u)), ∂log π/∂log σ = −1.

@@ -1,16 +1,15 @@
 //! Training a ReLU MLP on plain `f32` buffers: the forward pass keeps each
 //! layer's input, the backward pass turns the output's gradient into every
 //! weight's and bias's (`∂W = xᵀ·g`, `∂b = Σ_rows g`) and the input's
-//! (`g ← (g·Wᵀ) ⊙ relu'(z)`). Each product is one `gemm` over the whole batch,
-//! spread over the cores; buffers live in the tape and are reused every call.
+//! (`g ← (g·Wᵀ) ⊙ relu'(z)`). Each product is one single-threaded `gemm` over the
+//! whole batch (splitting one 256-wide product over two cores measured no faster;
+//! callers run independent networks on separate cores instead); buffers live in
+//! the tape and are reused every call.
 
 use burn::module::{Module, ModuleMapper, Param};
 use burn::tensor::{Tensor, TensorData};
 
 use crate::nn::{Activation, Mlp, to_f32_vec};
-
-/// From this many multiply-adds a product is split over the cores.
-const PARALLEL_MIN_FLOPS: usize = 1 << 18;
 
 /// One dense layer `y = x·W + b`, W row-major `[d_in, d_out]` (burn's layout).
 #[derive(Debug, Clone, PartialEq)]
@@ -270,11 +269,6 @@ fn product(
     }
     last(lhs, m, k);
     last(rhs, k, n);
-    let parallelism = if m * n * k >= PARALLEL_MIN_FLOPS {
-        gemm::Parallelism::Rayon(0)
-    } else {
-        gemm::Parallelism::None
-    };
     // SAFETY: the asserts above keep every index gemm reads inside `lhs` and
     // `rhs` and every index it writes inside `dst`; `dst` is borrowed mutably,
     // so it overlaps neither.
@@ -298,7 +292,7 @@ fn product(
             false,
             false,
             false,
-            parallelism,
+            gemm::Parallelism::None,
         );
     }
 }
