@@ -10,7 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use super::sac::{Sac, SacAdam, SacLosses};
 use crate::data::TransitionBatch;
 use crate::infer::{MlpTape, ReluMlp};
-use crate::nn::{Adam, AdamState, fill_standard_normal, to_f32_vec};
+use crate::nn::{Adam, AdamState, AdamStep, fill_standard_normal, to_f32_vec};
 
 /// ½·log(2π), the Gaussian's normalising constant per dimension.
 const HALF_LOG_TWO_PI: f32 = 0.918_938_5;
@@ -160,34 +160,30 @@ impl FusedSac {
         // Critic step.
         let critic = self.critic_gradients(batch);
         let step = self.adam.begin(&mut self.state.critic, self.lr.0);
-        for (prefix, net, grads) in [
-            ("q1", &mut self.q1, &self.work.q1_grads),
-            ("q2", &mut self.q2, &self.work.q2_grads),
-        ] {
-            for (path, param, grad) in net.params_with(grads) {
-                let moments = self
-                    .state
-                    .critic
-                    .moments
-                    .entry(format!("{prefix}.{path}"))
-                    .or_default();
-                self.adam.update(step, param, grad, moments);
-            }
-        }
+        let critic_state = &mut self.state.critic;
+        step_network(
+            &self.adam,
+            step,
+            critic_state,
+            "q1",
+            &mut self.q1,
+            &self.work.q1_grads,
+        );
+        step_network(
+            &self.adam,
+            step,
+            critic_state,
+            "q2",
+            &mut self.q2,
+            &self.work.q2_grads,
+        );
 
         // Actor step, through the updated critics.
         fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
         let actor_loss = self.actor_gradients(&batch.observations, alpha);
         let step = self.adam.begin(&mut self.state.actor, self.lr.1);
-        for (path, param, grad) in self.actor.params_with(&self.work.actor_grads) {
-            let moments = self
-                .state
-                .actor
-                .moments
-                .entry(format!("net.{path}"))
-                .or_default();
-            self.adam.update(step, param, grad, moments);
-        }
+        let (actor, grads) = (&mut self.actor, &self.work.actor_grads);
+        step_network(&self.adam, step, &mut self.state.actor, "net", actor, grads);
 
         // Temperature step.
         let (alpha_loss, alpha_grad, entropy) = self.alpha_gradient();
@@ -411,6 +407,22 @@ impl FusedSac {
     /// Adam's state (for tests and checkpoints).
     pub fn adam_state(&self) -> (&AdamState, &AdamState, &AdamState) {
         (&self.state.actor, &self.state.critic, &self.state.alpha)
+    }
+}
+
+/// One Adam step of every parameter of `net`, its moments under `prefix.` + the
+/// parameter's path (the burn module's, so both kernels share them).
+fn step_network(
+    adam: &Adam,
+    step: AdamStep,
+    state: &mut AdamState,
+    prefix: &str,
+    net: &mut ReluMlp,
+    grads: &ReluMlp,
+) {
+    for (path, param, grad) in net.params_with(grads) {
+        let moments = state.moments.entry(format!("{prefix}.{path}")).or_default();
+        adam.update(step, param, grad, moments);
     }
 }
 
