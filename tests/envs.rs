@@ -207,6 +207,31 @@ fn evaluator_is_deterministic_and_independent_of_thread_count() {
     assert_ne!(one.returns, other_seed.returns);
 }
 
+/// Hopper's zero action whatever the state: episodes depend on their reset seed alone.
+struct Still;
+
+impl BatchPolicy for Still {
+    fn obs_dim(&self) -> usize {
+        11
+    }
+    fn act_dim(&self) -> usize {
+        3
+    }
+    fn act(&self, observations: &[f32], _: &mut dyn rand::RngCore) -> Vec<f32> {
+        vec![0.0; observations.len() / 11 * 3]
+    }
+}
+
+#[test]
+fn episode_seeds_wrap_around_the_largest_seed() {
+    // Episode i resets with seed + i mod 2⁶⁴: from u64::MAX the second episode is seed 0's.
+    let hopper = TaskConfig::d4rl(TaskName::Hopper);
+    let last = evaluate(&Still, &EvaluationConfig::new(hopper, 2, u64::MAX)).unwrap();
+    let zero = evaluate(&Still, &EvaluationConfig::new(hopper, 1, 0)).unwrap();
+    assert_eq!(last.returns[1], zero.returns[0]);
+    assert_ne!(last.returns[0], last.returns[1]);
+}
+
 /// A policy whose output width is wrong, to check the evaluator refuses it.
 struct Broken;
 

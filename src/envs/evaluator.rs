@@ -2,7 +2,7 @@
 //!
 //! Episodes are cut into fixed groups that step in lockstep, so the policy sees
 //! a batch of states per call; groups run in parallel on rayon's pool. Episode
-//! `i` resets with seed `seed + i` and group `g` draws policy noise from its own
+//! `i` resets with seed `seed + i` (mod 2⁶⁴) and group `g` draws policy noise from its own
 //! generator seeded by `(seed, g)`, so a report depends on the seed alone, not
 //! on the number of threads.
 
@@ -111,7 +111,7 @@ fn run_group(
     let mut observations = Vec::with_capacity(episodes.len());
     for episode in episodes {
         let mut task = MujocoTask::new(config.task)?;
-        observations.push(task.reset(Some(config.seed + episode as u64)));
+        observations.push(task.reset(Some(config.seed.wrapping_add(episode as u64))));
         tasks.push(task);
     }
     let obs_dim = policy.obs_dim();

@@ -21,7 +21,7 @@ use crate::server::{ApiError, AppState};
 pub struct EvaluateRequest {
     /// The model whose policy runs, in the model's task.
     pub model: String,
-    /// Episodes (default 10); episode i resets with seed + i.
+    /// Episodes (default 10); episode i resets with seed + i (mod 2⁶⁴).
     #[serde(default = "ten")]
     pub episodes: usize,
     #[serde(default)]
