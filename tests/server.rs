@@ -629,6 +629,17 @@ async fn token_guards_everything_but_health() {
         .await
         .unwrap();
     assert_eq!(r.status(), StatusCode::UNAUTHORIZED);
+    // A prefix or an extension of the token is no token.
+    for near in ["s3cre", "s3cretX", "S3cret", ""] {
+        let r = server
+            .client
+            .get(format!("{}/v1/models", server.base))
+            .bearer_auth(near)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), StatusCode::UNAUTHORIZED, "{near:?}");
+    }
     let r = server
         .client
         .get(format!("{}/v1/models", server.base))
