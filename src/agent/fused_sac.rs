@@ -242,13 +242,13 @@ impl FusedSac {
         }
     }
 
-    /// y = r + γ(1 − d)(min_i Q̄_i(s', ã') − α·log π(ã'|s')), ã' drawn with
-    /// `work.noise`, into `work.y`.
-    fn critic_target(&mut self, batch: &TransitionBatch, alpha: f32) {
-        let b = batch.rewards.len();
+    /// ã ~ π(·|s) for `observations`, drawn with `work.noise` (the actor's tape
+    /// and `work.sample` keep what its gradient needs), and `[s | ã]` into
+    /// `work.critic_input`.
+    fn act_into_critic_input(&mut self, observations: &[f32]) {
+        let b = observations.len() / self.obs_dim;
         let w = &mut self.work;
-        self.actor
-            .forward(&batch.next_observations, b, &mut w.actor_tape);
+        self.actor.forward(observations, b, &mut w.actor_tape);
         sample(
             &w.actor_tape.output,
             &w.noise,
@@ -257,12 +257,20 @@ impl FusedSac {
             &mut w.sample,
         );
         concat_rows(
-            &batch.next_observations,
+            observations,
             &w.sample.action,
             self.obs_dim,
             self.act_dim,
             &mut w.critic_input,
         );
+    }
+
+    /// y = r + γ(1 − d)(min_i Q̄_i(s', ã') − α·log π(ã'|s')), ã' drawn with
+    /// `work.noise`, into `work.y`.
+    fn critic_target(&mut self, batch: &TransitionBatch, alpha: f32) {
+        let b = batch.rewards.len();
+        self.act_into_critic_input(&batch.next_observations);
+        let w = &mut self.work;
         let input = &w.critic_input;
         rayon::join(
             || self.target_q1.forward(input, b, &mut w.q1_tape),
@@ -320,16 +328,8 @@ impl FusedSac {
     fn actor_gradients(&mut self, observations: &[f32], alpha: f32) -> f32 {
         let (o, a) = (self.obs_dim, self.act_dim);
         let b = observations.len() / o;
+        self.act_into_critic_input(observations);
         let w = &mut self.work;
-        self.actor.forward(observations, b, &mut w.actor_tape);
-        sample(
-            &w.actor_tape.output,
-            &w.noise,
-            (&self.half, &self.center, self.log_half_sum),
-            self.log_std,
-            &mut w.sample,
-        );
-        concat_rows(observations, &w.sample.action, o, a, &mut w.critic_input);
         let input = &w.critic_input;
         rayon::join(
             || self.q1.forward(input, b, &mut w.q1_tape),
@@ -402,11 +402,6 @@ impl FusedSac {
         let mean_log_prob = mean(log_prob);
         let grad = -(mean_log_prob + self.target_entropy);
         (self.log_alpha * grad, grad, -mean_log_prob)
-    }
-
-    /// Adam's state (for tests and checkpoints).
-    pub fn adam_state(&self) -> (&AdamState, &AdamState, &AdamState) {
-        (&self.state.actor, &self.state.critic, &self.state.alpha)
     }
 }
 

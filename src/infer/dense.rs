@@ -103,36 +103,67 @@ impl Dense {
         assert_eq!(out.len(), rows * self.d_out, "layer output size");
         assert!(rows == 0 || input.data.len() >= (rows - 1) * input.stride + input.width);
         if rows >= GEMM_MIN_ROWS {
-            // SAFETY: the asserts above keep every index gemm touches inside
-            // `input.data`, `self.weight` and `out`, which do not overlap.
-            unsafe {
-                gemm::gemm(
-                    rows,
-                    self.d_out,
-                    self.d_in,
-                    out.as_mut_ptr(),
-                    1,
-                    self.d_out as isize,
-                    false,
-                    input.data.as_ptr(),
-                    1,
-                    input.stride as isize,
-                    self.weight.as_ptr(),
-                    1,
-                    self.stride as isize,
-                    1.0,
-                    1.0,
-                    false,
-                    false,
-                    false,
-                    gemm::Parallelism::None,
-                );
-            }
+            product(
+                (rows, self.d_out, self.d_in),
+                out,
+                (input.data, input.stride as isize, 1),
+                (&self.weight, self.stride as isize, 1),
+            );
         } else {
             out.fill(0.0);
             accumulate_rows(self, input, out);
         }
         bias_then_activate(out, &self.bias, activation);
+    }
+}
+
+/// `dst = lhs·rhs` for `(m, n, k)`: dst row-major `[m, n]`, overwritten;
+/// `lhs` `[m, k]` and `rhs` `[k, n]` given as (values, row stride, column stride).
+pub(super) fn product(
+    (m, n, k): (usize, usize, usize),
+    dst: &mut [f32],
+    lhs: (&[f32], isize, isize),
+    rhs: (&[f32], isize, isize),
+) {
+    assert_eq!(dst.len(), m * n, "product: destination size");
+    let last = |(values, rs, cs): (&[f32], isize, isize), r: usize, c: usize| {
+        let last = (r - 1) * rs as usize + (c - 1) * cs as usize;
+        assert!(last < values.len(), "product: operand too short");
+    };
+    if m == 0 || n == 0 {
+        return;
+    }
+    if k == 0 {
+        dst.fill(0.0);
+        return;
+    }
+    last(lhs, m, k);
+    last(rhs, k, n);
+    // SAFETY: the asserts above keep every index gemm reads inside `lhs` and
+    // `rhs` and every index it writes inside `dst`; `dst` is borrowed mutably,
+    // so it overlaps neither.
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            dst.as_mut_ptr(),
+            1,
+            n as isize,
+            false,
+            lhs.0.as_ptr(),
+            lhs.2,
+            lhs.1,
+            rhs.0.as_ptr(),
+            rhs.2,
+            rhs.1,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            gemm::Parallelism::None,
+        );
     }
 }
 

@@ -9,6 +9,7 @@
 use burn::module::{Module, ModuleMapper, Param};
 use burn::tensor::{Tensor, TensorData};
 
+use super::dense::product;
 use crate::nn::{Activation, Mlp, to_f32_vec};
 
 /// One dense layer `y = x·W + b`, W row-major `[d_in, d_out]` (burn's layout).
@@ -244,55 +245,5 @@ impl ReluMlp {
             grad_input.clear();
             grad_input.extend_from_slice(&tape.grad);
         }
-    }
-}
-
-/// `dst = lhs·rhs` for `(m, n, k)`: dst row-major `[m, n]`, overwritten;
-/// `lhs` `[m, k]` and `rhs` `[k, n]` given as (values, row stride, column stride).
-fn product(
-    (m, n, k): (usize, usize, usize),
-    dst: &mut [f32],
-    lhs: (&[f32], isize, isize),
-    rhs: (&[f32], isize, isize),
-) {
-    assert_eq!(dst.len(), m * n, "product: destination size");
-    let last = |(values, rs, cs): (&[f32], isize, isize), r: usize, c: usize| {
-        let last = (r - 1) * rs as usize + (c - 1) * cs as usize;
-        assert!(last < values.len(), "product: operand too short");
-    };
-    if m == 0 || n == 0 {
-        return;
-    }
-    if k == 0 {
-        dst.fill(0.0);
-        return;
-    }
-    last(lhs, m, k);
-    last(rhs, k, n);
-    // SAFETY: the asserts above keep every index gemm reads inside `lhs` and
-    // `rhs` and every index it writes inside `dst`; `dst` is borrowed mutably,
-    // so it overlaps neither.
-    unsafe {
-        gemm::gemm(
-            m,
-            n,
-            k,
-            dst.as_mut_ptr(),
-            1,
-            n as isize,
-            false,
-            lhs.0.as_ptr(),
-            lhs.2,
-            lhs.1,
-            rhs.0.as_ptr(),
-            rhs.2,
-            rhs.1,
-            1.0,
-            1.0,
-            false,
-            false,
-            false,
-            gemm::Parallelism::None,
-        );
     }
 }
