@@ -771,3 +771,95 @@ fn sde_rollouts_with_truncation_keep_nothing_past_epsilon() {
         );
     }
 }
+
+/// The networks run once per item; particles must still be the model's own EM
+/// step of each (s, a) with that particle's ε: compared with both kernels'
+/// `step` on the rows repeated once per particle (the path before the change),
+/// with the same ε.
+#[test]
+fn particles_equal_the_model_step_on_repeated_rows() {
+    use nuno::agent::{ParticleConfig, step_particles};
+    use rand::Rng;
+    let (model, metadata) = shipped_model();
+    let rules = TaskRules::new(
+        TaskConfig::d4rl(TaskName::Hopper),
+        &metadata.spec.split,
+        metadata.spec.dt,
+    );
+    let (batch, particles, obs_dim, act_dim) = (5, 7, 11, 3);
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let dataset = small_dataset();
+    let observations: Vec<f32> = dataset
+        .observations
+        .iter()
+        .take(batch * obs_dim)
+        .copied()
+        .collect();
+    let actions: Vec<f32> = (0..batch * act_dim)
+        .map(|_| rng.random_range(-1.0..1.0))
+        .collect();
+    let config = ParticleConfig {
+        particles,
+        penalty: 0.5,
+        noise_scale: 1.5,
+    };
+    for kernel in [Kernel::Fused, Kernel::Burn] {
+        let dynamics = kernel.dynamics(&model);
+        let got = step_particles(
+            &*dynamics,
+            &rules,
+            &observations,
+            &actions,
+            config,
+            &mut ChaCha8Rng::seed_from_u64(9),
+        );
+        let repeat = |values: &[f32], width: usize| -> Vec<f32> {
+            values
+                .chunks_exact(width)
+                .flat_map(|row| row.repeat(particles))
+                .collect()
+        };
+        let mut noise_rng = ChaCha8Rng::seed_from_u64(9);
+        let noise: Vec<f32> = (0..batch * particles * obs_dim)
+            .map(|_| noise_rng.sample::<f32, _>(rand_distr::StandardNormal) * 1.5)
+            .collect();
+        let row_observations = repeat(&observations, obs_dim);
+        let row_actions = repeat(&actions, act_dim);
+        let want = dynamics.step(&row_observations, &row_actions, &noise);
+        assert_eq!(got.next_states.len(), want.next_states.len());
+        for (i, (g, w)) in got.next_states.iter().zip(&want.next_states).enumerate() {
+            assert!(
+                (g - w).abs() <= 1e-5 * w.abs().max(1.0),
+                "{kernel:?} row {} dim {}: {g} vs {w}",
+                i / obs_dim,
+                i % obs_dim
+            );
+        }
+        for row in 0..batch * particles {
+            let b = row / particles;
+            // Batches of different sizes may take different matrix kernels.
+            let close = |g: f32, w: f32| (g - w).abs() <= 1e-5 * w.abs().max(1.0);
+            assert!(close(got.eta[b], want.eta[row]), "{kernel:?} η of item {b}");
+            let next = &want.next_states[row * obs_dim..(row + 1) * obs_dim];
+            let reward = rules.reward(
+                &observations[b * obs_dim..(b + 1) * obs_dim],
+                &actions[b * act_dim..(b + 1) * act_dim],
+                next,
+            );
+            assert!((got.rewards[row] - reward).abs() <= 1e-5 * reward.abs().max(1.0));
+            let penalised = reward - 0.5 * want.eta[row];
+            assert!(
+                (got.penalized_rewards[row] - penalised).abs() <= 1e-5 * penalised.abs().max(1.0)
+            );
+            assert_eq!(got.terminals[row], rules.terminal(next));
+        }
+        for (g, w) in got.mean.iter().zip(
+            want.means
+                .chunks_exact(obs_dim)
+                .step_by(particles)
+                .flatten(),
+        ) {
+            assert!((g - w).abs() <= 1e-5 * w.abs().max(1.0), "{kernel:?} mean");
+        }
+    }
+}

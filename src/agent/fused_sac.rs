@@ -89,10 +89,12 @@ impl FusedSac {
         let actor = ReluMlp::from_burn(&sac.actor.net);
         let q1 = ReluMlp::from_burn(&sac.critic.q1);
         let q2 = ReluMlp::from_burn(&sac.critic.q2);
+        let cores = rayon::current_num_threads();
         let work = Workspace {
-            actor_tape: MlpTape::default(),
-            q1_tape: MlpTape::default(),
-            q2_tape: MlpTape::default(),
+            // The actor runs alone, the twin critics side by side.
+            actor_tape: MlpTape::on_cores(cores),
+            q1_tape: MlpTape::on_cores(cores / 2),
+            q2_tape: MlpTape::on_cores(cores - cores / 2),
             actor_grads: actor.zeros_like(),
             q1_grads: q1.zeros_like(),
             q2_grads: q2.zeros_like(),
@@ -152,6 +154,14 @@ impl FusedSac {
 
     /// One SAC update on `batch`, drawing ε from `rng` exactly as [`Sac::update`] does.
     pub fn update(&mut self, batch: &TransitionBatch, rng: &mut ChaCha8Rng) -> SacLosses {
+        // On a worker thread of the pool, each join below queues one half
+        // where the other worker takes it; from outside the pool, every join
+        // would hand both halves over and put this thread to sleep (measured
+        // 10–15 % slower).
+        rayon::scope(|_| self.update_on_pool(batch, rng))
+    }
+
+    fn update_on_pool(&mut self, batch: &TransitionBatch, rng: &mut ChaCha8Rng) -> SacLosses {
         let b = batch.rewards.len();
         let alpha = self.log_alpha.exp();
         fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);

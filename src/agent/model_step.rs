@@ -8,7 +8,7 @@ use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
 use crate::envs::TaskRules;
-use crate::sde::BatchDynamics;
+use crate::sde::{BatchDynamics, euler_maruyama};
 
 /// A batch step's results, row-major; `b` items, `p` particles, `d` = obs_dim.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -76,56 +76,62 @@ pub fn step_particles(
     let state_dim = dynamics.state_dim();
     let batch = observations.len() / obs_dim;
     let rows = batch * particles;
-    // Particle p of item b is row b·particles + p.
-    let mut row_observations = Vec::with_capacity(rows * obs_dim);
-    let mut row_actions = Vec::with_capacity(rows * act_dim);
-    for b in 0..batch {
-        for _ in 0..particles {
-            row_observations.extend_from_slice(&observations[b * obs_dim..(b + 1) * obs_dim]);
-            row_actions.extend_from_slice(&actions[b * act_dim..(b + 1) * act_dim]);
-        }
-    }
-    let states = dynamics.states_from_observations(&row_observations);
+    // Drift, σ, h(η) and η depend on (s, a) only: the networks run once per
+    // item (with ε = 0, so s' is the mean) and only the noise is per particle.
+    let states = dynamics.states_from_observations(observations);
+    let terms = dynamics.step(&states, actions, &vec![0.0; states.len()]);
+    // Particle p of item b is row b·particles + p, drawn in that order.
     let noise = scaled_noise(rows * state_dim, noise_scale, rng);
-    let step = dynamics.step(&states, &row_actions, &noise);
+    let sqrt_dt = spec.dt.sqrt() as f32;
 
-    let first_particle = |values: &[f32], width: usize| -> Vec<f32> {
-        (0..batch)
-            .flat_map(|b| {
-                let row = b * particles;
-                values[row * width..row * width + obs_dim.min(width)].to_vec()
-            })
+    let observation_columns = |values: &[f32]| -> Vec<f32> {
+        values
+            .chunks_exact(state_dim)
+            .flat_map(|row| &row[..obs_dim])
+            .copied()
             .collect()
     };
     let mut out = ParticleStep {
         batch,
         particles,
         obs_dim,
-        mean: first_particle(&step.means, state_dim),
-        sigma: first_particle(&step.sigma, state_dim),
-        h_eta: first_particle(&step.h_eta, state_dim),
-        eta: (0..batch).map(|b| step.eta[b * particles]).collect(),
+        mean: observation_columns(&terms.means),
+        sigma: observation_columns(&terms.sigma),
+        h_eta: observation_columns(&terms.h_eta),
+        eta: terms.eta.clone(),
         next_states: Vec::with_capacity(rows * obs_dim),
         rewards: Vec::with_capacity(rows),
         penalized_rewards: Vec::with_capacity(rows),
         terminals: Vec::with_capacity(rows),
     };
+    let mut next = vec![0.0; state_dim];
     for row in 0..rows {
-        let next = &step.next_states[row * state_dim..(row + 1) * state_dim];
+        let b = row / particles.max(1);
+        let item = b * state_dim..(b + 1) * state_dim;
+        let noise = &noise[row * state_dim..(row + 1) * state_dim];
+        for (d, next) in next.iter_mut().enumerate() {
+            *next = euler_maruyama(
+                terms.means[item.start + d],
+                terms.sigma[item.start + d],
+                terms.h_eta[item.start + d],
+                noise[d],
+                sqrt_dt,
+            );
+        }
         let next_obs = &next[..obs_dim];
         let reward = if dynamics.learns_reward() {
             next[obs_dim]
         } else {
             rules.reward(
-                &row_observations[row * obs_dim..(row + 1) * obs_dim],
-                &row_actions[row * act_dim..(row + 1) * act_dim],
+                &observations[b * obs_dim..(b + 1) * obs_dim],
+                &actions[b * act_dim..(b + 1) * act_dim],
                 next_obs,
             )
         };
         out.next_states.extend_from_slice(next_obs);
         out.rewards.push(reward);
         out.penalized_rewards
-            .push(penalized_reward(reward, penalty, step.eta[row]));
+            .push(penalized_reward(reward, penalty, terms.eta[b]));
         out.terminals.push(rules.terminal(next_obs));
     }
     out

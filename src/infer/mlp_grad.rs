@@ -1,15 +1,16 @@
 //! Training a ReLU MLP on plain `f32` buffers: the forward pass keeps each
 //! layer's input, the backward pass turns the output's gradient into every
 //! weight's and bias's (`∂W = xᵀ·g`, `∂b = Σ_rows g`) and the input's
-//! (`g ← (g·Wᵀ) ⊙ relu'(z)`). Each product is one single-threaded `gemm` over the
-//! whole batch (splitting one 256-wide product over two cores measured no faster;
-//! callers run independent networks on separate cores instead); buffers live in
-//! the tape and are reused every call.
+//! (`g ← (g·Wᵀ) ⊙ relu'(z)`). Each product is single-threaded `gemm` on row
+//! blocks, split over as many cores as the tape is given (gemm's own threads
+//! measured no faster than one core; rayon-joined row blocks do pay); buffers
+//! live in the tape and are reused every call.
 
 use burn::module::{Module, ModuleMapper, Param};
 use burn::tensor::{Tensor, TensorData};
 
-use super::dense::product;
+use super::dense::product_on_cores;
+use super::vector_math::{bias_then_activate, column_sums, relu_gradient};
 use crate::nn::{Activation, Mlp, to_f32_vec};
 
 /// One dense layer `y = x·W + b`, W row-major `[d_in, d_out]` (burn's layout).
@@ -38,6 +39,20 @@ pub struct MlpTape {
     pub output: Vec<f32>,
     grad: Vec<f32>,
     grad_next: Vec<f32>,
+    /// How many cores each product may split its rows over.
+    cores: usize,
+}
+
+impl MlpTape {
+    /// A tape whose passes split each product's rows over `cores` cores: for a
+    /// network that runs while nothing else does (SAC's actor), or with a share
+    /// of the cores (the twin critics, side by side).
+    pub fn on_cores(cores: usize) -> Self {
+        Self {
+            cores,
+            ..Self::default()
+        }
+    }
 }
 
 impl ReluMlp {
@@ -166,20 +181,15 @@ impl ReluMlp {
             out.resize(rows * layer.d_out, 0.0);
             let x = &before[i];
             // out = x·W
-            product(
+            product_on_cores(
+                tape.cores,
                 (rows, layer.d_out, layer.d_in),
                 out,
                 (x, layer.d_in as isize, 1),
                 (&layer.weight, layer.d_out as isize, 1),
             );
-            for row in out.chunks_exact_mut(layer.d_out) {
-                for (y, b) in row.iter_mut().zip(&layer.bias) {
-                    *y += b;
-                    if i != last {
-                        *y = y.max(0.0);
-                    }
-                }
-            }
+            let activation = (i != last).then_some(Activation::Relu);
+            bias_then_activate(out, &layer.bias, activation);
         }
     }
 
@@ -207,37 +217,30 @@ impl ReluMlp {
             if let Some(grads) = grads.as_deref_mut() {
                 let g = &mut grads.layers[i];
                 // ∂W = xᵀ·g: x read column-major as a [d_in, rows] matrix.
-                product(
+                product_on_cores(
+                    tape.cores,
                     (layer.d_in, layer.d_out, rows),
                     &mut g.weight,
                     (x, 1, layer.d_in as isize),
                     (&tape.grad, layer.d_out as isize, 1),
                 );
-                g.bias.fill(0.0);
-                for row in tape.grad.chunks_exact(layer.d_out) {
-                    for (b, r) in g.bias.iter_mut().zip(row) {
-                        *b += r;
-                    }
-                }
+                column_sums(&tape.grad, &mut g.bias);
             }
             if i == 0 && !wants_input {
                 break;
             }
             // g·Wᵀ: W read column-major as a [d_out, d_in] matrix.
             tape.grad_next.resize(rows * layer.d_in, 0.0);
-            product(
+            product_on_cores(
+                tape.cores,
                 (rows, layer.d_in, layer.d_out),
                 &mut tape.grad_next,
                 (&tape.grad, layer.d_out as isize, 1),
                 (&layer.weight, 1, layer.d_out as isize),
             );
             if i > 0 {
-                // relu'(z) = 1 where the layer's input (a ReLU output) is positive.
-                for (g, &a) in tape.grad_next.iter_mut().zip(x) {
-                    if a <= 0.0 {
-                        *g = 0.0;
-                    }
-                }
+                // This layer's input is the previous layer's ReLU output.
+                relu_gradient(&mut tape.grad_next, x);
             }
             std::mem::swap(&mut tape.grad, &mut tape.grad_next);
         }

@@ -6,7 +6,7 @@ use std::sync::Mutex;
 
 use super::dense::{DenseMlp, GEMM_MIN_ROWS, MlpScratch, Rows};
 use super::tiles::{row_chunks, run_tiles, tile_rows, with_buffers};
-use crate::sde::{BatchDynamics, DynamicsSpec, ModelStep, NeuralSde, SdeConstants};
+use crate::sde::{BatchDynamics, DynamicsSpec, ModelStep, NeuralSde, SdeConstants, euler_maruyama};
 
 /// A [`NeuralSde`]'s weights laid out for [`BatchDynamics::step`] on the CPU.
 #[derive(Debug, Clone)]
@@ -274,7 +274,7 @@ impl FusedSde {
                 sigma[d] =
                     (softplus(s.sigma[r * state_dim + d]) + c.config.sigma_min) * diffusion[d];
                 h_eta[d] = sigmoid(logit * h_weight + h_bias) * diffusion[d] * w_max[d];
-                next[d] = mean[d] + (sigma[d] + h_eta[d]) * noise[d] * sqrt_dt;
+                next[d] = euler_maruyama(mean[d], sigma[d], h_eta[d], noise[d], sqrt_dt);
             }
         }
     }

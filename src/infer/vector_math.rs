@@ -44,6 +44,40 @@ impl<F: Fn(f32) -> f32> Vectorized for BiasMap<'_, F> {
     }
 }
 
+/// `g ← 0` wherever the ReLU's output `a` is not positive (relu'(z) = 0 there):
+/// a gradient through a ReLU layer, in place.
+pub fn relu_gradient(grad: &mut [f32], outputs: &[f32]) {
+    struct Mask<'a>(&'a mut [f32], &'a [f32]);
+    impl Vectorized for Mask<'_> {
+        #[inline(always)]
+        fn run(self) {
+            for (g, &a) in self.0.iter_mut().zip(self.1) {
+                // A select, not a branch, so that it vectorises.
+                *g = if a > 0.0 { *g } else { 0.0 };
+            }
+        }
+    }
+    assert_eq!(grad.len(), outputs.len(), "relu_gradient: sizes");
+    widest(Mask(grad, outputs));
+}
+
+/// `sums[j] = Σ_rows values[row, j]` (rows as wide as `sums`), overwriting `sums`.
+pub fn column_sums(values: &[f32], sums: &mut [f32]) {
+    struct Sums<'a>(&'a [f32], &'a mut [f32]);
+    impl Vectorized for Sums<'_> {
+        #[inline(always)]
+        fn run(self) {
+            self.1.fill(0.0);
+            for row in self.0.chunks_exact(self.1.len()) {
+                for (s, v) in self.1.iter_mut().zip(row) {
+                    *s += v;
+                }
+            }
+        }
+    }
+    widest(Sums(values, sums));
+}
+
 /// Runs `work` compiled for the widest vector instructions this CPU has.
 #[inline(always)]
 pub(crate) fn widest(work: impl Vectorized) {
@@ -182,5 +216,15 @@ mod tests {
         let mut relu = vec![-1.0, 0.5];
         bias_then_activate(&mut relu, &[0.25], Some(Activation::Relu));
         assert_eq!(relu, [0.0, 0.75]);
+    }
+
+    #[test]
+    fn relu_gradient_and_column_sums_by_hand() {
+        let mut grad = vec![1.0, -2.0, 3.0, 4.0, 5.0];
+        relu_gradient(&mut grad, &[0.5, 0.0, -1.0, 2.0, f32::MIN_POSITIVE]);
+        assert_eq!(grad, [1.0, 0.0, 0.0, 4.0, 5.0]);
+        let mut sums = vec![9.0; 3];
+        column_sums(&[1.0, 2.0, 3.0, 10.0, 20.0, 30.0], &mut sums);
+        assert_eq!(sums, [11.0, 22.0, 33.0]);
     }
 }

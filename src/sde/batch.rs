@@ -23,6 +23,14 @@ pub struct ModelStep {
     pub eta: Vec<f32>,
 }
 
+/// s' = mean + (σ + h(η))·ε·sqrt(dt) for one state dimension: the EM step's
+/// sample, in the order of operations both kernels use (so a sample drawn
+/// from a step's reported terms equals the step's own).
+#[inline]
+pub fn euler_maruyama(mean: f32, sigma: f32, h_eta: f32, noise: f32, sqrt_dt: f32) -> f32 {
+    mean + (sigma + h_eta) * noise * sqrt_dt
+}
+
 /// A dynamics model stepped on a batch of `(state, action)` rows at once.
 pub trait BatchDynamics: Sync {
     fn spec(&self) -> &DynamicsSpec;

@@ -16,7 +16,7 @@ mod rollout;
 mod spec;
 mod threshold;
 
-pub use batch::{BatchDynamics, ModelStep};
+pub use batch::{BatchDynamics, ModelStep, euler_maruyama};
 pub use calibration::{
     CalibrationConfig, CalibrationReport, DiffusionAt, DimensionCalibration, HorizonCalibration,
     TruncationRate, Z_STD_BAND, calibration_report,
