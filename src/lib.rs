@@ -12,10 +12,12 @@
 //! - [`nn`]: the MLP both use;
 //! - [`infer`]: the fused CPU path that rollouts and the server evaluate trained networks with;
 //! - [`artifact`]: atomic writes of everything nuno saves;
-//! - [`server`]: the HTTP model server (axum), a thin layer over the rest.
+//! - [`server`]: the HTTP model server (axum), a thin layer over the rest;
+//! - [`cancel`]: the flag long work checks between steps, to stop when asked.
 
 pub mod agent;
 pub mod artifact;
+pub mod cancel;
 pub mod data;
 pub mod envs;
 pub mod infer;

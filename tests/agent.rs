@@ -863,3 +863,78 @@ fn particles_equal_the_model_step_on_repeated_rows() {
         }
     }
 }
+
+/// A policy that sets `cancel` on its `at`-th call and counts its calls.
+struct CancelAt {
+    cancel: nuno::cancel::Cancel,
+    at: usize,
+    calls: std::sync::atomic::AtomicUsize,
+}
+
+impl BatchPolicy for CancelAt {
+    fn obs_dim(&self) -> usize {
+        11
+    }
+    fn act_dim(&self) -> usize {
+        3
+    }
+    fn act(&self, observations: &[f32], _rng: &mut dyn rand::RngCore) -> Vec<f32> {
+        let calls = self.calls.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1;
+        if calls == self.at {
+            self.cancel.cancel();
+        }
+        vec![0.0; observations.len() / 11 * 3]
+    }
+}
+
+/// Cancelled rollouts and evaluations stop before their next step: the
+/// policy is asked for exactly as many steps as ran before the flag was set.
+#[test]
+fn cancelled_rollouts_and_evaluations_stop_at_the_next_step() {
+    use nuno::agent::rollout_model_or_cancel;
+    use nuno::cancel::Cancelled;
+    use nuno::envs::{EnvError, EvaluationConfig, evaluate_or_cancel};
+    let (model, metadata) = shipped_model();
+    let rules = TaskRules::new(
+        TaskConfig::d4rl(TaskName::Hopper),
+        &metadata.spec.split,
+        metadata.spec.dt,
+    );
+    let policy = CancelAt {
+        cancel: Default::default(),
+        at: 3,
+        calls: Default::default(),
+    };
+    let dataset = small_dataset();
+    let starts: Vec<f32> = dataset.observations.iter().take(4 * 11).copied().collect();
+    let config = RolloutConfig {
+        horizon: 20,
+        particles: 2,
+        penalty: 0.0,
+        threshold: None,
+        noise_scale: 0.0,
+    };
+    let dynamics = Kernel::Fused.dynamics(&model);
+    let out = rollout_model_or_cancel(
+        &*dynamics,
+        RolloutActions::Policy(&policy),
+        &rules,
+        &starts,
+        &config,
+        &mut ChaCha8Rng::seed_from_u64(0),
+        &policy.cancel,
+    );
+    assert_eq!(out.err(), Some(Cancelled));
+    assert_eq!(policy.calls.load(std::sync::atomic::Ordering::SeqCst), 3);
+
+    let policy = CancelAt {
+        cancel: Default::default(),
+        at: 5,
+        calls: Default::default(),
+    };
+    let mut evaluation = EvaluationConfig::new(TaskConfig::d4rl(TaskName::Hopper), 2, 0);
+    evaluation.episodes_per_group = 2;
+    let err = evaluate_or_cancel(&policy, &evaluation, &policy.cancel).unwrap_err();
+    assert!(matches!(err, EnvError::Cancelled(Cancelled)), "{err}");
+    assert_eq!(policy.calls.load(std::sync::atomic::Ordering::SeqCst), 5);
+}

@@ -881,6 +881,105 @@ async fn slow_requests_time_out_with_a_json_error_and_keep_their_slot() {
     assert_eq!(started.load(Ordering::SeqCst), 2);
 }
 
+/// The answer's size is checked before any work: over the byte budget is a
+/// 422 naming the limit; the same request fits in binary (4 bytes a number
+/// instead of JSON's 16).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn answers_over_the_byte_budget_are_refused_before_any_work() {
+    let limits = Limits {
+        max_answer_bytes: 10_000,
+        ..limits()
+    };
+    let server = Server::start(limits, None).await;
+    // 20 rows × 4 particles: 20·(3·11 + 1) + 80·(11 + 3) = 1800 numbers.
+    let (states, acts) = (upright(20), actions(20));
+    let request = json!({"states": states, "actions": acts, "particles": 4});
+    let (status, answer) = server
+        .post(&format!("/v1/models/{MODEL}/step"), &request)
+        .await;
+    assert_eq!(
+        (status, error_code(&answer)),
+        (StatusCode::UNPROCESSABLE_ENTITY, "over_limit")
+    );
+    let message = answer["error"]["message"].as_str().unwrap();
+    assert!(
+        message.contains("28800 bytes") && message.contains("max_answer_bytes"),
+        "{message}"
+    );
+    let tensors = nuno::artifact::NamedTensors::from([
+        ("states".to_string(), (vec![20, 11], states.concat())),
+        ("actions".to_string(), (vec![20, 3], acts.concat())),
+    ]);
+    let metadata = std::collections::HashMap::from([("particles".to_string(), "4".to_string())]);
+    let bytes = nuno::artifact::safetensors_bytes(&tensors, Some(metadata)).unwrap();
+    let response = server
+        .post_raw(&format!("/v1/models/{MODEL}/step"), BINARY, bytes)
+        .await;
+    assert_eq!(response.status(), StatusCode::OK);
+    // A rollout counts (horizon + 1) states and horizon actions, η, Ση and rewards per row.
+    let rollout = json!({"states": upright(5), "horizon": 10, "particles": 8});
+    let (status, answer) = server
+        .post(&format!("/v1/models/{MODEL}/rollout"), &rollout)
+        .await;
+    assert_eq!(
+        (status, error_code(&answer)),
+        (StatusCode::UNPROCESSABLE_ENTITY, "over_limit"),
+        "{answer}"
+    );
+}
+
+/// A request that times out while its computation waits (held by the hook)
+/// leaves the work cancelled: it stops instead of rolling out, says so in the
+/// metrics, and frees the only slot for the next request.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn abandoned_work_is_cancelled_and_frees_its_slot() {
+    let limits = Limits {
+        request_timeout_s: 1,
+        compute_slots: 1,
+        ..limits()
+    };
+    let (hook, release, started) = hold_first_computation();
+    let server =
+        Server::start_with_config(limits, |config| config.before_compute = Some(hook)).await;
+    let rollout = json!({"states": upright(4), "horizon": 50, "particles": 8});
+    let (status, answer) = server
+        .post(&format!("/v1/models/{MODEL}/rollout"), &rollout)
+        .await;
+    assert_eq!(
+        (status, error_code(&answer)),
+        (StatusCode::SERVICE_UNAVAILABLE, "timeout")
+    );
+    release.send(()).unwrap();
+    // The cancelled work returns at once; wait for it to be counted (an event,
+    // not a duration: the loop ends as soon as the metric says so).
+    let mut metrics = String::new();
+    for _ in 0..600 {
+        metrics = server
+            .client
+            .get(format!("{}/metrics", server.base))
+            .send()
+            .await
+            .unwrap()
+            .text()
+            .await
+            .unwrap();
+        if metrics.contains("nuno_computations_cancelled_total 1") {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    }
+    assert!(
+        metrics.contains("nuno_computations_cancelled_total 1"),
+        "{metrics}"
+    );
+    let body = json!({"states": upright(2), "actions": actions(2)});
+    let (status, answer) = server
+        .post(&format!("/v1/models/{MODEL}/step"), &body)
+        .await;
+    assert_eq!(status, StatusCode::OK, "{answer}");
+    assert_eq!(started.load(Ordering::SeqCst), 2);
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_binary_serves_and_stops_cleanly_on_sigterm() {
     use std::io::{BufRead, BufReader};

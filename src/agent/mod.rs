@@ -22,7 +22,7 @@ pub use critic::{Temperature, TwinCritic};
 pub use fused_sac::{FusedGradients, FusedSac};
 pub use model_rollout::{
     ModelRollout, RolloutActions, RolloutConfig, RolloutStats, RolloutTrace, StepOutcome,
-    rollout_model,
+    rollout_model, rollout_model_or_cancel,
 };
 pub use model_step::{ParticleConfig, ParticleStep, penalized_reward, step_particles};
 pub use policy::{BatchPolicy, RandomPolicy};

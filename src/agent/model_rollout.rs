@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use super::BatchPolicy;
 use super::model_step::{penalized_reward, scaled_noise};
+use crate::cancel::{Cancel, Cancelled};
 use crate::data::TransitionBatch;
 use crate::envs::TaskRules;
 use crate::sde::BatchDynamics;
@@ -111,6 +112,24 @@ pub fn rollout_model(
     config: &RolloutConfig,
     rng: &mut ChaCha8Rng,
 ) -> ModelRollout {
+    let never = Cancel::default();
+    match rollout_model_or_cancel(dynamics, source, rules, starts, config, rng, &never) {
+        Ok(rollout) => rollout,
+        Err(Cancelled) => unreachable!("a flag no one else holds is never cancelled"),
+    }
+}
+
+/// [`rollout_model`], stopping with [`Cancelled`] before the next step once
+/// `cancel` is set.
+pub fn rollout_model_or_cancel(
+    dynamics: &dyn BatchDynamics,
+    source: RolloutActions,
+    rules: &TaskRules,
+    starts: &[f32],
+    config: &RolloutConfig,
+    rng: &mut ChaCha8Rng,
+    cancel: &Cancel,
+) -> Result<ModelRollout, Cancelled> {
     let spec = dynamics.spec();
     let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
     let state_dim = dynamics.state_dim();
@@ -138,7 +157,9 @@ pub fn rollout_model(
         rewards: vec![Vec::new(); rows],
         outcome: vec![StepOutcome::Continued; rows],
     };
-    let mut transitions = TransitionBatch::with_capacity(rows * config.horizon, obs_dim, act_dim);
+    // Grown as steps are kept: sized for every step, it would reserve the
+    // largest rollout a server accepts (hundreds of MB) for runs that truncate early.
+    let mut transitions = TransitionBatch::with_capacity(0, obs_dim, act_dim);
     let mut accumulated = vec![0.0f32; rows];
     let mut active: Vec<usize> = (0..rows).collect();
 
@@ -146,6 +167,7 @@ pub fn rollout_model(
         if active.is_empty() {
             break;
         }
+        cancel.check()?;
         let obs: Vec<f32> = active
             .iter()
             .flat_map(|&r| observations[r * obs_dim..(r + 1) * obs_dim].iter().copied())
@@ -215,11 +237,11 @@ pub fn rollout_model(
     }
 
     let stats = summarize(&trace, &transitions);
-    ModelRollout {
+    Ok(ModelRollout {
         transitions,
         trace,
         stats,
-    }
+    })
 }
 
 fn summarize(trace: &RolloutTrace, transitions: &TransitionBatch) -> RolloutStats {

@@ -32,6 +32,9 @@ struct Args {
     max_episodes: usize,
     #[arg(long, default_value_t = Limits::default().max_body_bytes)]
     max_body_bytes: usize,
+    /// Largest answer in bytes (4 a number in binary, 16 as JSON), checked before any work.
+    #[arg(long, default_value_t = Limits::default().max_answer_bytes)]
+    max_answer_bytes: usize,
     /// Seconds before a request is answered with a timeout error.
     #[arg(long, default_value_t = Limits::default().request_timeout_s)]
     request_timeout: u64,
@@ -64,6 +67,7 @@ fn main() -> ExitCode {
             max_rollout_steps: args.max_rollout_steps,
             max_episodes: args.max_episodes,
             max_body_bytes: args.max_body_bytes,
+            max_answer_bytes: args.max_answer_bytes,
             request_timeout_s: args.request_timeout,
             concurrency: args.concurrency,
             compute_slots: args.compute_slots,

@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{EnvError, MujocoTask, TaskConfig};
 use crate::agent::BatchPolicy;
+use crate::cancel::Cancel;
 
 /// What to evaluate and how.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -53,6 +54,16 @@ pub fn evaluate(
     policy: &dyn BatchPolicy,
     config: &EvaluationConfig,
 ) -> Result<EvaluationReport, EnvError> {
+    evaluate_or_cancel(policy, config, &Cancel::default())
+}
+
+/// [`evaluate`], stopping with [`EnvError::Cancelled`] at the next step of
+/// every episode once `cancel` is set.
+pub fn evaluate_or_cancel(
+    policy: &dyn BatchPolicy,
+    config: &EvaluationConfig,
+    cancel: &Cancel,
+) -> Result<EvaluationReport, EnvError> {
     if config.episodes == 0 {
         return Err(EnvError::NoEpisodes);
     }
@@ -77,7 +88,7 @@ pub fn evaluate(
         .enumerate()
         .map(|(g, &first)| {
             let episodes = first..(first + group).min(config.episodes);
-            run_group(policy, config, g as u64, episodes)
+            run_group(policy, config, g as u64, episodes, cancel)
         })
         .collect::<Result<_, _>>()?;
     let (returns, lengths): (Vec<f64>, Vec<usize>) = groups.into_iter().flatten().unzip();
@@ -104,6 +115,7 @@ fn run_group(
     config: &EvaluationConfig,
     group_index: u64,
     episodes: std::ops::Range<usize>,
+    cancel: &Cancel,
 ) -> Result<Vec<(f64, usize)>, EnvError> {
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     rng.set_stream(group_index + 1);
@@ -120,6 +132,7 @@ fn run_group(
     let mut running: Vec<usize> = (0..tasks.len()).collect();
     let mut batch = Vec::with_capacity(tasks.len() * obs_dim);
     while !running.is_empty() {
+        cancel.check()?;
         batch.clear();
         for &i in &running {
             batch.extend(observations[i].iter().map(|&x| x as f32));

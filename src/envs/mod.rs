@@ -8,7 +8,7 @@ mod rules;
 mod score;
 mod task;
 
-pub use evaluator::{EvaluationConfig, EvaluationReport, evaluate};
+pub use evaluator::{EvaluationConfig, EvaluationReport, evaluate, evaluate_or_cancel};
 pub use mujoco_task::{MujocoTask, TaskConfig, Transition};
 pub use rules::TaskRules;
 pub use score::ScoreReference;
@@ -43,4 +43,6 @@ pub enum EnvError {
     },
     #[error("an evaluation needs at least one episode")]
     NoEpisodes,
+    #[error(transparent)]
+    Cancelled(#[from] crate::cancel::Cancelled),
 }

@@ -30,6 +30,8 @@ pub enum ApiError {
     Unauthorized,
     #[error("the request did not finish within {0} s")]
     Timeout(u64),
+    #[error("the computation was cancelled: its request timed out or its client hung up")]
+    Cancelled,
     #[error("internal error: {0}")]
     Internal(String),
 }
@@ -50,8 +52,15 @@ impl ApiError {
             }
             ApiError::Unauthorized => (StatusCode::UNAUTHORIZED, "unauthorized"),
             ApiError::Timeout(_) => (StatusCode::SERVICE_UNAVAILABLE, "timeout"),
+            ApiError::Cancelled => (StatusCode::SERVICE_UNAVAILABLE, "cancelled"),
             ApiError::Internal(_) => (StatusCode::INTERNAL_SERVER_ERROR, "internal"),
         }
+    }
+}
+
+impl From<crate::cancel::Cancelled> for ApiError {
+    fn from(_: crate::cancel::Cancelled) -> Self {
+        ApiError::Cancelled
     }
 }
 
@@ -64,7 +73,8 @@ pub struct ErrorBody {
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 pub struct ErrorDetail {
     /// Stable code: model_not_found, route_not_found, no_policy, malformed_body, invalid_request,
-    /// over_limit, body_too_large, unsupported_media_type, unauthorized, timeout, internal.
+    /// over_limit, body_too_large, unsupported_media_type, unauthorized, timeout, cancelled,
+    /// internal.
     pub code: String,
     /// What was wrong, naming the field and the expected value.
     pub message: String,

@@ -48,6 +48,7 @@ struct Table {
     latency: BTreeMap<String, Histogram>,
     batch: BTreeMap<String, Histogram>,
     items: BTreeMap<String, u64>,
+    cancelled: u64,
 }
 
 /// The server's metrics.
@@ -86,6 +87,11 @@ impl Metrics {
         });
     }
 
+    /// A computation that stopped early because its request was gone.
+    pub fn cancelled(&self) {
+        self.with(|t| t.cancelled += 1);
+    }
+
     /// The text exposition format.
     pub fn render(&self) -> String {
         self.with(|t| {
@@ -122,6 +128,11 @@ impl Metrics {
             for (model, n) in &t.items {
                 let _ = writeln!(out, "nuno_items_total{{model=\"{model}\"}} {n}");
             }
+            out.push_str(
+                "# HELP nuno_computations_cancelled_total Computations stopped early because their request timed out or its client hung up.\n",
+            );
+            out.push_str("# TYPE nuno_computations_cancelled_total counter\n");
+            let _ = writeln!(out, "nuno_computations_cancelled_total {}", t.cancelled);
             out
         })
     }

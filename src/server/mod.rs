@@ -4,7 +4,8 @@
 //! SIGTERM/Ctrl-C and reloads the models on SIGHUP.
 //!
 //! Heavy work (model steps, rollouts, MuJoCo episodes) runs off the async
-//! runtime on tokio's blocking pool, at most `Limits::compute_slots` at once.
+//! runtime on tokio's blocking pool, at most `Limits::compute_slots` at once,
+//! and stops between steps once its request is gone.
 
 mod body;
 mod error;
@@ -28,6 +29,7 @@ use serde::Serialize;
 use tokio::sync::Semaphore;
 use utoipa::ToSchema;
 
+use crate::cancel::Cancel;
 use crate::infer::Kernel;
 
 pub use body::{BINARY, TensorBytes};
@@ -48,6 +50,9 @@ pub struct Limits {
     pub max_rollout_steps: usize,
     pub max_episodes: usize,
     pub max_body_bytes: usize,
+    /// Largest answer, in bytes, checked before any work from the request's
+    /// sizes (4 bytes a number in binary, 16 as JSON): what bounds a request's memory.
+    pub max_answer_bytes: usize,
     /// Seconds before a request is answered with a timeout error.
     pub request_timeout_s: u64,
     /// Requests handled at once; more wait in line.
@@ -65,6 +70,7 @@ impl Default for Limits {
             max_rollout_steps: 5_000_000,
             max_episodes: 100,
             max_body_bytes: 64 << 20,
+            max_answer_bytes: 512 << 20,
             request_timeout_s: 120,
             concurrency: 64,
             compute_slots: std::thread::available_parallelism().map_or(2, |n| n.get()),
@@ -131,10 +137,12 @@ impl AppState {
     /// The slot belongs to the blocking work, not to the request's future: when a
     /// request times out or its client hangs up, the future is dropped but the slot
     /// stays taken until the work itself has finished, so abandoned requests cannot
-    /// pile up more computations than there are slots.
+    /// pile up more computations than there are slots. Dropping the future also
+    /// sets the [`Cancel`] flag `work` is given: long work checks it between steps
+    /// and stops early, freeing the slot for the next request.
     pub async fn compute<T: Send + 'static>(
         &self,
-        work: impl FnOnce() -> Result<T, ApiError> + Send + 'static,
+        work: impl FnOnce(&Cancel) -> Result<T, ApiError> + Send + 'static,
     ) -> Result<T, ApiError> {
         let slot = self
             .compute
@@ -142,13 +150,24 @@ impl AppState {
             .acquire_owned()
             .await
             .map_err(|e| ApiError::Internal(e.to_string()))?;
+        let cancel = Cancel::default();
+        // Dropped with this future: on completion (harmless), timeout or hang-up.
+        let _cancel_if_abandoned = cancel.on_drop();
         let hook = self.config.before_compute.clone();
+        let metrics = self.metrics.clone();
         tokio::task::spawn_blocking(move || {
             let _slot = slot;
             if let Some(ComputeHook(hook)) = hook {
                 hook();
             }
-            work()
+            let result = cancel
+                .check()
+                .map_err(ApiError::from)
+                .and_then(|()| work(&cancel));
+            if matches!(result, Err(ApiError::Cancelled)) {
+                metrics.cancelled();
+            }
+            result
         })
         .await
         .map_err(|e| ApiError::Internal(format!("computation failed: {e}")))?

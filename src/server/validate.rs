@@ -2,6 +2,7 @@
 //! values, within the configured limits. Every message names the field.
 
 use super::ApiError;
+use super::body::Format;
 
 /// Flattens `rows` after checking there is at least one, each has `width`
 /// entries, and every entry is finite.
@@ -71,6 +72,38 @@ pub fn non_negative(field: &str, value: f64) -> Result<(), ApiError> {
     if !value.is_finite() || value < 0.0 {
         return Err(ApiError::Invalid(format!(
             "`{field}` must be a finite number ≥ 0, got {value}"
+        )));
+    }
+    Ok(())
+}
+
+/// Bytes one number of an answer takes: 4 as f32 in binary, at most 16 as JSON
+/// text (the longest f32 `serde_json` writes, `-1.2345678e-12`, and a comma).
+fn bytes_per_value(format: Format) -> usize {
+    match format {
+        Format::Binary => 4,
+        Format::Json => 16,
+    }
+}
+
+/// Checked before any work: an answer of `values` numbers (`what` says how
+/// they were counted) must fit in `max_bytes` in `format`.
+pub fn answer_within(
+    what: &str,
+    values: usize,
+    format: Format,
+    max_bytes: usize,
+) -> Result<(), ApiError> {
+    let bytes = values.saturating_mul(bytes_per_value(format));
+    if bytes > max_bytes {
+        let hint = match format {
+            Format::Json => "; binary answers (application/octet-stream) take a quarter",
+            Format::Binary => "",
+        };
+        return Err(ApiError::OverLimit(format!(
+            "the answer would take up to {bytes} bytes ({values} values: {what}), over this \
+             server's limit of {max_bytes} bytes (max_answer_bytes); send fewer rows, particles \
+             or steps{hint}"
         )));
     }
     Ok(())

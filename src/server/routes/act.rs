@@ -63,7 +63,7 @@ pub async fn act(
     let act_dim = actor.config.act_dim;
     let worker = model.clone();
     let actions = state
-        .compute(move || {
+        .compute(move |_| {
             let policy = worker
                 .batch_policy(r.mode)
                 .ok_or_else(|| ApiError::NoPolicy(worker.id.clone()))?;

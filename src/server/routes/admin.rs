@@ -11,5 +11,5 @@ use crate::server::{ApiError, AppState, ReloadReport};
     responses((status = 200, description = "Success", body = ReloadReport), (status = 401, description = "Missing or wrong bearer token", body = crate::server::ErrorBody)))]
 pub async fn reload(State(state): State<AppState>) -> Result<Json<ReloadReport>, ApiError> {
     let registry = state.registry.clone();
-    Ok(Json(state.compute(move || Ok(registry.reload())).await?))
+    Ok(Json(state.compute(move |_| Ok(registry.reload())).await?))
 }

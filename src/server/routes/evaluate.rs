@@ -10,8 +10,10 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::defaults::{one, ten};
-use crate::agent::{ActionMode, RolloutActions, RolloutConfig, rollout_model};
-use crate::envs::{EvaluationConfig, EvaluationReport, MujocoTask, evaluate as run_episodes};
+use crate::agent::{ActionMode, RolloutActions, RolloutConfig, rollout_model_or_cancel};
+use crate::envs::{
+    EnvError, EvaluationConfig, EvaluationReport, MujocoTask, evaluate_or_cancel as run_episodes,
+};
 use crate::server::body::RawBody;
 use crate::server::validate::{matrix, within};
 use crate::server::{ApiError, AppState};
@@ -63,11 +65,14 @@ pub async fn evaluate(
     let config = EvaluationConfig::new(model.task, r.episodes, r.seed);
     let worker = model.clone();
     let report = state
-        .compute(move || {
+        .compute(move |cancel| {
             let policy = worker
                 .batch_policy(r.mode)
                 .ok_or_else(|| ApiError::NoPolicy(worker.id.clone()))?;
-            run_episodes(policy.as_ref(), &config).map_err(|e| ApiError::Internal(e.to_string()))
+            run_episodes(policy.as_ref(), &config, cancel).map_err(|e| match e {
+                EnvError::Cancelled(_) => ApiError::Cancelled,
+                e => ApiError::Internal(e.to_string()),
+            })
         })
         .await?;
     Ok(Json(EvaluateResponse {
@@ -143,12 +148,13 @@ pub async fn validate(
     state.metrics.batch("validate", &id, horizon * r.particles);
     let worker = model.clone();
     let (real, predicted) = state
-        .compute(move || {
+        .compute(move |cancel| {
             let internal = |e: crate::envs::EnvError| ApiError::Internal(e.to_string());
             let mut task = MujocoTask::new(worker.task).map_err(internal)?;
             let start: Vec<f32> = task.reset(Some(r.seed)).iter().map(|&x| x as f32).collect();
             let mut real = vec![start.clone()];
             for action in actions.chunks(act_dim) {
+                cancel.check()?;
                 let action: Vec<f64> = action.iter().map(|&a| f64::from(a)).collect();
                 let t = task
                     .step(&action)
@@ -166,14 +172,15 @@ pub async fn validate(
                 noise_scale: r.noise_scale,
             };
             let mut rng = ChaCha8Rng::seed_from_u64(r.seed);
-            let out = rollout_model(
+            let out = rollout_model_or_cancel(
                 worker.batch_dynamics(),
                 RolloutActions::Sequence(&actions),
                 &worker.rules,
                 &start,
                 &config,
                 &mut rng,
-            );
+                cancel,
+            )?;
             Ok((real, out.trace.observations))
         })
         .await?;

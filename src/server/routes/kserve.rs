@@ -222,7 +222,7 @@ pub async fn infer(
     state.metrics.batch("infer", &id, batch);
     let worker = model.clone();
     let s = state
-        .compute(move || {
+        .compute(move |_| {
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
             Ok(step_particles(
                 worker.batch_dynamics(),

@@ -12,10 +12,11 @@ use utoipa::ToSchema;
 
 use super::defaults::{one, unit, unit_f32};
 use crate::agent::{
-    ActionMode, RolloutActions, RolloutConfig, StepOutcome, penalized_reward, rollout_model,
+    ActionMode, RolloutActions, RolloutConfig, StepOutcome, penalized_reward,
+    rollout_model_or_cancel,
 };
-use crate::server::body::{RawBody, json_response};
-use crate::server::validate::{matrix, non_negative, within};
+use crate::server::body::{Format, RawBody, json_response};
+use crate::server::validate::{answer_within, matrix, non_negative, within};
 use crate::server::{ApiError, AppState};
 
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
@@ -124,6 +125,13 @@ pub async fn rollout(
     )?;
     non_negative("penalty", r.penalty)?;
     non_negative("noise_scale", f64::from(r.noise_scale))?;
+    let rows = batch * r.particles;
+    answer_within(
+        "batch × particles × ((horizon + 1)·obs_dim + horizon·(act_dim + 3))",
+        rows * ((r.horizon + 1) * obs_dim + r.horizon * (act_dim + 3)),
+        Format::Json,
+        limits.max_answer_bytes,
+    )?;
     let sequence = match &r.actions {
         None => {
             if model.policy.is_none() {
@@ -193,7 +201,7 @@ pub async fn rollout(
     // The trajectories are built and serialised in the compute work too: at
     // 4096 starts × 10 steps the JSON answer is megabytes.
     state
-        .compute(move || {
+        .compute(move |cancel| {
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
             let policy = worker.batch_policy(mode);
             let source = match (&sequence, &policy) {
@@ -201,14 +209,15 @@ pub async fn rollout(
                 (None, Some(policy)) => RolloutActions::Policy(policy.as_ref()),
                 (None, None) => return Err(ApiError::NoPolicy(worker.id.clone())),
             };
-            let out = rollout_model(
+            let out = rollout_model_or_cancel(
                 worker.batch_dynamics(),
                 source,
                 &worker.rules,
                 &starts,
                 &config,
                 &mut rng,
-            );
+                cancel,
+            )?;
             let t = &out.trace;
             let trajectories = (0..t.rows)
                 .map(|row| {

@@ -15,7 +15,7 @@ use super::defaults::{one, unit, unit_f32};
 use crate::agent::{ParticleConfig, ParticleStep, step_particles};
 use crate::artifact::NamedTensors;
 use crate::server::body::{Format, RawBody, TensorBytes, json_response, tensors_response};
-use crate::server::validate::{flat, matrix, non_negative, within};
+use crate::server::validate::{answer_within, flat, matrix, non_negative, within};
 use crate::server::{ApiError, AppState};
 
 /// A batch of observations and actions to step.
@@ -112,7 +112,14 @@ pub async fn step(
     within("particles", request.particles, limits.max_particles)?;
     non_negative("penalty", request.penalty)?;
     non_negative("noise_scale", f64::from(request.noise_scale))?;
-    state.metrics.batch("step", &id, batch * request.particles);
+    let rows = batch * request.particles;
+    answer_within(
+        "batch × (3·obs_dim + 1) + batch × particles × (obs_dim + 3)",
+        batch * (3 * obs_dim + 1) + rows * (obs_dim + 3),
+        body.format,
+        limits.max_answer_bytes,
+    )?;
+    state.metrics.batch("step", &id, rows);
 
     let config = ParticleConfig {
         particles: request.particles,
@@ -124,7 +131,7 @@ pub async fn step(
     // The answer is serialised in the compute work too: at batch 4096 its JSON
     // is megabytes.
     state
-        .compute(move || {
+        .compute(move |_| {
             let mut rng = ChaCha8Rng::seed_from_u64(request.seed);
             let result = step_particles(
                 worker.batch_dynamics(),
