@@ -648,6 +648,18 @@ async fn token_guards_everything_but_health() {
         .await
         .unwrap();
     assert_eq!(r.status(), StatusCode::OK);
+    // The spec and the docs list every route: with a token, they need it too.
+    for path in ["/openapi.json", "/docs"] {
+        assert_eq!(server.get(path).await.0, StatusCode::UNAUTHORIZED, "{path}");
+        let r = server
+            .client
+            .get(format!("{}{path}", server.base))
+            .bearer_auth("s3cret")
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), StatusCode::OK, "{path}");
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -681,6 +693,12 @@ async fn concurrent_requests_metrics_kserve_and_reload() {
         );
     }
 
+    // Unknown routes are answered in JSON and counted like the others.
+    let (status, body) = server.get("/v1/no-such-route").await;
+    assert_eq!(
+        (status, error_code(&body)),
+        (StatusCode::NOT_FOUND, "route_not_found")
+    );
     let text = server
         .client
         .get(format!("{}/metrics", server.base))
@@ -692,6 +710,10 @@ async fn concurrent_requests_metrics_kserve_and_reload() {
         .unwrap();
     assert!(
         text.contains("nuno_requests_total{route=\"/v1/models/{id}/step\",status=\"200\"} 16"),
+        "{text}"
+    );
+    assert!(
+        text.contains("nuno_requests_total{route=\"unmatched\",status=\"404\"} 1"),
         "{text}"
     );
     assert!(

@@ -58,6 +58,7 @@ fn main() -> ExitCode {
         print!("{}", openapi_json());
         return ExitCode::SUCCESS;
     }
+    init_logging();
     let config = ServerConfig {
         models_dir: args.models.clone(),
         limits: Limits {
@@ -78,35 +79,54 @@ fn main() -> ExitCode {
     };
     let (state, report) = AppState::new(config);
     for failure in &report.failed {
-        eprintln!("warning: not serving `{}`: {}", failure.id, failure.error);
+        tracing::warn!("not serving `{}`: {}", failure.id, failure.error);
     }
     if report.loaded.is_empty() {
-        eprintln!(
-            "warning: no model loaded from {} (each model is a subdirectory with model.json)",
+        tracing::warn!(
+            "no model loaded from {} (each model is a subdirectory with model.json)",
             args.models.display()
         );
     }
     let runtime = match tokio::runtime::Runtime::new() {
         Ok(runtime) => runtime,
         Err(e) => {
-            eprintln!("error: cannot start the async runtime: {e}");
+            tracing::error!("cannot start the async runtime: {e}");
             return ExitCode::FAILURE;
         }
     };
     let result = runtime.block_on(async {
         let listener = tokio::net::TcpListener::bind(args.addr).await?;
-        eprintln!(
-            "nuno-server: serving {:?} on http://{} (docs at /docs)",
+        tracing::info!(
+            "serving {:?} on http://{} (docs at /docs)",
             report.loaded,
             listener.local_addr()?
         );
         serve(state, listener).await
     });
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(()) => {
+            tracing::info!("stopped");
+            ExitCode::SUCCESS
+        }
         Err(e) => {
-            eprintln!("error: {e}");
+            tracing::error!("{e}");
             ExitCode::FAILURE
         }
     }
+}
+
+/// Log lines on stderr, filtered by `RUST_LOG` (`info` when unset; e.g.
+/// `RUST_LOG=nuno=debug,tower=warn`), coloured only on a terminal.
+fn init_logging() {
+    use std::io::IsTerminal;
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        // A closed stderr must not take requests down: by default a failed
+        // write is reported with `eprintln!`, which panics on that same stderr.
+        .log_internal_errors(false)
+        .init();
 }

@@ -64,6 +64,21 @@ impl From<crate::cancel::Cancelled> for ApiError {
     }
 }
 
+impl ApiError {
+    /// What the client is told. An internal error's detail may name paths or
+    /// internals: it goes to the log under a fresh id, and the client gets the id.
+    pub fn client_message(&self) -> String {
+        match self {
+            ApiError::Internal(detail) => {
+                let id = format!("{:016x}", rand::random::<u64>());
+                tracing::error!(error_id = %id, detail = %detail, "internal error");
+                format!("internal error {id} (the server's log has the details)")
+            }
+            other => other.to_string(),
+        }
+    }
+}
+
 /// The error body.
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 pub struct ErrorBody {
@@ -86,7 +101,7 @@ impl IntoResponse for ApiError {
         let body = ErrorBody {
             error: ErrorDetail {
                 code: code.to_string(),
-                message: self.to_string(),
+                message: self.client_message(),
             },
         };
         (status, Json(body)).into_response()

@@ -27,6 +27,7 @@ use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use tokio::sync::Semaphore;
+use tracing::Instrument;
 use utoipa::ToSchema;
 
 use crate::cancel::Cancel;
@@ -177,12 +178,17 @@ impl AppState {
 /// The whole HTTP application.
 pub fn app(state: AppState) -> Router {
     let limits = state.config.limits.clone();
+    // With a token, the spec and the docs need it too: they list every model
+    // route, which a deployment that sets a token may not want to show.
     let protected = routes::api_routes()
+        .merge(openapi::docs_routes())
         .route_layer(middleware::from_fn_with_state(state.clone(), require_token));
+    // The fallback goes in before the layers, so unknown routes are timed,
+    // logged and counted like the others.
     Router::new()
         .merge(protected)
         .merge(routes::health_routes())
-        .merge(openapi::docs_routes())
+        .fallback(|uri: axum::http::Uri| async move { ApiError::NoRoute(uri.path().to_string()) })
         .layer(middleware::from_fn_with_state(
             state.clone(),
             timeout_and_metrics,
@@ -191,7 +197,6 @@ pub fn app(state: AppState) -> Router {
         .layer(tower::limit::ConcurrencyLimitLayer::new(
             limits.concurrency.max(1),
         ))
-        .fallback(|uri: axum::http::Uri| async move { ApiError::NoRoute(uri.path().to_string()) })
         .with_state(state)
 }
 
@@ -223,7 +228,8 @@ fn token_matches(given: &str, token: &str) -> bool {
     difference == 0
 }
 
-/// Per-request timeout (answered as a JSON error) and request metrics.
+/// Per-request timeout (answered as a JSON error), request metrics, and one
+/// log line per request in a `request` span (method, matched route).
 async fn timeout_and_metrics(
     State(state): State<AppState>,
     request: Request,
@@ -233,18 +239,17 @@ async fn timeout_and_metrics(
         .extensions()
         .get::<MatchedPath>()
         .map_or_else(|| "unmatched".to_string(), |p| p.as_str().to_string());
+    let span = tracing::info_span!("request", method = %request.method(), route = %route);
     let started = Instant::now();
     let seconds = state.config.limits.request_timeout_s;
-    let response = match tokio::time::timeout(Duration::from_secs(seconds), next.run(request)).await
-    {
+    let answer = tokio::time::timeout(Duration::from_secs(seconds), next.run(request));
+    let response = match answer.instrument(span.clone()).await {
         Ok(response) => response,
         Err(_) => ApiError::Timeout(seconds).into_response(),
     };
-    state.metrics.request(
-        &route,
-        response.status().as_u16(),
-        started.elapsed().as_secs_f64(),
-    );
+    let (status, elapsed) = (response.status().as_u16(), started.elapsed());
+    span.in_scope(|| tracing::info!(status, latency_ms = elapsed.as_secs_f64() * 1e3, "answered"));
+    state.metrics.request(&route, status, elapsed.as_secs_f64());
     response
 }
 
@@ -261,11 +266,13 @@ pub async fn serve(state: AppState, listener: tokio::net::TcpListener) -> std::i
             while hangups.recv().await.is_some() {
                 let registry = registry.clone();
                 let report = tokio::task::spawn_blocking(move || registry.reload()).await;
-                if let Ok(report) = report {
-                    eprintln!(
-                        "SIGHUP: reloaded {:?}, failed {:?}",
-                        report.loaded, report.failed
-                    );
+                match report {
+                    Ok(report) => tracing::info!(
+                        loaded = ?report.loaded,
+                        failed = ?report.failed,
+                        "SIGHUP: models reloaded"
+                    ),
+                    Err(e) => tracing::error!(error = %e, "SIGHUP: the reload failed"),
                 }
             }
         });

@@ -31,7 +31,7 @@ impl IntoResponse for V2Error {
         let (status, _) = self.0.status_code();
         (
             status,
-            Json(serde_json::json!({ "error": self.0.to_string() })),
+            Json(serde_json::json!({ "error": self.0.client_message() })),
         )
             .into_response()
     }
