@@ -809,6 +809,128 @@ fn committed_openapi_spec_is_current() {
     assert!(step["application/json"].is_object() && step["application/octet-stream"].is_object());
 }
 
+/// KServe's own Python client (PyPI `kserve`, protocol v2) with the binary
+/// tensor extension off and on: the same numbers as `/v1/.../step` with the
+/// same seed, and binary answers are binary.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn kserves_python_client_infers_in_json_and_binary() {
+    let server = Server::start(limits(), None).await;
+    let (states, acts) = (upright(5), actions(5));
+    let body = json!({"states": states, "actions": acts, "seed": 3, "penalty": 0.5});
+    let (status, step) = server
+        .post(&format!("/v1/models/{MODEL}/step"), &body)
+        .await;
+    assert_eq!(status, StatusCode::OK, "{step}");
+    let step: StepResponse = serde_json::from_value(step).unwrap();
+
+    let work = tempfile::tempdir().unwrap();
+    let (base, dir) = (server.base.clone(), work.path().to_path_buf());
+    let args = [
+        base,
+        MODEL.to_string(),
+        json!(states).to_string(),
+        json!(acts).to_string(),
+    ];
+    tokio::task::spawn_blocking(move || common::run_python("kserve_client.py", &args, &dir))
+        .await
+        .unwrap();
+    let result: Value =
+        serde_json::from_str(&std::fs::read_to_string(work.path().join("result.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        (&result["live"], &result["ready"], &result["model_ready"]),
+        (&json!(true), &json!(true), &json!(true))
+    );
+    assert_eq!(result["json"]["content_type"], "application/json");
+    assert_eq!(result["binary"]["content_type"], "application/octet-stream");
+    let as_f32 = |v: &Value| -> Vec<f32> {
+        v.as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|x| match x {
+                Value::Array(row) => row.iter().map(|y| y.as_f64().unwrap() as f32).collect(),
+                x => vec![x.as_f64().unwrap() as f32],
+            })
+            .collect()
+    };
+    for mode in ["json", "binary"] {
+        let outputs = &result[mode]["outputs"];
+        // Shape [batch, obs_dim]: one particle per row, the same draw as step's first.
+        let next: Vec<f32> = step
+            .next_states
+            .iter()
+            .map(|p| p[0].clone())
+            .collect::<Vec<_>>()
+            .concat();
+        assert_eq!(as_f32(&outputs["next_states"]), next, "{mode} next_states");
+        assert_eq!(as_f32(&outputs["eta"]), step.eta, "{mode} eta");
+        let penalised: Vec<f32> = step.penalized_rewards.iter().map(|p| p[0]).collect();
+        assert_eq!(
+            as_f32(&outputs["penalized_rewards"]),
+            penalised,
+            "{mode} penalised rewards"
+        );
+        let terminals: Vec<f32> = step
+            .terminals
+            .iter()
+            .map(|p| f32::from(u8::from(p[0])))
+            .collect();
+        assert_eq!(as_f32(&outputs["terminals"]), terminals, "{mode} terminals");
+    }
+}
+
+/// Binary-extension bodies that do not add up are refused, naming what is wrong.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn malformed_binary_infer_bodies_are_refused_by_name() {
+    let server = Server::start(limits(), None).await;
+    let infer = format!("/v2/models/{MODEL}/infer");
+    let header = json!({"inputs": [
+        {"name": "states", "shape": [1, 11], "datatype": "FP32", "parameters": {"binary_data_size": 44}},
+        {"name": "actions", "shape": [1, 3], "datatype": "FP32", "parameters": {"binary_data_size": 12}},
+    ]})
+    .to_string();
+    let send = |body: Vec<u8>, length: Option<usize>| {
+        let mut request = server
+            .client
+            .post(format!("{}{infer}", server.base))
+            .header("content-type", BINARY)
+            .body(body);
+        if let Some(length) = length {
+            request = request.header("inference-header-content-length", length.to_string());
+        }
+        request.send()
+    };
+    let mut body = header.clone().into_bytes();
+    body.extend(std::iter::repeat_n(0u8, 40)); // 4 bytes short of the states
+    let cases = [
+        (
+            body.clone(),
+            None,
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "inference-header-content-length",
+        ),
+        (
+            body.clone(),
+            Some(body.len() + 1),
+            StatusCode::BAD_REQUEST,
+            "the body has",
+        ),
+        (
+            body,
+            Some(header.len()),
+            StatusCode::BAD_REQUEST,
+            "binary_data_size 44, but only 40 bytes",
+        ),
+    ];
+    for (body, length, status, needle) in cases {
+        let r = send(body, length).await.unwrap();
+        assert_eq!(r.status(), status, "{needle}");
+        let answer: Value = r.json().await.unwrap();
+        let message = answer["error"].as_str().unwrap();
+        assert!(message.contains(needle), "{message}");
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_client_generated_from_the_spec_calls_the_server() {
     let server = Server::start(limits(), None).await;

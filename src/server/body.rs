@@ -35,13 +35,33 @@ pub enum Format {
 pub struct RawBody {
     pub format: Format,
     pub bytes: Bytes,
+    /// `Inference-Header-Content-Length`: the Open Inference Protocol's binary
+    /// tensor extension, a JSON header of this many bytes and raw tensors after it.
+    pub inference_header_length: Option<usize>,
 }
+
+/// The header of the Open Inference Protocol's binary tensor extension.
+pub const INFERENCE_HEADER_LENGTH: &str = "inference-header-content-length";
 
 impl FromRequest<AppState> for RawBody {
     type Rejection = ApiError;
 
     async fn from_request(req: Request, state: &AppState) -> Result<Self, Self::Rejection> {
         let format = request_format(req.headers())?;
+        let inference_header_length = match req.headers().get(INFERENCE_HEADER_LENGTH) {
+            None => None,
+            Some(value) => Some(
+                value
+                    .to_str()
+                    .ok()
+                    .and_then(|v| v.trim().parse::<usize>().ok())
+                    .ok_or_else(|| {
+                        ApiError::Malformed(format!(
+                            "header `{INFERENCE_HEADER_LENGTH}` must be a byte count, got {value:?}"
+                        ))
+                    })?,
+            ),
+        };
         let limit = state.config.limits.max_body_bytes;
         let bytes = Bytes::from_request(req, state).await.map_err(|e| {
             if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
@@ -50,7 +70,11 @@ impl FromRequest<AppState> for RawBody {
                 ApiError::Malformed(e.body_text())
             }
         })?;
-        Ok(Self { format, bytes })
+        Ok(Self {
+            format,
+            bytes,
+            inference_header_length,
+        })
     }
 }
 
@@ -63,15 +87,27 @@ impl RawBody {
     /// The body as JSON of type `T` (binary bodies are refused for JSON-only routes).
     pub async fn json<T: DeserializeOwned + Send + 'static>(&self) -> Result<T, ApiError> {
         if self.format == Format::Binary {
-            return Err(ApiError::UnsupportedMediaType(BINARY.into()));
+            return Err(ApiError::UnsupportedMediaType {
+                given: BINARY.into(),
+                accepted: "application/json",
+            });
         }
-        if self.bytes.len() < OFF_RUNTIME_BYTES {
-            return parse_json(&self.bytes);
+        json_off_runtime(self.bytes.clone()).await
+    }
+
+    /// The first `length` bytes as JSON of type `T`, whatever the content type
+    /// (the JSON header of a binary-extension body).
+    pub async fn json_prefix<T: DeserializeOwned + Send + 'static>(
+        &self,
+        length: usize,
+    ) -> Result<T, ApiError> {
+        if length > self.bytes.len() {
+            return Err(ApiError::Malformed(format!(
+                "`{INFERENCE_HEADER_LENGTH}` is {length} but the body has {} bytes",
+                self.bytes.len()
+            )));
         }
-        let bytes = self.bytes.clone();
-        tokio::task::spawn_blocking(move || parse_json(&bytes))
-            .await
-            .map_err(|e| ApiError::Internal(format!("parsing the body failed: {e}")))?
+        json_off_runtime(self.bytes.slice(..length)).await
     }
 
     /// The body as safetensors: named f32 tensors and the header's string metadata.
@@ -86,6 +122,18 @@ impl RawBody {
             .map_err(|e| ApiError::Malformed(e.to_string()))?;
         Ok((tensors, metadata))
     }
+}
+
+/// Parses `bytes` as JSON, on a blocking thread from [`OFF_RUNTIME_BYTES`] up.
+async fn json_off_runtime<T: DeserializeOwned + Send + 'static>(
+    bytes: Bytes,
+) -> Result<T, ApiError> {
+    if bytes.len() < OFF_RUNTIME_BYTES {
+        return parse_json(&bytes);
+    }
+    tokio::task::spawn_blocking(move || parse_json(&bytes))
+        .await
+        .map_err(|e| ApiError::Internal(format!("parsing the body failed: {e}")))?
 }
 
 fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
@@ -114,7 +162,10 @@ fn request_format(headers: &HeaderMap) -> Result<Format, ApiError> {
     match mime.as_str() {
         "application/json" | "application/x-www-form-urlencoded" | "" => Ok(Format::Json),
         BINARY => Ok(Format::Binary),
-        _ => Err(ApiError::UnsupportedMediaType(value.to_string())),
+        _ => Err(ApiError::UnsupportedMediaType {
+            given: value.to_string(),
+            accepted: "application/json or application/octet-stream",
+        }),
     }
 }
 

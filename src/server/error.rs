@@ -24,8 +24,11 @@ pub enum ApiError {
     OverLimit(String),
     #[error("request body larger than the limit of {0} bytes")]
     TooLarge(usize),
-    #[error("unsupported content type `{0}` (use application/json or application/octet-stream)")]
-    UnsupportedMediaType(String),
+    #[error("unsupported content type `{given}` (this route takes {accepted})")]
+    UnsupportedMediaType {
+        given: String,
+        accepted: &'static str,
+    },
     #[error("missing or wrong bearer token")]
     Unauthorized,
     #[error("the request did not finish within {0} s")]
@@ -47,7 +50,7 @@ impl ApiError {
             ApiError::Invalid(_) => (StatusCode::UNPROCESSABLE_ENTITY, "invalid_request"),
             ApiError::OverLimit(_) => (StatusCode::UNPROCESSABLE_ENTITY, "over_limit"),
             ApiError::TooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, "body_too_large"),
-            ApiError::UnsupportedMediaType(_) => {
+            ApiError::UnsupportedMediaType { .. } => {
                 (StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported_media_type")
             }
             ApiError::Unauthorized => (StatusCode::UNAUTHORIZED, "unauthorized"),

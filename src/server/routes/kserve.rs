@@ -1,6 +1,7 @@
 //! The KServe Open Inference Protocol v2 for `step`, so generic inference
 //! clients work: health, server and model metadata, readiness, and `infer`
-//! with inputs `states` and `actions` (FP32, `[batch, dim]`, flat `data`).
+//! with inputs `states` and `actions` (FP32, `[batch, dim]`, flat `data` or
+//! the binary tensor extension, `kserve_binary`).
 //! Errors follow the protocol: `{ "error": "<message>" }`.
 
 use axum::Json;
@@ -12,8 +13,9 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use crate::agent::{ParticleConfig, step_particles};
-use crate::server::body::RawBody;
+use super::kserve_binary::{OutputData, binary_response, binary_size, decode_fp32};
+use crate::agent::{ParticleConfig, ParticleStep, step_particles};
+use crate::server::body::{Format, INFERENCE_HEADER_LENGTH, RawBody, TensorBytes, json_response};
 use crate::server::validate::{flat, within};
 use crate::server::{ApiError, AppState};
 
@@ -55,7 +57,7 @@ pub async fn server_metadata() -> Json<serde_json::Value> {
     Json(serde_json::json!({
         "name": "nuno",
         "version": env!("CARGO_PKG_VERSION"),
-        "extensions": [],
+        "extensions": ["binary_tensor_data"],
     }))
 }
 
@@ -126,14 +128,30 @@ pub async fn v2_model_metadata(
     }))
 }
 
-/// One v2 tensor with its data flattened row-major.
+/// One v2 tensor: its data inline (`data`, flattened row-major), or with the
+/// binary tensor extension `parameters.binary_data_size` bytes after the JSON
+/// header.
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 pub struct InferTensor {
     pub name: String,
     pub shape: Vec<usize>,
     pub datatype: String,
-    #[schema(value_type = Vec<f64>)]
-    pub data: serde_json::Value,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = Option<Vec<f64>>)]
+    pub data: Option<serde_json::Value>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = Option<Object>)]
+    pub parameters: Option<serde_json::Map<String, serde_json::Value>>,
+}
+
+/// An output the client asks for; `parameters.binary_data: true` answers it
+/// in binary.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct RequestedOutput {
+    pub name: String,
+    #[serde(default)]
+    #[schema(value_type = Option<Object>)]
+    pub parameters: Option<serde_json::Map<String, serde_json::Value>>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
@@ -141,7 +159,11 @@ pub struct InferRequest {
     #[serde(default)]
     pub id: Option<String>,
     pub inputs: Vec<InferTensor>,
-    /// `seed`, `penalty`, `noise_scale` (one particle per row).
+    /// The outputs to answer (default: all of them).
+    #[serde(default)]
+    pub outputs: Option<Vec<RequestedOutput>>,
+    /// `seed`, `penalty`, `noise_scale` (one particle per row);
+    /// `binary_data_output: true` answers every output in binary.
     #[serde(default)]
     #[schema(value_type = Object)]
     pub parameters: serde_json::Map<String, serde_json::Value>,
@@ -155,24 +177,74 @@ pub struct InferResponse {
     pub outputs: Vec<InferTensor>,
 }
 
-/// One EM step per row, in the v2 inference format.
+/// One EM step per row, in the v2 inference format. JSON, or the binary tensor
+/// extension (`application/octet-stream` with `Inference-Header-Content-Length`)
+/// both ways: inputs with `parameters.binary_data_size`, outputs in binary when
+/// asked (`parameters.binary_data_output`, or `binary_data` per output).
 #[utoipa::path(post, path = "/v2/models/{id}/infer", tag = "kserve-v2",
     params(("id" = String, Path, description = "Model id")),
-    request_body = InferRequest,
-    responses((status = 200, description = "Success", body = InferResponse), (status = 400, description = "Malformed"), (status = 404, description = "Unknown model")))]
+    request_body(content(
+        (InferRequest = "application/json"),
+        (TensorBytes = "application/octet-stream"),
+    )),
+    responses(
+        (status = 200, description = "Success", content((InferResponse = "application/json"), (TensorBytes = "application/octet-stream"))),
+        (status = 400, description = "Malformed"),
+        (status = 404, description = "Unknown model"),
+        (status = 422, description = "Wrong inputs, shapes or parameters, or over a limit"),
+    ))]
 pub async fn infer(
     State(state): State<AppState>,
     Path(id): Path<String>,
     body: RawBody,
-) -> Result<Json<InferResponse>, V2Error> {
-    let r: InferRequest = body.json().await?;
+) -> Result<Response, V2Error> {
+    let header_length = match (body.format, body.inference_header_length) {
+        (_, Some(length)) => length,
+        (Format::Json, None) => body.bytes.len(),
+        (Format::Binary, None) => {
+            return Err(ApiError::Invalid(format!(
+                "a binary infer body needs the `{INFERENCE_HEADER_LENGTH}` header (the Open \
+                 Inference Protocol's binary tensor extension); JSON bodies need none"
+            ))
+            .into());
+        }
+    };
+    let r: InferRequest = body.json_prefix(header_length).await?;
     let model = state.model(&id)?;
     let spec = &model.metadata.spec;
+    // Each input's values: inline JSON, or its slice of the binary tail, in order.
+    let mut tail = &body.bytes[header_length..];
+    let mut inputs = Vec::with_capacity(r.inputs.len());
+    for t in &r.inputs {
+        let values = match binary_size(t)? {
+            Some(size) => {
+                if size > tail.len() {
+                    return Err(ApiError::Malformed(format!(
+                        "input `{}` has binary_data_size {size}, but only {} bytes are left",
+                        t.name,
+                        tail.len()
+                    ))
+                    .into());
+                }
+                let (data, rest) = tail.split_at(size);
+                tail = rest;
+                Some(data)
+            }
+            None => None,
+        };
+        inputs.push((t, values));
+    }
+    if !tail.is_empty() {
+        return Err(ApiError::Malformed(format!(
+            "{} bytes follow the last binary input",
+            tail.len()
+        ))
+        .into());
+    }
     let input = |name: &str, width: usize| -> Result<Vec<f32>, ApiError> {
-        let t = r
-            .inputs
+        let (t, binary) = inputs
             .iter()
-            .find(|t| t.name == name)
+            .find(|(t, _)| t.name == name)
             .ok_or_else(|| ApiError::Invalid(format!("input `{name}` is missing")))?;
         if t.datatype != "FP32" {
             return Err(ApiError::Invalid(format!(
@@ -180,11 +252,19 @@ pub async fn infer(
                 t.datatype
             )));
         }
-        let values: Vec<f32> = serde_json::from_value::<Vec<f64>>(t.data.clone())
-            .map_err(|e| ApiError::Invalid(format!("input `{name}` data: {e}")))?
-            .into_iter()
-            .map(|v| v as f32)
-            .collect();
+        let values: Vec<f32> = match (binary, &t.data) {
+            (Some(bytes), _) => decode_fp32(name, bytes)?,
+            (None, Some(data)) => serde_json::from_value::<Vec<f64>>(data.clone())
+                .map_err(|e| ApiError::Invalid(format!("input `{name}` data: {e}")))?
+                .into_iter()
+                .map(|v| v as f32)
+                .collect(),
+            (None, None) => {
+                return Err(ApiError::Invalid(format!(
+                    "input `{name}` has neither `data` nor parameters.binary_data_size"
+                )));
+            }
+        };
         let rows = flat(name, &values, width)?;
         if t.shape != [rows, width] {
             return Err(ApiError::Invalid(format!(
@@ -213,6 +293,37 @@ pub async fn infer(
                 }),
         }
     };
+    let flag = |parameters: Option<&serde_json::Map<String, serde_json::Value>>,
+                key: &str|
+     -> Result<Option<bool>, ApiError> {
+        match parameters.and_then(|p| p.get(key)) {
+            None => Ok(None),
+            Some(v) => v.as_bool().map(Some).ok_or_else(|| {
+                ApiError::Invalid(format!("parameter `{key}` must be true or false"))
+            }),
+        }
+    };
+    let binary_default = flag(Some(&r.parameters), "binary_data_output")?.unwrap_or(false);
+    // (name, binary?) of every output to answer, in the order asked.
+    let wanted: Vec<(String, bool)> = match &r.outputs {
+        None => OUTPUTS
+            .iter()
+            .map(|name| (name.to_string(), binary_default))
+            .collect(),
+        Some(outputs) => outputs
+            .iter()
+            .map(|o| {
+                if !OUTPUTS.contains(&o.name.as_str()) {
+                    return Err(ApiError::Invalid(format!(
+                        "output `{}` does not exist; this model answers {OUTPUTS:?}",
+                        o.name
+                    )));
+                }
+                let binary = flag(o.parameters.as_ref(), "binary_data")?;
+                Ok((o.name.clone(), binary.unwrap_or(binary_default)))
+            })
+            .collect::<Result<_, _>>()?,
+    };
     let seed = number("seed", 0.0)? as u64;
     let config = ParticleConfig {
         particles: 1,
@@ -221,44 +332,91 @@ pub async fn infer(
     };
     state.metrics.batch("infer", &id, batch);
     let worker = model.clone();
-    let s = state
+    let request_id = r.id.clone();
+    // The answer is built in the compute work too: it is batch-sized.
+    let response = state
         .compute(move |_| {
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
-            Ok(step_particles(
+            let s = step_particles(
                 worker.batch_dynamics(),
                 &worker.rules,
                 &states,
                 &actions,
                 config,
                 &mut rng,
-            ))
+            );
+            infer_response(&id, request_id, &s, &wanted)
         })
         .await?;
-    let d = s.obs_dim;
-    let fp32 = |name: &str, shape: Vec<usize>, data: &[f32]| InferTensor {
-        name: name.into(),
-        shape,
-        datatype: "FP32".into(),
-        data: serde_json::json!(data),
+    Ok(response)
+}
+
+/// What `infer` answers, in the order of [`V2ModelMetadata::outputs`].
+const OUTPUTS: [&str; 8] = [
+    "next_states",
+    "mean",
+    "sigma",
+    "h_eta",
+    "eta",
+    "rewards",
+    "penalized_rewards",
+    "terminals",
+];
+
+/// The answer with `wanted` outputs, each inline or in binary.
+fn infer_response(
+    id: &str,
+    request_id: Option<String>,
+    s: &ParticleStep,
+    wanted: &[(String, bool)],
+) -> Result<Response, ApiError> {
+    let (b, d) = (s.batch, s.obs_dim);
+    let output = |name: &str| -> (Vec<usize>, OutputData<'_>) {
+        match name {
+            "next_states" => (vec![b, d], OutputData::Fp32(&s.next_states)),
+            "mean" => (vec![b, d], OutputData::Fp32(&s.mean)),
+            "sigma" => (vec![b, d], OutputData::Fp32(&s.sigma)),
+            "h_eta" => (vec![b, d], OutputData::Fp32(&s.h_eta)),
+            "eta" => (vec![b], OutputData::Fp32(&s.eta)),
+            "rewards" => (vec![b], OutputData::Fp32(&s.rewards)),
+            "penalized_rewards" => (vec![b], OutputData::Fp32(&s.penalized_rewards)),
+            _ => (vec![b], OutputData::Bool(&s.terminals)),
+        }
     };
-    Ok(Json(InferResponse {
-        model_name: id,
+    let mut tails = Vec::new();
+    let outputs = wanted
+        .iter()
+        .map(|(name, binary)| {
+            let (shape, data) = output(name);
+            let mut tensor = InferTensor {
+                name: name.clone(),
+                shape,
+                datatype: data.datatype().into(),
+                data: None,
+                parameters: None,
+            };
+            if *binary {
+                let bytes = data.to_bytes();
+                tensor.parameters = Some(serde_json::Map::from_iter([(
+                    "binary_data_size".to_string(),
+                    serde_json::json!(bytes.len()),
+                )]));
+                tails.push(bytes);
+            } else {
+                tensor.data = Some(data.to_json());
+            }
+            tensor
+        })
+        .collect();
+    let response = InferResponse {
+        model_name: id.to_string(),
         model_version: "1".into(),
-        id: r.id,
-        outputs: vec![
-            fp32("next_states", vec![batch, d], &s.next_states),
-            fp32("mean", vec![batch, d], &s.mean),
-            fp32("sigma", vec![batch, d], &s.sigma),
-            fp32("h_eta", vec![batch, d], &s.h_eta),
-            fp32("eta", vec![batch], &s.eta),
-            fp32("rewards", vec![batch], &s.rewards),
-            fp32("penalized_rewards", vec![batch], &s.penalized_rewards),
-            InferTensor {
-                name: "terminals".into(),
-                shape: vec![batch],
-                datatype: "BOOL".into(),
-                data: serde_json::json!(s.terminals),
-            },
-        ],
-    }))
+        id: request_id,
+        outputs,
+    };
+    if tails.is_empty() {
+        return json_response(&response);
+    }
+    let header = serde_json::to_vec(&response).map_err(|e| ApiError::Internal(e.to_string()))?;
+    Ok(binary_response(&header, &tails))
 }

@@ -7,6 +7,7 @@ mod defaults;
 mod evaluate;
 mod health;
 mod kserve;
+mod kserve_binary;
 mod models;
 mod rollout;
 mod step;
