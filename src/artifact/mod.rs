@@ -26,7 +26,7 @@ pub use policy::{
     BEST_POLICY, LAST_POLICY, POLICY_SCHEMA_VERSION, PolicyMetadata, PolicyProvenance, has_policy,
     load_policy, save_policy,
 };
-pub use safetensors_file::{parse_safetensors, safetensors_bytes};
+pub use safetensors_file::{parse_safetensors, parse_safetensors_with_metadata, safetensors_bytes};
 pub use tensors::{NamedTensors, collect_tensors, load_tensors};
 
 /// Everything that can be wrong with an artifact.

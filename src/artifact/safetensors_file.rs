@@ -1,6 +1,7 @@
 //! Reading and writing named f32 tensors as a `.safetensors` file, with every
 //! malformed case reported by name.
 
+use std::collections::HashMap;
 use std::path::Path;
 
 use safetensors::tensor::{Dtype, SafeTensors, TensorView};
@@ -11,7 +12,7 @@ use super::{ArtifactError, write_atomically};
 /// Serialises `tensors` (f32, little-endian) with `metadata` in the header.
 pub fn safetensors_bytes(
     tensors: &NamedTensors,
-    metadata: Option<std::collections::HashMap<String, String>>,
+    metadata: Option<HashMap<String, String>>,
 ) -> Result<Vec<u8>, ArtifactError> {
     let bytes: Vec<(String, Vec<usize>, Vec<u8>)> = tensors
         .iter()
@@ -42,24 +43,41 @@ pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), ArtifactError> {
 
 /// Parses a safetensors buffer into named f32 tensors; any other dtype is refused.
 pub fn parse_safetensors(bytes: &[u8], file: &Path) -> Result<NamedTensors, ArtifactError> {
-    let parsed = SafeTensors::deserialize(bytes).map_err(|e| ArtifactError::Corrupt {
-        file: file.to_path_buf(),
-        message: e.to_string(),
-    })?;
+    parse_safetensors_with_metadata(bytes, file).map(|(tensors, _)| tensors)
+}
+
+/// [`parse_safetensors`], and the header's string metadata, from one parse of
+/// the header.
+pub fn parse_safetensors_with_metadata(
+    bytes: &[u8],
+    file: &Path,
+) -> Result<(NamedTensors, HashMap<String, String>), ArtifactError> {
+    let (header, parsed) =
+        SafeTensors::read_metadata(bytes).map_err(|e| ArtifactError::Corrupt {
+            file: file.to_path_buf(),
+            message: e.to_string(),
+        })?;
+    // read_metadata checks that the offsets tile the data; `get` keeps a
+    // malformed file an error even if it did not.
+    let data = bytes.get(8 + header..).unwrap_or_default();
     let mut tensors = NamedTensors::new();
-    for (name, view) in parsed.tensors() {
-        if view.dtype() != Dtype::F32 {
+    for (name, info) in parsed.tensors() {
+        if info.dtype != Dtype::F32 {
             return Err(ArtifactError::TensorDtype {
                 name,
-                got: format!("{:?}", view.dtype()),
+                got: format!("{:?}", info.dtype),
             });
         }
-        let values = view
-            .data()
+        let (start, end) = info.data_offsets;
+        let raw = data.get(start..end).ok_or_else(|| ArtifactError::Corrupt {
+            file: file.to_path_buf(),
+            message: format!("tensor `{name}` lies outside the file"),
+        })?;
+        let values = raw
             .chunks_exact(4)
             .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
             .collect();
-        tensors.insert(name, (view.shape().to_vec(), values));
+        tensors.insert(name, (info.shape.clone(), values));
     }
-    Ok(tensors)
+    Ok((tensors, parsed.metadata().clone().unwrap_or_default()))
 }

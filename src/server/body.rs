@@ -13,7 +13,7 @@ use serde::de::DeserializeOwned;
 
 use super::ApiError;
 use super::AppState;
-use crate::artifact::{NamedTensors, parse_safetensors, safetensors_bytes};
+use crate::artifact::{NamedTensors, parse_safetensors_with_metadata, safetensors_bytes};
 
 /// The MIME type of binary tensor bodies.
 pub const BINARY: &str = "application/octet-stream";
@@ -112,15 +112,8 @@ impl RawBody {
 
     /// The body as safetensors: named f32 tensors and the header's string metadata.
     pub fn tensors(&self) -> Result<(NamedTensors, HashMap<String, String>), ApiError> {
-        let metadata = safetensors::SafeTensors::read_metadata(&self.bytes)
-            .map_err(|e| ApiError::Malformed(format!("safetensors body: {e}")))?
-            .1
-            .metadata()
-            .clone()
-            .unwrap_or_default();
-        let tensors = parse_safetensors(&self.bytes, std::path::Path::new("request body"))
-            .map_err(|e| ApiError::Malformed(e.to_string()))?;
-        Ok((tensors, metadata))
+        parse_safetensors_with_metadata(&self.bytes, std::path::Path::new("request body"))
+            .map_err(|e| ApiError::Malformed(e.to_string()))
     }
 }
 

@@ -1,14 +1,14 @@
 //! `POST /v1/models/{id}/act`: the model's policy on a batch of states.
 
-use axum::Json;
 use axum::extract::{Path, State};
+use axum::response::Response;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use crate::agent::ActionMode;
-use crate::server::body::RawBody;
+use crate::server::body::{RawBody, json_response};
 use crate::server::validate::{matrix, within};
 use crate::server::{ApiError, AppState};
 
@@ -46,7 +46,7 @@ pub async fn act(
     State(state): State<AppState>,
     Path(id): Path<String>,
     body: RawBody,
-) -> Result<Json<ActResponse>, ApiError> {
+) -> Result<Response, ApiError> {
     let r: ActRequest = body.json().await?;
     let model = state.model(&id)?;
     let Some((actor, _)) = model.policy.as_ref() else {
@@ -62,17 +62,18 @@ pub async fn act(
     state.metrics.batch("act", &id, r.states.len());
     let act_dim = actor.config.act_dim;
     let worker = model.clone();
-    let actions = state
+    // Serialised in the compute work too: the answer is batch-sized.
+    state
         .compute(move |_| {
             let policy = worker
                 .batch_policy(r.mode)
                 .ok_or_else(|| ApiError::NoPolicy(worker.id.clone()))?;
             let mut rng = ChaCha8Rng::seed_from_u64(r.seed);
-            Ok(policy.act(&states, &mut rng))
+            let actions = policy.act(&states, &mut rng);
+            json_response(&ActResponse {
+                model: id,
+                actions: actions.chunks(act_dim).map(<[f32]>::to_vec).collect(),
+            })
         })
-        .await?;
-    Ok(Json(ActResponse {
-        model: id,
-        actions: actions.chunks(act_dim).map(<[f32]>::to_vec).collect(),
-    }))
+        .await
 }

@@ -241,6 +241,7 @@ pub async fn infer(
         ))
         .into());
     }
+    let max_batch = state.config.limits.max_batch;
     let input = |name: &str, width: usize| -> Result<Vec<f32>, ApiError> {
         let (t, binary) = inputs
             .iter()
@@ -252,6 +253,12 @@ pub async fn infer(
                 t.datatype
             )));
         }
+        // The declared rows first: no data is converted for a batch over the limit.
+        within(
+            "batch (shape[0])",
+            t.shape.first().copied().unwrap_or(0),
+            max_batch,
+        )?;
         let values: Vec<f32> = match (binary, &t.data) {
             (Some(bytes), _) => decode_fp32(name, bytes)?,
             (None, Some(data)) => serde_json::from_value::<Vec<f64>>(data.clone())
@@ -281,7 +288,6 @@ pub async fn infer(
     if actions.len() / spec.act_dim != batch {
         return Err(ApiError::Invalid("`states` and `actions` differ in rows".into()).into());
     }
-    within("batch", batch, state.config.limits.max_batch)?;
     let number = |key: &str, default: f64| -> Result<f64, ApiError> {
         match r.parameters.get(key) {
             None => Ok(default),
