@@ -14,22 +14,33 @@ pub fn safetensors_bytes(
     tensors: &NamedTensors,
     metadata: Option<HashMap<String, String>>,
 ) -> Result<Vec<u8>, ArtifactError> {
-    let bytes: Vec<(String, Vec<usize>, Vec<u8>)> = tensors
+    let bytes: Vec<_> = tensors
         .iter()
-        .map(|(name, (shape, values))| {
-            let raw = values.iter().flat_map(|v| v.to_le_bytes()).collect();
-            (name.clone(), shape.clone(), raw)
-        })
+        .map(|(name, (shape, values))| (name, shape, le_bytes(values)))
         .collect();
     let views = bytes
         .iter()
         .map(|(name, shape, raw)| {
-            TensorView::new(Dtype::F32, shape.clone(), raw)
-                .map(|view| (name.clone(), view))
+            TensorView::new(Dtype::F32, (*shape).clone(), raw)
+                .map(|view| ((*name).clone(), view))
                 .map_err(|e| ArtifactError::Safetensors(format!("tensor `{name}`: {e}")))
         })
         .collect::<Result<Vec<_>, _>>()?;
     safetensors::serialize(views, metadata).map_err(|e| ArtifactError::Safetensors(e.to_string()))
+}
+
+/// `values` as little-endian bytes: borrowed where f32 already is (no copy of
+/// an answer that may be hundreds of MB), converted elsewhere.
+fn le_bytes(values: &[f32]) -> std::borrow::Cow<'_, [u8]> {
+    if cfg!(target_endian = "little") {
+        // SAFETY: an f32 is 4 initialised bytes with no padding, u8 has
+        // alignment 1, and the byte slice covers exactly the f32 slice's memory.
+        std::borrow::Cow::Borrowed(unsafe {
+            std::slice::from_raw_parts(values.as_ptr().cast::<u8>(), std::mem::size_of_val(values))
+        })
+    } else {
+        std::borrow::Cow::Owned(values.iter().flat_map(|v| v.to_le_bytes()).collect())
+    }
 }
 
 /// Writes `bytes` to `path` atomically.

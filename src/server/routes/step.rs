@@ -143,7 +143,7 @@ pub async fn step(
             );
             match format {
                 Format::Json => json_response(&step_response(&id, &result)),
-                Format::Binary => tensors_response(&binary_response(&result)),
+                Format::Binary => tensors_response(&binary_response(result)),
             }
         })
         .await
@@ -219,28 +219,26 @@ fn step_response(id: &str, s: &ParticleStep) -> StepResponse {
     }
 }
 
-fn binary_response(s: &ParticleStep) -> NamedTensors {
+/// The answer's tensors, moved out of `s` (at the largest accepted batch a
+/// copy would be hundreds of MB).
+fn binary_response(s: ParticleStep) -> NamedTensors {
     let (b, p, d) = (s.batch, s.particles, s.obs_dim);
+    let terminals = s
+        .terminals
+        .iter()
+        .map(|&t| f32::from(u8::from(t)))
+        .collect();
     NamedTensors::from([
-        ("mean".into(), (vec![b, d], s.mean.clone())),
-        ("sigma".into(), (vec![b, d], s.sigma.clone())),
-        ("h_eta".into(), (vec![b, d], s.h_eta.clone())),
-        ("eta".into(), (vec![b], s.eta.clone())),
-        ("next_states".into(), (vec![b, p, d], s.next_states.clone())),
-        ("rewards".into(), (vec![b, p], s.rewards.clone())),
+        ("mean".into(), (vec![b, d], s.mean)),
+        ("sigma".into(), (vec![b, d], s.sigma)),
+        ("h_eta".into(), (vec![b, d], s.h_eta)),
+        ("eta".into(), (vec![b], s.eta)),
+        ("next_states".into(), (vec![b, p, d], s.next_states)),
+        ("rewards".into(), (vec![b, p], s.rewards)),
         (
             "penalized_rewards".into(),
-            (vec![b, p], s.penalized_rewards.clone()),
+            (vec![b, p], s.penalized_rewards),
         ),
-        (
-            "terminals".into(),
-            (
-                vec![b, p],
-                s.terminals
-                    .iter()
-                    .map(|&t| f32::from(u8::from(t)))
-                    .collect(),
-            ),
-        ),
+        ("terminals".into(), (vec![b, p], terminals)),
     ])
 }
