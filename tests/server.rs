@@ -987,8 +987,9 @@ fn hold_first_computation() -> (ComputeHook, std::sync::mpsc::Sender<()>, Arc<At
     (hook, release, started)
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn slow_requests_time_out_with_a_json_error_and_keep_their_slot() {
+/// A server with one compute slot, a 1 s timeout, and its first computation
+/// held until released (see [`hold_first_computation`]).
+async fn one_held_slot() -> (Server, std::sync::mpsc::Sender<()>, Arc<AtomicUsize>) {
     let limits = Limits {
         request_timeout_s: 1,
         compute_slots: 1,
@@ -997,6 +998,12 @@ async fn slow_requests_time_out_with_a_json_error_and_keep_their_slot() {
     let (hook, release, started) = hold_first_computation();
     let server =
         Server::start_with_config(limits, |config| config.before_compute = Some(hook)).await;
+    (server, release, started)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn slow_requests_time_out_with_a_json_error_and_keep_their_slot() {
+    let (server, release, started) = one_held_slot().await;
     let step = format!("/v1/models/{MODEL}/step");
     let body = json!({"states": upright(2), "actions": actions(2)});
     // The first computation is held until released: whatever the machine's speed,
@@ -1072,19 +1079,74 @@ async fn answers_over_the_byte_budget_are_refused_before_any_work() {
     );
 }
 
+/// `Accept: application/octet-stream` answers a rollout as padded tensors
+/// holding the same numbers as its JSON answer.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rollouts_answer_in_binary_with_the_json_numbers() {
+    let server = Server::start(limits(), None).await;
+    let h = 8;
+    let request =
+        json!({"states": upright(3), "horizon": h, "particles": 2, "seed": 5, "threshold": 1.5});
+    let path = format!("{}/v1/models/{MODEL}/rollout", server.base);
+    let (status, body) = server
+        .post(&format!("/v1/models/{MODEL}/rollout"), &request)
+        .await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    let json: RolloutResponse = serde_json::from_value(body).unwrap();
+    let r = server
+        .client
+        .post(&path)
+        .header("accept", BINARY)
+        .json(&request)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::OK);
+    assert_eq!(r.headers()["content-type"], BINARY);
+    let bytes = r.bytes().await.unwrap();
+    let t = nuno::artifact::parse_safetensors(&bytes, Path::new("answer")).unwrap();
+    assert_eq!(t["states"].0, vec![6, h + 1, 11]);
+    assert_eq!(t["eta"].0, vec![6, h]);
+    for (row, trajectory) in json.trajectories.iter().enumerate() {
+        assert_eq!(t["length"].1[row], trajectory.length as f32);
+        let outcome = match (
+            trajectory.terminal,
+            trajectory.truncated,
+            trajectory.diverged,
+        ) {
+            (true, _, _) => 1.0,
+            (_, true, _) => 2.0,
+            (_, _, true) => 3.0,
+            _ => 0.0,
+        };
+        assert_eq!(t["outcome"].1[row], outcome, "row {row}");
+        let states = &t["states"].1[row * (h + 1) * 11..(row + 1) * (h + 1) * 11];
+        let kept = trajectory.states.concat();
+        assert_eq!(&states[..kept.len()], &kept[..], "row {row} states");
+        assert!(
+            states[kept.len()..].iter().all(|x| x.is_nan()),
+            "row {row} padding"
+        );
+        let eta = &t["eta"].1[row * h..(row + 1) * h];
+        assert_eq!(&eta[..trajectory.eta.len()], &trajectory.eta[..]);
+        let penalised = &t["penalized_rewards"].1[row * h..(row + 1) * h];
+        assert_eq!(
+            &penalised[..trajectory.penalized_rewards.len()],
+            &trajectory.penalized_rewards[..]
+        );
+    }
+    assert!(
+        json.trajectories.iter().any(|t| t.truncated),
+        "the threshold truncates some rollouts, so padding is exercised"
+    );
+}
+
 /// A request that times out while its computation waits (held by the hook)
 /// leaves the work cancelled: it stops instead of rolling out, says so in the
 /// metrics, and frees the only slot for the next request.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn abandoned_work_is_cancelled_and_frees_its_slot() {
-    let limits = Limits {
-        request_timeout_s: 1,
-        compute_slots: 1,
-        ..limits()
-    };
-    let (hook, release, started) = hold_first_computation();
-    let server =
-        Server::start_with_config(limits, |config| config.before_compute = Some(hook)).await;
+    let (server, release, started) = one_held_slot().await;
     let rollout = json!({"states": upright(4), "horizon": 50, "particles": 8});
     let (status, answer) = server
         .post(&format!("/v1/models/{MODEL}/rollout"), &rollout)

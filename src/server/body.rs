@@ -162,6 +162,21 @@ fn request_format(headers: &HeaderMap) -> Result<Format, ApiError> {
     }
 }
 
+/// The answer's format a client asks for with `Accept`: binary when it lists
+/// `application/octet-stream` (and not JSON first), JSON otherwise.
+pub fn answer_format(headers: &HeaderMap) -> Format {
+    let accept = headers
+        .get(header::ACCEPT)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or_default();
+    let position = |mime: &str| accept.find(mime);
+    match (position(BINARY), position("application/json")) {
+        (Some(binary), Some(json)) if json < binary => Format::Json,
+        (Some(_), _) => Format::Binary,
+        _ => Format::Json,
+    }
+}
+
 /// A safetensors response body.
 pub fn tensors_response(tensors: &NamedTensors) -> Result<Response, ApiError> {
     let bytes = safetensors_bytes(tensors, None).map_err(|e| ApiError::Internal(e.to_string()))?;

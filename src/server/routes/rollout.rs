@@ -4,6 +4,7 @@
 //! truncation at ε(h, α).
 
 use axum::extract::{Path, State};
+use axum::http::HeaderMap;
 use axum::response::Response;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -12,10 +13,13 @@ use utoipa::ToSchema;
 
 use super::defaults::{one, unit, unit_f32};
 use crate::agent::{
-    ActionMode, RolloutActions, RolloutConfig, StepOutcome, penalized_reward,
+    ActionMode, RolloutActions, RolloutConfig, RolloutTrace, StepOutcome, penalized_reward,
     rollout_model_or_cancel,
 };
-use crate::server::body::{Format, RawBody, json_response};
+use crate::artifact::NamedTensors;
+use crate::server::body::{
+    Format, RawBody, TensorBytes, answer_format, json_response, tensors_response,
+};
 use crate::server::validate::{answer_within, matrix, non_negative, within};
 use crate::server::{ApiError, AppState};
 
@@ -92,12 +96,18 @@ pub struct RolloutResponse {
     pub trajectories: Vec<Trajectory>,
 }
 
-/// Rolls the model h steps from each start state.
+/// Rolls the model h steps from each start state. With `Accept:
+/// application/octet-stream` the answer is a safetensors file instead:
+/// `states` `[rows, horizon + 1, obs_dim]`, `actions` `[rows, horizon, act_dim]`,
+/// `eta`, `accumulated_eta`, `rewards`, `penalized_rewards` `[rows, horizon]`
+/// (NaN past each trajectory's steps taken), `length` `[rows]` (steps kept) and
+/// `outcome` `[rows]` (0 ran to h, 1 terminal, 2 truncated, 3 diverged); row
+/// `b·particles + p` is start `b`'s particle `p`.
 #[utoipa::path(post, path = "/v1/models/{id}/rollout", tag = "models",
     params(("id" = String, Path, description = "Model id")),
     request_body = RolloutRequest,
     responses(
-        (status = 200, description = "Success", body = RolloutResponse),
+        (status = 200, description = "Success", content((RolloutResponse = "application/json"), (TensorBytes = "application/octet-stream"))),
         (status = 400, description = "Malformed body", body = crate::server::ErrorBody),
         (status = 404, description = "Unknown model", body = crate::server::ErrorBody),
         (status = 409, body = crate::server::ErrorBody, description = "No actions given and the model has no policy"),
@@ -106,8 +116,10 @@ pub struct RolloutResponse {
 pub async fn rollout(
     State(state): State<AppState>,
     Path(id): Path<String>,
+    headers: HeaderMap,
     body: RawBody,
 ) -> Result<Response, ApiError> {
+    let answer = answer_format(&headers);
     let r: RolloutRequest = body.json().await?;
     let model = state.model(&id)?;
     let spec = &model.metadata.spec;
@@ -127,9 +139,9 @@ pub async fn rollout(
     non_negative("noise_scale", f64::from(r.noise_scale))?;
     let rows = batch * r.particles;
     answer_within(
-        "batch × particles × ((horizon + 1)·obs_dim + horizon·(act_dim + 3))",
-        rows * ((r.horizon + 1) * obs_dim + r.horizon * (act_dim + 3)),
-        Format::Json,
+        "batch × particles × ((horizon + 1)·obs_dim + horizon·(act_dim + 4) + 2)",
+        rows * ((r.horizon + 1) * obs_dim + r.horizon * (act_dim + 4) + 2),
+        answer,
         limits.max_answer_bytes,
     )?;
     let sequence = match &r.actions {
@@ -218,6 +230,13 @@ pub async fn rollout(
                 &mut rng,
                 cancel,
             )?;
+            if answer == Format::Binary {
+                return tensors_response(&binary_rollout(
+                    &out.trace,
+                    r.penalty,
+                    (obs_dim, act_dim),
+                ));
+            }
             let t = &out.trace;
             let trajectories = (0..t.rows)
                 .map(|row| {
@@ -258,4 +277,70 @@ pub async fn rollout(
             })
         })
         .await
+}
+
+/// The trace as padded tensors (see [`rollout`]'s description).
+fn binary_rollout(
+    t: &RolloutTrace,
+    penalty: f64,
+    (obs_dim, act_dim): (usize, usize),
+) -> NamedTensors {
+    let (rows, h) = (t.rows, t.horizon);
+    let padded = |per_row: &[Vec<f32>], width: usize, steps: usize| -> Vec<f32> {
+        let mut out = vec![f32::NAN; rows * steps * width];
+        for (row, values) in per_row.iter().enumerate() {
+            out[row * steps * width..][..values.len()].copy_from_slice(values);
+        }
+        out
+    };
+    let penalized: Vec<Vec<f32>> = t
+        .rewards
+        .iter()
+        .zip(&t.eta)
+        .map(|(rewards, eta)| {
+            rewards
+                .iter()
+                .zip(eta)
+                .map(|(&reward, &eta)| penalized_reward(reward, penalty, eta))
+                .collect()
+        })
+        .collect();
+    let outcome = t
+        .outcome
+        .iter()
+        .map(|o| match o {
+            StepOutcome::Continued => 0.0,
+            StepOutcome::Terminal => 1.0,
+            StepOutcome::Truncated => 2.0,
+            StepOutcome::Diverged => 3.0,
+        })
+        .collect();
+    NamedTensors::from([
+        (
+            "states".into(),
+            (
+                vec![rows, h + 1, obs_dim],
+                padded(&t.observations, obs_dim, h + 1),
+            ),
+        ),
+        (
+            "actions".into(),
+            (vec![rows, h, act_dim], padded(&t.actions, act_dim, h)),
+        ),
+        ("eta".into(), (vec![rows, h], padded(&t.eta, 1, h))),
+        (
+            "accumulated_eta".into(),
+            (vec![rows, h], padded(&t.accumulated_eta, 1, h)),
+        ),
+        ("rewards".into(), (vec![rows, h], padded(&t.rewards, 1, h))),
+        (
+            "penalized_rewards".into(),
+            (vec![rows, h], padded(&penalized, 1, h)),
+        ),
+        (
+            "length".into(),
+            (vec![rows], t.kept.iter().map(|&k| k as f32).collect()),
+        ),
+        ("outcome".into(), (vec![rows], outcome)),
+    ])
 }
