@@ -794,15 +794,38 @@ fn committed_openapi_spec_is_current() {
     );
     let spec: Value = serde_json::from_str(&committed).unwrap();
     assert_eq!(spec["openapi"], "3.1.0");
+    // Every route the router serves (the KServe v2 ones included).
     for path in [
+        "/v1/models",
+        "/v1/models/{id}",
         "/v1/models/{id}/step",
         "/v1/models/{id}/rollout",
+        "/v1/models/{id}/act",
+        "/v1/models/{id}/validate",
         "/v1/evaluate",
+        "/v1/admin/reload",
+        "/healthz",
+        "/readyz",
+        "/metrics",
+        "/v2",
+        "/v2/health/live",
+        "/v2/health/ready",
+        "/v2/models/{id}",
+        "/v2/models/{id}/ready",
         "/v2/models/{id}/infer",
     ] {
         assert!(
             spec["paths"][path].is_object(),
             "{path} missing from the spec"
+        );
+    }
+    // The token is optional (a server without `--token` needs none); probes never need it.
+    assert_eq!(spec["security"], json!([{}, {"bearer": []}]));
+    for probe in ["/healthz", "/readyz", "/v2/health/live", "/v2/health/ready"] {
+        assert_eq!(
+            spec["paths"][probe]["get"]["security"],
+            json!([{}]),
+            "{probe}"
         );
     }
     let step = &spec["paths"]["/v1/models/{id}/step"]["post"]["requestBody"]["content"];

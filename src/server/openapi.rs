@@ -38,11 +38,13 @@ impl Modify for BearerAuth {
     ),
     paths(
         list_models, get_model, step, rollout, act, evaluate, validate, reload,
-        healthz, readyz, metrics, v2_model_metadata, infer
+        healthz, readyz, metrics, live, ready, server_metadata, v2_model_metadata,
+        model_ready, infer
     ),
     components(schemas(crate::server::ErrorBody, crate::server::ErrorDetail)),
     modifiers(&BearerAuth),
-    security(("bearer" = [])),
+    // The token is optional: a server started without `--token` needs none.
+    security((), ("bearer" = [])),
     tags(
         (name = "models", description = "Model queries"),
         (name = "evaluation", description = "Runs in the real MuJoCo task"),

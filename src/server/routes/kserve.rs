@@ -39,10 +39,16 @@ impl IntoResponse for V2Error {
     }
 }
 
+/// KServe v2 liveness: the process answers.
+#[utoipa::path(get, path = "/v2/health/live", tag = "kserve-v2", security(()),
+    responses((status = 200, description = "Live", body = Object)))]
 pub async fn live() -> Json<serde_json::Value> {
     Json(serde_json::json!({ "live": true }))
 }
 
+/// KServe v2 readiness: at least one model is loaded.
+#[utoipa::path(get, path = "/v2/health/ready", tag = "kserve-v2", security(()),
+    responses((status = 200, description = "Ready", body = Object), (status = 503, description = "No model loaded", body = Object)))]
 pub async fn ready(State(state): State<AppState>) -> Response {
     let ready = !state.registry.snapshot().is_empty();
     let status = if ready {
@@ -53,6 +59,9 @@ pub async fn ready(State(state): State<AppState>) -> Response {
     (status, Json(serde_json::json!({ "ready": ready }))).into_response()
 }
 
+/// KServe v2 server metadata: name, version, protocol extensions.
+#[utoipa::path(get, path = "/v2", tag = "kserve-v2",
+    responses((status = 200, description = "Success", body = Object), (status = 401, description = "Missing or wrong bearer token")))]
 pub async fn server_metadata() -> Json<serde_json::Value> {
     Json(serde_json::json!({
         "name": "nuno",
@@ -61,6 +70,10 @@ pub async fn server_metadata() -> Json<serde_json::Value> {
     }))
 }
 
+/// KServe v2 model readiness (a loaded model is ready).
+#[utoipa::path(get, path = "/v2/models/{id}/ready", tag = "kserve-v2",
+    params(("id" = String, Path, description = "Model id")),
+    responses((status = 200, description = "Ready", body = Object), (status = 401, description = "Missing or wrong bearer token"), (status = 404, description = "Unknown model", body = Object)))]
 pub async fn model_ready(
     State(state): State<AppState>,
     Path(id): Path<String>,

@@ -24,7 +24,8 @@ pub use evaluate::{
 };
 pub use health::{__path_healthz, __path_metrics, __path_readyz, Health, Readiness};
 pub use kserve::{
-    __path_infer, __path_v2_model_metadata, InferRequest, InferResponse, InferTensor,
+    __path_infer, __path_live, __path_model_ready, __path_ready, __path_server_metadata,
+    __path_v2_model_metadata, InferRequest, InferResponse, InferTensor, RequestedOutput,
     V2ModelMetadata, V2TensorMetadata,
 };
 pub use models::{__path_get_model, __path_list_models, ModelDetail, ModelList, ModelSummary};
