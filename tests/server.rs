@@ -138,6 +138,17 @@ impl Server {
             .unwrap()
     }
 
+    /// The Prometheus text of `/metrics`.
+    async fn metrics(&self) -> String {
+        let r = self
+            .client
+            .get(format!("{}/metrics", self.base))
+            .send()
+            .await
+            .unwrap();
+        r.text().await.unwrap()
+    }
+
     async fn get(&self, path: &str) -> (StatusCode, Value) {
         let r = self
             .client
@@ -699,15 +710,7 @@ async fn concurrent_requests_metrics_kserve_and_reload() {
         (status, error_code(&body)),
         (StatusCode::NOT_FOUND, "route_not_found")
     );
-    let text = server
-        .client
-        .get(format!("{}/metrics", server.base))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let text = server.metrics().await;
     assert!(
         text.contains("nuno_requests_total{route=\"/v1/models/{id}/step\",status=\"200\"} 16"),
         "{text}"
@@ -1183,15 +1186,7 @@ async fn abandoned_work_is_cancelled_and_frees_its_slot() {
     // not a duration: the loop ends as soon as the metric says so).
     let mut metrics = String::new();
     for _ in 0..600 {
-        metrics = server
-            .client
-            .get(format!("{}/metrics", server.base))
-            .send()
-            .await
-            .unwrap()
-            .text()
-            .await
-            .unwrap();
+        metrics = server.metrics().await;
         if metrics.contains("nuno_computations_cancelled_total 1") {
             break;
         }
