@@ -659,6 +659,10 @@ async fn token_guards_everything_but_health() {
         .await
         .unwrap();
     assert_eq!(r.status(), StatusCode::OK);
+    // KServe routes refuse in the protocol's error shape, `{"error": "<message>"}`.
+    let (status, body) = server.get(&format!("/v2/models/{MODEL}")).await;
+    assert_eq!(status, StatusCode::UNAUTHORIZED);
+    assert!(body["error"].as_str().unwrap().contains("bearer token"), "{body}");
     // The spec and the docs list every route: with a token, they need it too.
     for path in ["/openapi.json", "/docs"] {
         assert_eq!(server.get(path).await.0, StatusCode::UNAUTHORIZED, "{path}");
@@ -831,6 +835,27 @@ fn committed_openapi_spec_is_current() {
             "{probe}"
         );
     }
+    // What the layers and the body extractor answer is documented on every route it can reach.
+    let responses = |path: &str, method: &str| {
+        let mut codes: Vec<String> = spec["paths"][path][method]["responses"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .cloned()
+            .collect();
+        codes.sort();
+        codes
+    };
+    assert_eq!(
+        responses("/v1/models/{id}/step", "post"),
+        ["200", "400", "401", "404", "413", "415", "422", "500", "503"]
+    );
+    assert_eq!(responses("/healthz", "get"), ["200", "500", "503"]);
+    let infer_422 = &spec["paths"]["/v2/models/{id}/infer"]["post"]["responses"]["422"];
+    assert_eq!(
+        infer_422["content"]["application/json"]["schema"]["$ref"],
+        "#/components/schemas/V2ErrorBody"
+    );
     let step = &spec["paths"]["/v1/models/{id}/step"]["post"]["requestBody"]["content"];
     assert!(step["application/json"].is_object() && step["application/octet-stream"].is_object());
 }
@@ -955,6 +980,47 @@ async fn malformed_binary_infer_bodies_are_refused_by_name() {
         let message = answer["error"].as_str().unwrap();
         assert!(message.contains(needle), "{message}");
     }
+}
+
+/// schemathesis `--checks all` against the spec the server serves: 0
+/// failures (tests/python/contract_hooks.py names the two things set aside:
+/// binary bodies, and model-dependent widths and field relations). Small
+/// limits keep every generated request cheap, and the spec states them.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_server_keeps_the_contract_of_its_own_spec() {
+    let limits = Limits {
+        max_batch: 16,
+        max_particles: 4,
+        max_horizon: 20,
+        max_episodes: 2,
+        ..Limits::default()
+    };
+    let server = Server::start(limits, None).await;
+    let (_, spec) = server.get("/openapi.json").await;
+    let schemas = &spec["components"]["schemas"];
+    assert_eq!(
+        schemas["StepRequest"]["properties"]["particles"]["maximum"],
+        4
+    );
+    assert_eq!(
+        schemas["StepRequest"]["properties"]["states"]["maxItems"],
+        16
+    );
+    assert_eq!(
+        schemas["RolloutRequest"]["properties"]["horizon"]["maximum"],
+        20
+    );
+    assert_eq!(
+        schemas["EvaluateRequest"]["properties"]["episodes"]["maximum"],
+        2
+    );
+    let work = tempfile::tempdir().unwrap();
+    let (base, dir) = (server.base.clone(), work.path().to_path_buf());
+    tokio::task::spawn_blocking(move || {
+        common::run_python("contract.py", &[base.as_str(), MODEL, "50"], &dir)
+    })
+    .await
+    .unwrap();
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

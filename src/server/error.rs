@@ -1,5 +1,6 @@
-//! Every error the API returns, mapped in one place to a status code and the
-//! JSON body `{ "error": { "code", "message" } }`.
+//! Every error the API returns, mapped in one place to a status code and a
+//! JSON body: `{ "error": { "code", "message" } }`, or the KServe Open
+//! Inference Protocol's `{ "error": "<message>" }` on its `/v2` routes.
 
 use axum::Json;
 use axum::http::StatusCode;
@@ -96,6 +97,33 @@ pub struct ErrorDetail {
     pub code: String,
     /// What was wrong, naming the field and the expected value.
     pub message: String,
+}
+
+/// The KServe v2 error body.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct V2ErrorBody {
+    pub error: String,
+}
+
+impl ApiError {
+    /// The answer in the error shape of `route` (a path or route pattern):
+    /// KServe's under `/v2`, ours elsewhere.
+    pub fn into_response_for(self, route: &str) -> Response {
+        if route == "/v2" || route.starts_with("/v2/") {
+            self.into_v2_response()
+        } else {
+            self.into_response()
+        }
+    }
+
+    /// The answer in KServe's error shape.
+    pub fn into_v2_response(self) -> Response {
+        let (status, _) = self.status_code();
+        let body = V2ErrorBody {
+            error: self.client_message(),
+        };
+        (status, Json(body)).into_response()
+    }
 }
 
 impl IntoResponse for ApiError {

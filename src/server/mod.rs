@@ -24,7 +24,7 @@ use axum::Router;
 use axum::extract::{DefaultBodyLimit, MatchedPath, Request, State};
 use axum::http::header;
 use axum::middleware::{self, Next};
-use axum::response::{IntoResponse, Response};
+use axum::response::Response;
 use serde::Serialize;
 use tokio::sync::Semaphore;
 use tracing::Instrument;
@@ -34,9 +34,9 @@ use crate::cancel::Cancel;
 use crate::infer::Kernel;
 
 pub use body::{BINARY, TensorBytes};
-pub use error::{ApiError, ErrorBody, ErrorDetail};
+pub use error::{ApiError, ErrorBody, ErrorDetail, V2ErrorBody};
 pub use metrics::Metrics;
-pub use openapi::{ApiDoc, openapi_json};
+pub use openapi::{document as openapi_document, openapi_json};
 pub use registry::{LoadFailure, LoadedModel, ModelRegistry, ReloadReport, valid_model_id};
 pub use routes::*;
 
@@ -180,14 +180,14 @@ pub fn app(state: AppState) -> Router {
     let limits = state.config.limits.clone();
     // With a token, the spec and the docs need it too: they list every model
     // route, which a deployment that sets a token may not want to show.
-    let protected = routes::api_routes()
-        .merge(openapi::docs_routes())
+    let protected = Router::from(routes::api_routes())
+        .merge(openapi::docs_routes(&limits))
         .route_layer(middleware::from_fn_with_state(state.clone(), require_token));
     // The fallback goes in before the layers, so unknown routes are timed,
     // logged and counted like the others.
     Router::new()
         .merge(protected)
-        .merge(routes::health_routes())
+        .merge(Router::from(routes::health_routes()))
         .fallback(|uri: axum::http::Uri| async move { ApiError::NoRoute(uri.path().to_string()) })
         .layer(middleware::from_fn_with_state(
             state.clone(),
@@ -209,7 +209,7 @@ async fn require_token(State(state): State<AppState>, request: Request, next: Ne
             .and_then(|v| v.to_str().ok())
             .and_then(|v| v.strip_prefix("Bearer "));
         if !given.is_some_and(|given| token_matches(given, token)) {
-            return ApiError::Unauthorized.into_response();
+            return ApiError::Unauthorized.into_response_for(request.uri().path());
         }
     }
     next.run(request).await
@@ -245,7 +245,7 @@ async fn timeout_and_metrics(
     let answer = tokio::time::timeout(Duration::from_secs(seconds), next.run(request));
     let response = match answer.instrument(span.clone()).await {
         Ok(response) => response,
-        Err(_) => ApiError::Timeout(seconds).into_response(),
+        Err(_) => ApiError::Timeout(seconds).into_response_for(&route),
     };
     let (status, elapsed) = (response.status().as_u16(), started.elapsed());
     span.in_scope(|| tracing::info!(status, latency_ms = elapsed.as_secs_f64() * 1e3, "answered"));

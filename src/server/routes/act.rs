@@ -5,6 +5,8 @@ use axum::response::Response;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
+
+use super::fields::integer;
 use utoipa::ToSchema;
 
 use crate::agent::ActionMode;
@@ -15,13 +17,15 @@ use crate::server::{ApiError, AppState};
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ActRequest {
-    /// Observations, `[batch][obs_dim]`.
+    /// Observations, `[batch][obs_dim]` (obs_dim: the model's).
+    #[schema(min_items = 1)]
     pub states: Vec<Vec<f32>>,
     /// deterministic (tanh of the mean, the default) or sampled.
     #[serde(default)]
     pub mode: ActionMode,
     /// Seed of the policy's noise when sampled.
     #[serde(default)]
+    #[serde(deserialize_with = "integer")]
     pub seed: u64,
 }
 

@@ -9,7 +9,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use super::defaults::{one, ten};
+use super::fields::{DEFAULT_EPISODES, integer, one, optional_integer};
 use crate::agent::{ActionMode, RolloutActions, RolloutConfig, rollout_model_or_cancel};
 use crate::envs::{
     EnvError, EvaluationConfig, EvaluationReport, MujocoTask, evaluate_or_cancel as run_episodes,
@@ -23,10 +23,13 @@ use crate::server::{ApiError, AppState};
 pub struct EvaluateRequest {
     /// The model whose policy runs, in the model's task.
     pub model: String,
-    /// Episodes (default 10); episode i resets with seed + i (mod 2⁶⁴).
-    #[serde(default = "ten")]
-    pub episodes: usize,
+    /// Episodes: 10 by default, or the server's limit when that is lower;
+    /// episode i resets with seed + i (mod 2⁶⁴).
+    #[serde(default, deserialize_with = "optional_integer")]
+    #[schema(minimum = 1)]
+    pub episodes: Option<usize>,
     #[serde(default)]
+    #[serde(deserialize_with = "integer")]
     pub seed: u64,
     /// deterministic (default) or sampled actions.
     #[serde(default)]
@@ -60,9 +63,11 @@ pub async fn evaluate(
     if model.policy.is_none() {
         return Err(ApiError::NoPolicy(r.model));
     }
-    within("episodes", r.episodes, state.config.limits.max_episodes)?;
-    state.metrics.batch("evaluate", &r.model, r.episodes);
-    let config = EvaluationConfig::new(model.task, r.episodes, r.seed);
+    let max_episodes = state.config.limits.max_episodes;
+    let episodes = r.episodes.unwrap_or(DEFAULT_EPISODES.min(max_episodes));
+    within("episodes", episodes, max_episodes)?;
+    state.metrics.batch("evaluate", &r.model, episodes);
+    let config = EvaluationConfig::new(model.task, episodes, r.seed);
     let worker = model.clone();
     let report = state
         .compute(move |cancel| {
@@ -85,16 +90,21 @@ pub async fn evaluate(
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ValidateRequest {
-    /// Actions to apply, `[horizon][act_dim]`.
+    /// Actions to apply, `[horizon][act_dim]` (act_dim: the model's).
+    #[schema(min_items = 1)]
     pub actions: Vec<Vec<f32>>,
     /// Reset seed of the real task (the start state).
     #[serde(default)]
+    #[serde(deserialize_with = "integer")]
     pub seed: u64,
     /// Model samples averaged per step (default 1).
     #[serde(default = "one")]
+    #[schema(minimum = 1)]
+    #[serde(deserialize_with = "integer")]
     pub particles: usize,
     /// Multiplies the model's noise (default 0: the drift alone).
     #[serde(default)]
+    #[schema(minimum = 0)]
     pub noise_scale: f32,
 }
 

@@ -13,6 +13,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use super::fields::integers;
 use super::kserve_binary::{OutputData, binary_response, binary_size, decode_fp32};
 use crate::agent::{ParticleConfig, ParticleStep, step_particles};
 use crate::server::body::{Format, INFERENCE_HEADER_LENGTH, RawBody, TensorBytes, json_response};
@@ -30,12 +31,7 @@ impl From<ApiError> for V2Error {
 
 impl IntoResponse for V2Error {
     fn into_response(self) -> Response {
-        let (status, _) = self.0.status_code();
-        (
-            status,
-            Json(serde_json::json!({ "error": self.0.client_message() })),
-        )
-            .into_response()
+        self.0.into_v2_response()
     }
 }
 
@@ -61,7 +57,7 @@ pub async fn ready(State(state): State<AppState>) -> Response {
 
 /// KServe v2 server metadata: name, version, protocol extensions.
 #[utoipa::path(get, path = "/v2", tag = "kserve-v2",
-    responses((status = 200, description = "Success", body = Object), (status = 401, description = "Missing or wrong bearer token")))]
+    responses((status = 200, description = "Success", body = Object)))]
 pub async fn server_metadata() -> Json<serde_json::Value> {
     Json(serde_json::json!({
         "name": "nuno",
@@ -73,7 +69,7 @@ pub async fn server_metadata() -> Json<serde_json::Value> {
 /// KServe v2 model readiness (a loaded model is ready).
 #[utoipa::path(get, path = "/v2/models/{id}/ready", tag = "kserve-v2",
     params(("id" = String, Path, description = "Model id")),
-    responses((status = 200, description = "Ready", body = Object), (status = 401, description = "Missing or wrong bearer token"), (status = 404, description = "Unknown model", body = Object)))]
+    responses((status = 200, description = "Ready", body = Object), (status = 404, description = "Unknown model", body = crate::server::V2ErrorBody)))]
 pub async fn model_ready(
     State(state): State<AppState>,
     Path(id): Path<String>,
@@ -110,7 +106,7 @@ fn tensor(name: &str, datatype: &str, shape: Vec<i64>) -> V2TensorMetadata {
 /// v2 model metadata of the `step` operation.
 #[utoipa::path(get, path = "/v2/models/{id}", tag = "kserve-v2",
     params(("id" = String, Path, description = "Model id")),
-    responses((status = 200, description = "Success", body = V2ModelMetadata), (status = 404, description = "Unknown model")))]
+    responses((status = 200, description = "Success", body = V2ModelMetadata), (status = 404, description = "Unknown model", body = crate::server::V2ErrorBody)))]
 pub async fn v2_model_metadata(
     State(state): State<AppState>,
     Path(id): Path<String>,
@@ -147,6 +143,8 @@ pub async fn v2_model_metadata(
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 pub struct InferTensor {
     pub name: String,
+    #[serde(deserialize_with = "integers")]
+    #[schema(value_type = Vec<u64>)]
     pub shape: Vec<usize>,
     pub datatype: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -202,15 +200,20 @@ pub struct InferResponse {
     )),
     responses(
         (status = 200, description = "Success", content((InferResponse = "application/json"), (TensorBytes = "application/octet-stream"))),
-        (status = 400, description = "Malformed"),
-        (status = 404, description = "Unknown model"),
-        (status = 422, description = "Wrong inputs, shapes or parameters, or over a limit"),
+        (status = 400, description = "Malformed body", body = crate::server::V2ErrorBody),
+        (status = 404, description = "Unknown model", body = crate::server::V2ErrorBody),
+        (status = 422, description = "Wrong inputs, shapes or parameters, or over a limit. Inputs \
+            `states` `[batch, obs_dim]` and `actions` `[batch, act_dim]` (the model's widths, in \
+            `GET /v2/models/{id}`), FP32, `data` holding shape's product of numbers: rules a schema \
+            cannot state", body = crate::server::V2ErrorBody),
     ))]
 pub async fn infer(
     State(state): State<AppState>,
     Path(id): Path<String>,
-    body: RawBody,
+    // The extractor's rejections answer in v2's error shape too.
+    body: Result<RawBody, ApiError>,
 ) -> Result<Response, V2Error> {
+    let body = body?;
     let header_length = match (body.format, body.inference_header_length) {
         (_, Some(length)) => length,
         (Format::Json, None) => body.bytes.len(),
@@ -371,7 +374,7 @@ pub async fn infer(
 }
 
 /// What `infer` answers, in the order of [`V2ModelMetadata::outputs`].
-const OUTPUTS: [&str; 8] = [
+pub(in crate::server) const OUTPUTS: [&str; 8] = [
     "next_states",
     "mean",
     "sigma",

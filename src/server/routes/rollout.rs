@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use super::defaults::{one, unit, unit_f32};
+use super::fields::{integer, one, unit, unit_f32};
 use crate::agent::{
     ActionMode, RolloutActions, RolloutConfig, RolloutTrace, StepOutcome, penalized_reward,
     rollout_model_or_cancel,
@@ -26,32 +26,45 @@ use crate::server::{ApiError, AppState};
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RolloutRequest {
-    /// Start observations, `[batch][obs_dim]`.
+    /// Start observations, `[batch][obs_dim]` (obs_dim: the model's).
+    #[schema(min_items = 1)]
     pub states: Vec<Vec<f32>>,
-    /// Open-loop actions `[batch][horizon][act_dim]`; without them the model's policy acts.
+    /// Open-loop actions `[batch][horizon][act_dim]` (one sequence per start
+    /// state, `horizon` steps each, act_dim: the model's); without them the
+    /// model's policy acts (409 when it has none).
     #[serde(default)]
     pub actions: Option<Vec<Vec<Vec<f32>>>>,
     /// How the policy acts when it does (default deterministic).
     #[serde(default)]
     pub policy_mode: ActionMode,
-    /// Steps h.
+    /// Steps h. batch × particles × horizon is bounded by `--max-rollout-steps`
+    /// and the answer budget (`--max-answer-bytes`).
+    #[schema(minimum = 1)]
+    #[serde(deserialize_with = "integer")]
     pub horizon: usize,
     /// Trajectories per start state (default 1).
     #[serde(default = "one")]
+    #[schema(minimum = 1)]
+    #[serde(deserialize_with = "integer")]
     pub particles: usize,
     #[serde(default)]
+    #[serde(deserialize_with = "integer")]
     pub seed: u64,
     /// λ_pen (default 1).
     #[serde(default = "unit")]
+    #[schema(minimum = 0)]
     pub penalty: f64,
-    /// CVaR level α: truncate at the model's ε(h, α) (h = horizon).
+    /// CVaR level α: truncate at the model's ε(h, α) (h = horizon); the pairs
+    /// a model has are in its `thresholds` (`GET /v1/models/{id}`).
     #[serde(default)]
+    #[schema(exclusive_minimum = 0, maximum = 1)]
     pub alpha: Option<f64>,
-    /// An explicit truncation threshold instead of α.
+    /// An explicit truncation threshold instead of α (give one of the two).
     #[serde(default)]
     pub threshold: Option<f32>,
     /// Multiplies ε (default 1; 0 follows the drift).
     #[serde(default = "unit_f32")]
+    #[schema(minimum = 0)]
     pub noise_scale: f32,
 }
 

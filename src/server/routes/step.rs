@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use super::defaults::{one, unit, unit_f32};
+use super::fields::{integer, one, unit, unit_f32};
 use crate::agent::{ParticleConfig, ParticleStep, step_particles};
 use crate::artifact::NamedTensors;
 use crate::server::body::{Format, RawBody, TensorBytes, json_response, tensors_response};
@@ -22,21 +22,29 @@ use crate::server::{ApiError, AppState};
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct StepRequest {
-    /// Observations, `[batch][obs_dim]`.
+    /// Observations, `[batch][obs_dim]` (obs_dim: the model's).
+    #[schema(min_items = 1)]
     pub states: Vec<Vec<f32>>,
-    /// Actions, `[batch][act_dim]`.
+    /// Actions, `[batch][act_dim]` (act_dim: the model's; as many rows as `states`).
+    #[schema(min_items = 1)]
     pub actions: Vec<Vec<f32>>,
-    /// Samples per item (default 1).
+    /// Samples per item (default 1). batch × particles is bounded by the
+    /// server's answer budget (`--max-answer-bytes`).
     #[serde(default = "one")]
+    #[schema(minimum = 1)]
+    #[serde(deserialize_with = "integer")]
     pub particles: usize,
     /// Seed of the noise ε (default 0): the same request gives the same answer.
     #[serde(default)]
+    #[serde(deserialize_with = "integer")]
     pub seed: u64,
     /// λ_pen of the penalised reward r − λ_pen·η (default 1).
     #[serde(default = "unit")]
+    #[schema(minimum = 0)]
     pub penalty: f64,
     /// Multiplies ε (default 1; 0 follows the drift).
     #[serde(default = "unit_f32")]
+    #[schema(minimum = 0)]
     pub noise_scale: f32,
 }
 
