@@ -18,7 +18,7 @@ PIP_DOWNLOAD      := $(PYTHON) -m pip download --quiet --no-deps --only-binary=:
 SERVE_ADDR   ?= 127.0.0.1:8080
 SERVE_MODELS ?= models
 
-.PHONY: serve test mujoco venv system-deps build lint bench openapi check-wgpu clean-runtime
+.PHONY: serve test mujoco venv system-deps build lint bench openapi check-wgpu check-docker clean-runtime
 
 ## serve: fetch what is missing, build, and serve the shipped models on $(SERVE_ADDR).
 serve: mujoco
@@ -44,6 +44,13 @@ bench: mujoco
 ## openapi: regenerate the committed spec (a test fails when it is stale).
 openapi: mujoco
 	$(CARGO) run --release --bin nuno-server -- --print-openapi > openapi/openapi.json
+
+## check-docker: build the image from the Dockerfile and check it runs as deployed
+## (ready, a step, SIGHUP reload, SIGTERM exit 0, non-root); prints the image size.
+## Needs a docker daemon (or root and Debian's docker.io); without an image hub it
+## makes a bookworm base with debootstrap. See deploy/docker/check.sh.
+check-docker: mujoco
+	deploy/docker/check.sh
 
 ## check-wgpu: build burn's wgpu backend and run the GPU smoke test. Without a GPU,
 ## Mesa's lavapipe (Debian's mesa-vulkan-drivers) provides a Vulkan device on the CPU.
