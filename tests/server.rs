@@ -662,7 +662,10 @@ async fn token_guards_everything_but_health() {
     // KServe routes refuse in the protocol's error shape, `{"error": "<message>"}`.
     let (status, body) = server.get(&format!("/v2/models/{MODEL}")).await;
     assert_eq!(status, StatusCode::UNAUTHORIZED);
-    assert!(body["error"].as_str().unwrap().contains("bearer token"), "{body}");
+    assert!(
+        body["error"].as_str().unwrap().contains("bearer token"),
+        "{body}"
+    );
     // The spec and the docs list every route: with a token, they need it too.
     for path in ["/openapi.json", "/docs"] {
         assert_eq!(server.get(path).await.0, StatusCode::UNAUTHORIZED, "{path}");
@@ -848,7 +851,9 @@ fn committed_openapi_spec_is_current() {
     };
     assert_eq!(
         responses("/v1/models/{id}/step", "post"),
-        ["200", "400", "401", "404", "413", "415", "422", "500", "503"]
+        [
+            "200", "400", "401", "404", "413", "415", "422", "500", "503"
+        ]
     );
     assert_eq!(responses("/healthz", "get"), ["200", "500", "503"]);
     let infer_422 = &spec["paths"]["/v2/models/{id}/infer"]["post"]["responses"]["422"];

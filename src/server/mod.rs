@@ -13,6 +13,7 @@ mod metrics;
 mod openapi;
 mod registry;
 mod routes;
+mod rows;
 mod validate;
 
 use std::net::SocketAddr;

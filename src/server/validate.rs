@@ -4,28 +4,6 @@
 use super::ApiError;
 use super::body::Format;
 
-/// Flattens `rows` after checking there is at least one, each has `width`
-/// entries, and every entry is finite.
-pub fn matrix(field: &str, rows: &[Vec<f32>], width: usize) -> Result<Vec<f32>, ApiError> {
-    if rows.is_empty() {
-        return Err(ApiError::Invalid(format!(
-            "`{field}` is empty: send at least one row"
-        )));
-    }
-    let mut flat = Vec::with_capacity(rows.len() * width);
-    for (i, row) in rows.iter().enumerate() {
-        if row.len() != width {
-            return Err(ApiError::Invalid(format!(
-                "`{field}[{i}]` has {} entries, this model expects {width}",
-                row.len()
-            )));
-        }
-        flat.extend_from_slice(row);
-    }
-    finite(field, &flat, width)?;
-    Ok(flat)
-}
-
 /// Checks a flat row-major buffer: whole rows of `width`, all finite.
 pub fn flat(field: &str, values: &[f32], width: usize) -> Result<usize, ApiError> {
     if values.is_empty() {

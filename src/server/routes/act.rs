@@ -11,15 +11,16 @@ use utoipa::ToSchema;
 
 use crate::agent::ActionMode;
 use crate::server::body::{RawBody, json_response};
-use crate::server::validate::{matrix, within};
+use crate::server::rows::Rows;
+use crate::server::validate::within;
 use crate::server::{ApiError, AppState};
 
-#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ActRequest {
     /// Observations, `[batch][obs_dim]` (obs_dim: the model's).
-    #[schema(min_items = 1)]
-    pub states: Vec<Vec<f32>>,
+    #[schema(value_type = Vec<Vec<f32>>, min_items = 1)]
+    pub states: Rows,
     /// deterministic (tanh of the mean, the default) or sampled.
     #[serde(default)]
     pub mode: ActionMode,
@@ -57,13 +58,14 @@ pub async fn act(
         return Err(ApiError::NoPolicy(id));
     };
     let obs_dim = actor.config.obs_dim;
-    let states = matrix("states", &r.states, obs_dim)?;
+    let batch = r.states.len();
     within(
         "batch (rows of states)",
-        r.states.len(),
+        batch,
         state.config.limits.max_batch,
     )?;
-    state.metrics.batch("act", &id, r.states.len());
+    let states = r.states.into_matrix("states", obs_dim)?;
+    state.metrics.batch("act", &id, batch);
     let act_dim = actor.config.act_dim;
     let worker = model.clone();
     // Serialised in the compute work too: the answer is batch-sized.

@@ -15,7 +15,8 @@ use crate::envs::{
     EnvError, EvaluationConfig, EvaluationReport, MujocoTask, evaluate_or_cancel as run_episodes,
 };
 use crate::server::body::RawBody;
-use crate::server::validate::{matrix, within};
+use crate::server::rows::Rows;
+use crate::server::validate::within;
 use crate::server::{ApiError, AppState};
 
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
@@ -87,12 +88,12 @@ pub async fn evaluate(
     }))
 }
 
-#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ValidateRequest {
     /// Actions to apply, `[horizon][act_dim]` (act_dim: the model's).
-    #[schema(min_items = 1)]
-    pub actions: Vec<Vec<f32>>,
+    #[schema(value_type = Vec<Vec<f32>>, min_items = 1)]
+    pub actions: Rows,
     /// Reset seed of the real task (the start state).
     #[serde(default)]
     #[serde(deserialize_with = "integer")]
@@ -141,20 +142,16 @@ pub async fn validate(
     let model = state.model(&id)?;
     let spec = &model.metadata.spec;
     let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
-    let actions = matrix("actions", &r.actions, act_dim)?;
     let limits = &state.config.limits;
-    within(
-        "horizon (rows of actions)",
-        r.actions.len(),
-        limits.max_horizon,
-    )?;
+    let horizon = r.actions.len();
+    within("horizon (rows of actions)", horizon, limits.max_horizon)?;
+    let actions = r.actions.into_matrix("actions", act_dim)?;
     within("particles", r.particles, limits.max_particles)?;
     if !r.noise_scale.is_finite() || r.noise_scale < 0.0 {
         return Err(ApiError::Invalid(
             "`noise_scale` must be a finite number ≥ 0".into(),
         ));
     }
-    let horizon = r.actions.len();
     state.metrics.batch("validate", &id, horizon * r.particles);
     let worker = model.clone();
     let (real, predicted) = state

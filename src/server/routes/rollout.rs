@@ -20,20 +20,22 @@ use crate::artifact::NamedTensors;
 use crate::server::body::{
     Format, RawBody, TensorBytes, answer_format, json_response, tensors_response,
 };
-use crate::server::validate::{answer_within, matrix, non_negative, within};
+use crate::server::rows::Rows;
+use crate::server::validate::{answer_within, non_negative, within};
 use crate::server::{ApiError, AppState};
 
-#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RolloutRequest {
     /// Start observations, `[batch][obs_dim]` (obs_dim: the model's).
-    #[schema(min_items = 1)]
-    pub states: Vec<Vec<f32>>,
+    #[schema(value_type = Vec<Vec<f32>>, min_items = 1)]
+    pub states: Rows,
     /// Open-loop actions `[batch][horizon][act_dim]` (one sequence per start
     /// state, `horizon` steps each, act_dim: the model's); without them the
     /// model's policy acts (409 when it has none).
     #[serde(default)]
-    pub actions: Option<Vec<Vec<Vec<f32>>>>,
+    #[schema(value_type = Option<Vec<Vec<Vec<f32>>>>)]
+    pub actions: Option<Vec<Rows>>,
     /// How the policy acts when it does (default deterministic).
     #[serde(default)]
     pub policy_mode: ActionMode,
@@ -133,14 +135,14 @@ pub async fn rollout(
     body: RawBody,
 ) -> Result<Response, ApiError> {
     let answer = answer_format(&headers);
-    let r: RolloutRequest = body.json().await?;
+    let mut r: RolloutRequest = body.json().await?;
     let model = state.model(&id)?;
     let spec = &model.metadata.spec;
     let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
     let limits = &state.config.limits;
-    let starts = matrix("states", &r.states, obs_dim)?;
     let batch = r.states.len();
     within("batch (rows of states)", batch, limits.max_batch)?;
+    let starts = std::mem::take(&mut r.states).into_matrix("states", obs_dim)?;
     within("horizon", r.horizon, limits.max_horizon)?;
     within("particles", r.particles, limits.max_particles)?;
     within(
@@ -157,7 +159,7 @@ pub async fn rollout(
         answer,
         limits.max_answer_bytes,
     )?;
-    let sequence = match &r.actions {
+    let sequence = match r.actions.take() {
         None => {
             if model.policy.is_none() {
                 return Err(ApiError::NoPolicy(id));
@@ -172,7 +174,7 @@ pub async fn rollout(
                 )));
             }
             let mut flat = Vec::with_capacity(batch * r.horizon * act_dim);
-            for (b, sequence) in actions.iter().enumerate() {
+            for (b, sequence) in actions.into_iter().enumerate() {
                 if sequence.len() != r.horizon {
                     return Err(ApiError::Invalid(format!(
                         "`actions[{b}]` has {} steps, the horizon is {}",
@@ -180,7 +182,7 @@ pub async fn rollout(
                         r.horizon
                     )));
                 }
-                flat.extend(matrix(&format!("actions[{b}]"), sequence, act_dim)?);
+                flat.extend(sequence.into_matrix(&format!("actions[{b}]"), act_dim)?);
             }
             Some(flat)
         }

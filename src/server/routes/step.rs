@@ -15,19 +15,20 @@ use super::fields::{integer, one, unit, unit_f32};
 use crate::agent::{ParticleConfig, ParticleStep, step_particles};
 use crate::artifact::NamedTensors;
 use crate::server::body::{Format, RawBody, TensorBytes, json_response, tensors_response};
-use crate::server::validate::{answer_within, flat, matrix, non_negative, within};
+use crate::server::rows::Rows;
+use crate::server::validate::{answer_within, flat, non_negative, within};
 use crate::server::{ApiError, AppState};
 
 /// A batch of observations and actions to step.
-#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct StepRequest {
     /// Observations, `[batch][obs_dim]` (obs_dim: the model's).
-    #[schema(min_items = 1)]
-    pub states: Vec<Vec<f32>>,
+    #[schema(value_type = Vec<Vec<f32>>, min_items = 1)]
+    pub states: Rows,
     /// Actions, `[batch][act_dim]` (act_dim: the model's; as many rows as `states`).
-    #[schema(min_items = 1)]
-    pub actions: Vec<Vec<f32>>,
+    #[schema(value_type = Vec<Vec<f32>>, min_items = 1)]
+    pub actions: Rows,
     /// Samples per item (default 1). batch × particles is bounded by the
     /// server's answer budget (`--max-answer-bytes`).
     #[serde(default = "one")]
@@ -101,9 +102,9 @@ pub async fn step(
     let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
     let (observations, actions, request) = match body.format {
         Format::Json => {
-            let r: StepRequest = body.json().await?;
-            let states = matrix("states", &r.states, obs_dim)?;
-            let actions = matrix("actions", &r.actions, act_dim)?;
+            let mut r: StepRequest = body.json().await?;
+            let states = std::mem::take(&mut r.states).into_matrix("states", obs_dim)?;
+            let actions = std::mem::take(&mut r.actions).into_matrix("actions", act_dim)?;
             (states, actions, r)
         }
         Format::Binary => binary_request(&body, obs_dim, act_dim)?,
@@ -178,8 +179,8 @@ fn binary_request(
     let states = take("states", obs_dim)?;
     let actions = take("actions", act_dim)?;
     let request = StepRequest {
-        states: Vec::new(),
-        actions: Vec::new(),
+        states: Rows::default(),
+        actions: Rows::default(),
         particles: option(&metadata, "particles", 1)?,
         seed: option(&metadata, "seed", 0)?,
         penalty: option(&metadata, "penalty", 1.0)?,
