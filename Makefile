@@ -24,9 +24,15 @@ SERVE_MODELS ?= models
 serve: mujoco
 	$(CARGO) run --release --bin nuno-server -- --models $(SERVE_MODELS) --addr $(SERVE_ADDR)
 
-## test: the full suite (unit, integration, Gymnasium parity).
+## test: the full suite (unit, integration, Gymnasium parity), then the fused
+## kernels' numerics again on each narrower vector level (NUNO_SIMD), so every
+## variant runs whatever the machine's widest is.
 test: mujoco venv
 	$(CARGO) test --workspace --release
+	for level in portable avx2; do \
+	  NUNO_SIMD=$$level $(CARGO) test --release --lib infer:: || exit 1; \
+	  NUNO_SIMD=$$level $(CARGO) test --release --test infer || exit 1; \
+	done
 
 build: mujoco
 	$(CARGO) build --workspace --release
@@ -34,6 +40,8 @@ build: mujoco
 lint: mujoco
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --workspace --all-targets --release -- -D warnings
+	# The library alone, as a dependency with default-features = false: no server stack.
+	$(CARGO) clippy --lib --no-default-features --release -- -D warnings
 
 bench: mujoco
 	$(CARGO) bench --bench env_step

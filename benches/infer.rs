@@ -16,11 +16,13 @@ use std::time::Instant;
 
 use burn::tensor::{Device, Tensor, TensorData};
 use common::{ACT, Hopper, OBS, seconds_per_call};
+use nuno::agent::FusedActor;
 use nuno::agent::{
     ActionMode, ActorConfig, ActorPolicy, BatchPolicy, RolloutActions, RolloutConfig, rollout_model,
 };
 use nuno::envs::{TaskConfig, TaskName, TaskRules};
-use nuno::infer::{Dense, FusedActor, FusedSde, Rows};
+use nuno::infer::{Dense, Rows};
+use nuno::sde::FusedSde;
 use nuno::sde::{BatchDynamics, NeuralSde, SdeConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -13,14 +13,23 @@
 //! - [`infer`]: the fused CPU path that rollouts and the server evaluate trained networks with;
 //! - [`artifact`]: atomic writes of everything nuno saves;
 //! - [`server`]: the HTTP model server (axum), a thin layer over the rest;
-//! - [`cancel`]: the flag long work checks between steps, to stop when asked.
+//! - [`shared`]: what every concern may import and which imports none of them: the
+//!   batch interfaces, the cancellation flag long work checks between steps, the
+//!   atomic file writer.
+//!
+//! Dependencies run one way, down the list in docs/architecture.md (checked by
+//! tests/layering.rs).
 
 pub mod agent;
 pub mod artifact;
-pub mod cancel;
 pub mod data;
 pub mod envs;
 pub mod infer;
 pub mod nn;
 pub mod sde;
+#[cfg(feature = "server")]
 pub mod server;
+pub mod shared;
+
+/// Cancellation, re-exported where it was first defined.
+pub use shared::cancel;

@@ -17,6 +17,7 @@ use nuno::envs::{MujocoTask, ObservationLayout, TaskConfig, TaskName, TaskRules}
 use nuno::infer::Kernel;
 use nuno::nn::{polyak_update, seeded_init, to_f32_vec};
 use nuno::sde::{BatchDynamics, DynamicsSpec, ModelStep};
+use nuno::shared::BatchShape;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -190,14 +191,13 @@ struct ConstantEta {
 }
 
 impl BatchDynamics for ConstantEta {
-    fn spec(&self) -> &DynamicsSpec {
-        &self.spec
-    }
-    fn state_dim(&self) -> usize {
-        self.spec.obs_dim
-    }
-    fn learns_reward(&self) -> bool {
-        false
+    fn shape(&self) -> BatchShape {
+        BatchShape {
+            obs_dim: self.spec.obs_dim,
+            act_dim: self.spec.act_dim,
+            learns_reward: false,
+            dt: self.spec.dt,
+        }
     }
     fn step(&self, states: &[f32], actions: &[f32], _noise: &[f32]) -> ModelStep {
         let (o, a) = (self.spec.obs_dim, self.spec.act_dim);
@@ -224,14 +224,8 @@ struct DivergesWhereMarked {
 }
 
 impl BatchDynamics for DivergesWhereMarked {
-    fn spec(&self) -> &DynamicsSpec {
-        self.inner.spec()
-    }
-    fn state_dim(&self) -> usize {
-        self.inner.state_dim()
-    }
-    fn learns_reward(&self) -> bool {
-        false
+    fn shape(&self) -> BatchShape {
+        self.inner.shape()
     }
     fn step(&self, states: &[f32], actions: &[f32], noise: &[f32]) -> ModelStep {
         let mut step = self.inner.step(states, actions, noise);

@@ -6,13 +6,17 @@
 use std::path::Path;
 
 use burn::tensor::Device;
+use nuno::agent::FusedActor;
 use nuno::agent::{
     ActionMode, ActorConfig, ActorPolicy, BatchPolicy, RolloutActions, RolloutConfig, rollout_model,
 };
 use nuno::artifact::{BEST_POLICY, load_dynamics, load_policy};
 use nuno::data::{Dataset, GenerateConfig, generate};
 use nuno::envs::{MujocoTask, TaskConfig, TaskName, TaskRules};
-use nuno::infer::{Dense, FusedActor, FusedSde, GEMM_MIN_ROWS, MAX_TILE_ROWS, Rows};
+use nuno::infer::{
+    Dense, GEMM_MIN_ROWS, MAX_TILE_ROWS, Rows, SimdLevel, detected_simd_level, simd_level,
+};
+use nuno::sde::FusedSde;
 use nuno::sde::{BatchDynamics, DynamicsSpec, NeuralSde, PhysicalScales, SdeConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -138,6 +142,88 @@ fn fused_step_matches_burn_on_random_models() {
 fn fused_step_matches_burn_on_the_shipped_model() {
     let (model, _) = load_dynamics(&shipped(), &Device::flex()).unwrap();
     compare_steps("shipped hopper-random", &model, &hopper_data(), 2);
+}
+
+/// `make test` runs this file once per vector level (`NUNO_SIMD`), so the
+/// portable and AVX2 variants are checked on machines that have AVX-512 too.
+#[test]
+fn the_requested_vector_level_is_the_one_used() {
+    let used = simd_level();
+    eprintln!(
+        "fused kernels on {used:?} (CPU: {:?})",
+        detected_simd_level()
+    );
+    if let Some(cap) = std::env::var("NUNO_SIMD")
+        .ok()
+        .and_then(|v| SimdLevel::parse(&v))
+    {
+        assert_eq!(used, cap.min(detected_simd_level()));
+    }
+}
+
+/// The panic message of `work`, which must panic.
+fn panic_message(work: impl FnOnce()) -> String {
+    let payload = std::panic::catch_unwind(std::panic::AssertUnwindSafe(work))
+        .expect_err("a batch of the wrong shape was accepted");
+    payload
+        .downcast_ref::<String>()
+        .cloned()
+        .or_else(|| payload.downcast_ref::<&str>().map(|s| s.to_string()))
+        .unwrap_or_default()
+}
+
+/// Rows of the wrong width are a caller's bug: both kernels refuse them at the
+/// interface, with the same message, instead of truncating (the fused tiles
+/// would silently drop the partial row) or failing deep inside burn.
+#[test]
+fn both_kernels_refuse_batches_of_the_wrong_shape_the_same_way() {
+    let device = Device::flex();
+    let data = hopper_data();
+    let spec = hopper_spec();
+    let scales = PhysicalScales::measure(&data, &spec, &Default::default());
+    let model = NeuralSde::init(spec, scales, SdeConfig::new(), &device);
+    let burn = ActorPolicy {
+        actor: ActorConfig::new(11, 3, vec![-1.0; 3], vec![1.0; 3]).init(&device),
+        mode: ActionMode::Deterministic,
+    };
+    let fused_sde = FusedSde::new(&model);
+    let fused_actor = FusedActor::new(&burn);
+    let dynamics: [&dyn BatchDynamics; 2] = [&model, &fused_sde];
+    let policies: [&dyn BatchPolicy; 2] = [&burn, &fused_actor];
+    let (states, actions, noise) = (vec![0.0; 2 * 11], vec![0.0; 2 * 3], vec![0.0; 2 * 11]);
+    let mut step_messages = Vec::new();
+    for d in dynamics {
+        // A short state row, a missing action row, a short noise buffer.
+        for (s, a, n) in [
+            (&states[1..], &actions[..], &noise[1..]),
+            (&states[..], &actions[3..], &noise[..]),
+            (&states[..], &actions[..], &noise[1..]),
+        ] {
+            step_messages.push(panic_message(|| {
+                d.step(s, a, n);
+            }));
+        }
+    }
+    let (burn_messages, fused_messages) = step_messages.split_at(3);
+    assert_eq!(burn_messages, fused_messages);
+    assert_eq!(
+        burn_messages[0],
+        "BatchDynamics::step: 21 state, 6 action and 21 noise values are not [batch, 11], \
+         [batch, 3] and [batch, 11] rows of one batch"
+    );
+    let act_messages: Vec<String> = policies
+        .iter()
+        .map(|p| {
+            panic_message(|| {
+                p.act(&states[1..], &mut ChaCha8Rng::seed_from_u64(0));
+            })
+        })
+        .collect();
+    assert_eq!(act_messages[0], act_messages[1]);
+    assert_eq!(
+        act_messages[0],
+        "BatchPolicy::act: 21 observation values are not [batch, 11] rows"
+    );
 }
 
 #[test]

@@ -947,7 +947,7 @@ fn the_shipped_model_is_calibrated_on_fresh_hopper_random_data() {
 }
 
 #[test]
-fn eta_report_on_the_shipped_model_separates_perturbed_data_not_random_actions() {
+fn eta_report_on_the_shipped_model_separates_perturbed_data() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/hopper-random");
     let device = Device::flex();
     let (model, _) = load_dynamics(&dir, &device).unwrap();
@@ -963,12 +963,11 @@ fn eta_report_on_the_shipped_model_separates_perturbed_data_not_random_actions()
     assert!(near.1.auroc_vs_data > 0.85, "{report:?}");
     assert!(far.1.auroc_vs_data > 0.95, "{report:?}");
     assert!(report.data_mean_eta < near.1.mean_eta && near.1.mean_eta < far.1.mean_eta);
-    // ... but random actions are as close to hopper-random's near-uniform
-    // actions as its own (docs/paper-map.md, known gaps).
-    assert!(
-        (report.random_actions.auroc_vs_data - 0.5).abs() < 0.1,
-        "{report:?}"
-    );
+    // Random actions against hopper-random's near-uniform ones are a figure of
+    // the report (~0.5 today: docs/paper-map.md, known gaps), not a requirement
+    // a better η would fail: only that it is a proper AUROC.
+    let random = report.random_actions.auroc_vs_data;
+    assert!((0.0..=1.0).contains(&random), "{report:?}");
 
     let none = EtaReportConfig::new().with_rows(0);
     let err = eta_report(&model, &dataset, 0.1, &none, &device).unwrap_err();

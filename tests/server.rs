@@ -1,6 +1,7 @@
 //! The model server end to end: the real router on 127.0.0.1:0, called with
 //! reqwest. Happy paths with value checks against the library, every bad-input
 //! case, auth, concurrency, metrics, KServe v2, reload, and the committed spec.
+#![cfg(feature = "server")]
 
 mod common;
 
@@ -9,11 +10,13 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use burn::tensor::Device;
+use nuno::agent::FusedActor;
 use nuno::agent::{ActionMode, ActorConfig, ActorPolicy, BatchPolicy};
 use nuno::artifact::{BEST_POLICY, PolicyProvenance, load_dynamics, save_policy};
 use nuno::envs::{TaskConfig, TaskName, TaskRules};
-use nuno::infer::{FusedActor, FusedSde, Kernel};
+use nuno::infer::Kernel;
 use nuno::sde::BatchDynamics;
+use nuno::sde::FusedSde;
 use nuno::server::{
     ActResponse, AppState, BINARY, ComputeHook, EvaluateResponse, Limits, ModelDetail, ModelList,
     RolloutResponse, ServerConfig, StepResponse, ValidateResponse, openapi_json, serve,

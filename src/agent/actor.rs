@@ -11,8 +11,8 @@ use rand::RngCore;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use super::BatchPolicy;
 use crate::nn::{Activation, Mlp, MlpConfig, standard_normal, to_f32_vec};
+use crate::shared::{BatchPolicy, act_batch};
 
 /// The actor's sizes and limits.
 #[derive(Config, Debug, PartialEq)]
@@ -124,17 +124,8 @@ impl Actor {
 }
 
 /// How a trained actor chooses actions.
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    Default,
-    serde::Serialize,
-    serde::Deserialize,
-    utoipa::ToSchema,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(rename_all = "lowercase")]
 pub enum ActionMode {
     /// tanh(μ(s)): what SAC evaluates (and the default for serving).
@@ -162,7 +153,7 @@ impl BatchPolicy for ActorPolicy {
 
     fn act(&self, observations: &[f32], rng: &mut dyn RngCore) -> Vec<f32> {
         let device = self.actor.net.layers[0].weight.val().device();
-        let batch = observations.len() / self.obs_dim();
+        let batch = act_batch(self, observations);
         let obs = Tensor::from_data(
             TensorData::new(observations.to_vec(), [batch, self.obs_dim()]),
             &device,

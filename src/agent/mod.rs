@@ -1,11 +1,12 @@
 //! Policies and NUNO's offline policy optimisation (Section 4.3, Appendix
 //! C.2–C.3): SAC trained on penalised, truncated neural-SDE rollouts mixed
 //! with real data. Everything that runs a policy goes through [`BatchPolicy`];
-//! model rollouts step the dynamics through [`crate::sde::BatchDynamics`].
+//! model rollouts step the dynamics through [`crate::shared::BatchDynamics`].
 
 mod actor;
 mod buffer;
 mod critic;
+mod fused_actor;
 mod fused_sac;
 mod model_rollout;
 mod model_step;
@@ -15,17 +16,20 @@ mod presets;
 mod random_network;
 mod sac;
 
+/// The policy interface, re-exported where it was first defined.
+pub use crate::shared::BatchPolicy;
 pub(crate) use actor::action_noise;
 pub use actor::{ActionMode, Actor, ActorConfig, ActorPolicy, ActorSample};
 pub use buffer::ReplayBuffer;
 pub use critic::{Temperature, TwinCritic};
+pub use fused_actor::FusedActor;
 pub use fused_sac::{FusedGradients, FusedSac};
 pub use model_rollout::{
     ModelRollout, RolloutActions, RolloutConfig, RolloutStats, RolloutTrace, StepOutcome,
     rollout_model, rollout_model_or_cancel,
 };
 pub use model_step::{ParticleConfig, ParticleStep, penalized_reward, step_particles};
-pub use policy::{BatchPolicy, RandomPolicy};
+pub use policy::RandomPolicy;
 pub use policy_loop::{
     EpochRecord, EtaProbe, EvalSummary, LoopContext, PhaseSeconds, PolicyLoopConfig, PolicyTraining,
 };

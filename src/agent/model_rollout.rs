@@ -11,11 +11,11 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::BatchPolicy;
-use super::model_step::{penalized_reward, scaled_noise};
-use crate::cancel::{Cancel, Cancelled};
+use super::model_step::penalized_reward;
 use crate::data::TransitionBatch;
 use crate::envs::TaskRules;
-use crate::sde::BatchDynamics;
+use crate::shared::cancel::{Cancel, Cancelled};
+use crate::shared::{BatchDynamics, scaled_noise};
 
 /// How model rollouts run.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -130,8 +130,7 @@ pub fn rollout_model_or_cancel(
     rng: &mut ChaCha8Rng,
     cancel: &Cancel,
 ) -> Result<ModelRollout, Cancelled> {
-    let spec = dynamics.spec();
-    let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
+    let (obs_dim, act_dim) = (dynamics.obs_dim(), dynamics.act_dim());
     let state_dim = dynamics.state_dim();
     let learned_reward = dynamics.learns_reward();
     let rows = starts.len() / obs_dim * config.particles;

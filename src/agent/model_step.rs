@@ -2,13 +2,11 @@
 //! the SDE's terms, the sampled next observations, and what the task's rules
 //! (or NUNO^R's learned reward) make of them. What the server's `step` answers.
 
-use rand::Rng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
 use crate::envs::TaskRules;
-use crate::sde::{BatchDynamics, euler_maruyama};
+use crate::shared::{BatchDynamics, euler_maruyama, scaled_noise};
 
 /// A batch step's results, row-major; `b` items, `p` particles, `d` = obs_dim.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -39,13 +37,6 @@ pub fn penalized_reward(reward: f32, penalty: f64, eta: f32) -> f32 {
     reward - (penalty * f64::from(eta)) as f32
 }
 
-/// `n` standard normal draws ε, multiplied by `scale`.
-pub(crate) fn scaled_noise(n: usize, scale: f32, rng: &mut ChaCha8Rng) -> Vec<f32> {
-    (0..n)
-        .map(|_| rng.sample::<f32, _>(StandardNormal) * scale)
-        .collect()
-}
-
 /// How a batch step samples and penalises.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ParticleConfig {
@@ -71,8 +62,7 @@ pub fn step_particles(
         penalty,
         noise_scale,
     } = config;
-    let spec = dynamics.spec();
-    let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
+    let (obs_dim, act_dim) = (dynamics.obs_dim(), dynamics.act_dim());
     let state_dim = dynamics.state_dim();
     let batch = observations.len() / obs_dim;
     let rows = batch * particles;
@@ -82,7 +72,7 @@ pub fn step_particles(
     let terms = dynamics.step(&states, actions, &vec![0.0; states.len()]);
     // Particle p of item b is row b·particles + p, drawn in that order.
     let noise = scaled_noise(rows * state_dim, noise_scale, rng);
-    let sqrt_dt = spec.dt.sqrt() as f32;
+    let sqrt_dt = dynamics.dt().sqrt() as f32;
 
     let observation_columns = |values: &[f32]| -> Vec<f32> {
         values

@@ -6,22 +6,7 @@
 
 use rand::{Rng, RngCore};
 
-/// A policy evaluated on a batch of states at once.
-///
-/// Implementations must be `Sync`: the evaluator calls one policy from several
-/// threads, each with its own random number generator.
-pub trait BatchPolicy: Sync {
-    /// Width of one state row.
-    fn obs_dim(&self) -> usize;
-    /// Width of one action row.
-    fn act_dim(&self) -> usize;
-    /// Actions for `observations`.
-    ///
-    /// # Shapes
-    /// - `observations`: row-major `[batch, obs_dim]`
-    /// - returns: row-major `[batch, act_dim]`
-    fn act(&self, observations: &[f32], rng: &mut dyn RngCore) -> Vec<f32>;
-}
+use crate::shared::{BatchPolicy, act_batch};
 
 /// Actions drawn uniformly from the task's action box, ignoring the state: the
 /// baseline behind D4RL's "random" datasets and the 0 of normalised scores.
@@ -50,7 +35,7 @@ impl BatchPolicy for RandomPolicy {
     }
 
     fn act(&self, observations: &[f32], rng: &mut dyn RngCore) -> Vec<f32> {
-        let batch = observations.len() / self.obs_dim;
+        let batch = act_batch(self, observations);
         let mut actions = Vec::with_capacity(batch * self.act_dim());
         for _ in 0..batch {
             for (low, high) in self.low.iter().zip(&self.high) {

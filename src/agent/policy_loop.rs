@@ -27,7 +27,8 @@ use super::{AgentError, BatchPolicy};
 use crate::data::{Dataset, StartStateSampler, TransitionBatch, TransitionSampler};
 use crate::envs::{EvaluationConfig, TaskConfig, TaskRules, evaluate};
 use crate::infer::Kernel;
-use crate::sde::{BatchDynamics, ThresholdTable};
+use crate::sde::ThresholdTable;
+use crate::shared::BatchDynamics;
 
 /// Every knob of the loop; defaults are Appendix C.2–C.3's.
 #[derive(Config, Debug, PartialEq)]
@@ -173,15 +174,15 @@ impl PolicyTraining {
         thresholds: Option<&ThresholdTable>,
         device: &Device,
     ) -> Result<Self, AgentError> {
-        let spec = ctx.dynamics.spec();
-        if ctx.dataset.obs_dim() != spec.obs_dim || ctx.dataset.act_dim() != spec.act_dim {
+        let (obs_dim, act_dim) = (ctx.dynamics.obs_dim(), ctx.dynamics.act_dim());
+        if ctx.dataset.obs_dim() != obs_dim || ctx.dataset.act_dim() != act_dim {
             return Err(AgentError::Mismatch(format!(
                 "the dataset has observations of width {} and actions of width {}, \
                  the dynamics model expects {} and {}",
                 ctx.dataset.obs_dim(),
                 ctx.dataset.act_dim(),
-                spec.obs_dim,
-                spec.act_dim
+                obs_dim,
+                act_dim
             )));
         }
         let threshold =
@@ -201,8 +202,8 @@ impl PolicyTraining {
         let task = crate::envs::MujocoTask::new(ctx.task)?;
         let (low, high) = task.action_bounds();
         let actor = ActorConfig::new(
-            spec.obs_dim,
-            spec.act_dim,
+            obs_dim,
+            act_dim,
             low.iter().map(|&x| x as f32).collect(),
             high.iter().map(|&x| x as f32).collect(),
         );
@@ -212,7 +213,7 @@ impl PolicyTraining {
         let capacity =
             config.rollout_batch * config.horizon * config.particles * config.retain_epochs;
         Ok(Self {
-            model_buffer: ReplayBuffer::new(capacity, spec.obs_dim, spec.act_dim),
+            model_buffer: ReplayBuffer::new(capacity, obs_dim, act_dim),
             rng: ChaCha8Rng::seed_from_u64(config.seed),
             step: 0,
             epoch: 0,

@@ -9,7 +9,7 @@ use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-use super::BatchPolicy;
+use crate::shared::{BatchPolicy, act_batch};
 
 /// rlkit's output-layer init range (`init_w`).
 const OUTPUT_INIT: f32 = 1e-3;
@@ -110,7 +110,7 @@ impl BatchPolicy for RandomNetworkPolicy {
     }
 
     fn act(&self, observations: &[f32], rng: &mut dyn RngCore) -> Vec<f32> {
-        let mut actions = Vec::with_capacity(observations.len() / self.obs_dim * self.act_dim());
+        let mut actions = Vec::with_capacity(act_batch(self, observations) * self.act_dim());
         for obs in observations.chunks_exact(self.obs_dim) {
             let features = self
                 .hidden

@@ -2,7 +2,6 @@
 //! metadata, validated on load, and the atomic write every file goes through,
 //! so a reader never sees a half-written file.
 
-mod atomic;
 mod checkpoint;
 mod dynamics;
 mod json_file;
@@ -12,7 +11,7 @@ mod tensors;
 
 use std::path::{Path, PathBuf};
 
-pub use atomic::write_atomically;
+pub use crate::shared::write_atomically;
 pub use checkpoint::{
     CHECKPOINT_SCHEMA_VERSION, latest_checkpoint, load_checkpoint, save_checkpoint,
 };

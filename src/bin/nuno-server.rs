@@ -44,8 +44,8 @@ struct Args {
     /// Model computations at once (default: the number of cores).
     #[arg(long, default_value_t = Limits::default().compute_slots)]
     compute_slots: usize,
-    /// What evaluates the models: the fused CPU path, or burn (the training code path).
-    #[arg(long, value_enum, default_value_t = Kernel::Fused, env = "NUNO_KERNEL")]
+    /// What evaluates the models: the fused CPU path, or burn (the training code path): `fused` or `burn`.
+    #[arg(long, default_value_t = Kernel::Fused, env = "NUNO_KERNEL")]
     kernel: Kernel,
     /// Print the OpenAPI document and exit.
     #[arg(long)]

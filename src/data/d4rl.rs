@@ -10,7 +10,7 @@ use ndarray::{Array1, Array2, Axis, s};
 
 use super::dataset::{DatasetParts, check_rows};
 use super::{DataError, Dataset, DatasetMetadata};
-use crate::artifact::write_atomically;
+use crate::shared::write_atomically;
 
 /// gzip level of written datasets (h5py's and D4RL's default).
 const GZIP_LEVEL: u8 = 4;

@@ -12,8 +12,8 @@ use serde::{Deserialize, Serialize};
 
 use super::dataset::DatasetParts;
 use super::{DataError, Dataset, DatasetMetadata};
-use crate::agent::BatchPolicy;
 use crate::envs::{MujocoTask, TaskConfig};
+use crate::shared::BatchPolicy;
 
 /// What to generate.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

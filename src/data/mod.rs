@@ -14,6 +14,8 @@ mod sampler;
 
 use std::path::PathBuf;
 
+/// The transition batch, re-exported where it was first defined.
+pub use crate::shared::TransitionBatch;
 pub use d4rl::{read_d4rl, write_d4rl};
 pub use dataset::{Dataset, DatasetMetadata, DatasetParts, Trajectory};
 pub use format::{DatasetFormat, read_dataset};
@@ -21,9 +23,7 @@ pub use generate::{GenerateConfig, generate};
 pub use minari::read_minari;
 pub use neorl::read_neorl;
 pub use normalizer::{Normalizer, NormalizerConfig, Stats};
-pub use sampler::{
-    StartStateSampler, TransitionBatch, TransitionSampler, WindowBatch, WindowSampler,
-};
+pub use sampler::{StartStateSampler, TransitionSampler, WindowBatch, WindowSampler};
 
 use crate::envs::EnvError;
 

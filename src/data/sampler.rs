@@ -5,6 +5,7 @@
 use rand::Rng;
 
 use super::{DataError, Dataset};
+use crate::shared::TransitionBatch;
 
 /// Windows `(s_t, a_t, r_t, ..., s_{t+H})`, row-major.
 #[derive(Debug, Clone, PartialEq)]
@@ -112,49 +113,6 @@ impl<'a> WindowSampler<'a> {
             }
         }
         out
-    }
-}
-
-/// Transitions `(s, a, r, s', terminal)`, row-major.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TransitionBatch {
-    pub observations: Vec<f32>,
-    pub actions: Vec<f32>,
-    pub rewards: Vec<f32>,
-    pub next_observations: Vec<f32>,
-    /// 1.0 where the transition ended in a terminal state.
-    pub terminals: Vec<f32>,
-}
-
-impl TransitionBatch {
-    /// An empty batch with room for `rows` transitions.
-    pub fn with_capacity(rows: usize, obs_dim: usize, act_dim: usize) -> Self {
-        Self {
-            observations: Vec::with_capacity(rows * obs_dim),
-            actions: Vec::with_capacity(rows * act_dim),
-            rewards: Vec::with_capacity(rows),
-            next_observations: Vec::with_capacity(rows * obs_dim),
-            terminals: Vec::with_capacity(rows),
-        }
-    }
-
-    /// Number of transitions.
-    pub fn len(&self) -> usize {
-        self.rewards.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.rewards.is_empty()
-    }
-
-    /// Appends `other`'s transitions after this batch's.
-    pub fn append(&mut self, other: &TransitionBatch) {
-        self.observations.extend_from_slice(&other.observations);
-        self.actions.extend_from_slice(&other.actions);
-        self.rewards.extend_from_slice(&other.rewards);
-        self.next_observations
-            .extend_from_slice(&other.next_observations);
-        self.terminals.extend_from_slice(&other.terminals);
     }
 }
 

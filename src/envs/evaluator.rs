@@ -12,8 +12,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::{EnvError, MujocoTask, TaskConfig};
-use crate::agent::BatchPolicy;
-use crate::cancel::Cancel;
+use crate::shared::BatchPolicy;
+use crate::shared::cancel::Cancel;
 
 /// What to evaluate and how.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -38,7 +38,8 @@ impl EvaluationConfig {
 }
 
 /// Per-episode results and their summary.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct EvaluationReport {
     pub returns: Vec<f64>,
     pub lengths: Vec<usize>,

@@ -44,5 +44,5 @@ pub enum EnvError {
     #[error("an evaluation needs at least one episode")]
     NoEpisodes,
     #[error(transparent)]
-    Cancelled(#[from] crate::cancel::Cancelled),
+    Cancelled(#[from] crate::shared::cancel::Cancelled),
 }

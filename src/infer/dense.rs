@@ -1,11 +1,12 @@
 //! Dense layers and MLPs evaluated on a tile of rows in plain `f32` buffers:
-//! each layer fills its output with the bias, accumulates `x·W` into it, and
-//! applies the activation while the tile is still in cache.
+//! each layer writes `x·W` to its output, then adds the bias and applies the
+//! activation in one pass while the tile is still in cache.
 //!
 //! Matrix kernel, chosen by measurement (BENCHMARKS.md, "Fused CPU inference"):
 //! the `gemm` crate's AVX-512 kernels from [`GEMM_MIN_ROWS`] rows up, a
 //! row-times-matrix loop below that, where packing would cost more than it saves.
 
+use super::simd::{SimdLevel, simd_level};
 use super::vector_math::{Vectorized, bias_then_activate, widest};
 use crate::nn::{Activation, Mlp, to_f32_vec};
 
@@ -279,8 +280,8 @@ impl DenseMlp {
 /// blocks of rows × columns held in registers; otherwise a plain loop.
 fn accumulate_rows(layer: &Dense, input: Rows, out: &mut [f32]) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx512f") {
-        // SAFETY: the CPU supports AVX-512F, checked just above.
+    if simd_level() == SimdLevel::Avx512 {
+        // SAFETY: simd_level() is at most what the CPU supports: AVX-512F here.
         return unsafe { avx512::accumulate_rows(layer, input, out) };
     }
     widest(RowLoop { layer, input, out });

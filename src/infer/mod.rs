@@ -1,5 +1,8 @@
-//! The fused CPU inference path under the narrow batch interfaces
-//! ([`crate::sde::BatchDynamics`], [`crate::agent::BatchPolicy`]).
+//! The fused CPU kernels under the narrow batch interfaces
+//! ([`crate::shared::BatchDynamics`], [`crate::shared::BatchPolicy`]): dense
+//! layers, their gradients, vectorised activations and batch tiles, knowing
+//! nothing of the models built from them (`sde::FusedSde`, `agent::FusedActor`,
+//! `agent::FusedSac`).
 //!
 //! burn's CPU backend runs this model on one core at about a fifth of what
 //! the layer shapes allow (BENCHMARKS.md). Rollouts and the server only ever
@@ -9,35 +12,20 @@
 //! ([`tiles`]), and per-thread buffers reused across steps. burn stays the
 //! path for training and for the GPU; [`Kernel`] picks between them.
 
-mod actor;
 mod dense;
 mod mlp_grad;
-mod sde;
+mod simd;
 mod tiles;
 mod vector_math;
 
-pub use actor::FusedActor;
 pub use dense::{Dense, DenseMlp, GEMM_MIN_ROWS, MlpScratch, Rows};
 pub use mlp_grad::{Layer, MlpTape, ReluMlp};
-pub use sde::FusedSde;
-pub use tiles::MAX_TILE_ROWS;
-
-use crate::agent::{ActorPolicy, BatchPolicy};
-use crate::sde::{BatchDynamics, NeuralSde};
+pub use simd::{SimdLevel, detected_simd_level, set_simd_cap, simd_level};
+pub use tiles::{MAX_TILE_ROWS, row_chunks, run_tiles, tile_rows, with_buffers};
 
 /// Which code evaluates trained networks for rollouts and serving.
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    Default,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-    utoipa::ToSchema,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 #[serde(rename_all = "lowercase")]
 pub enum Kernel {
     /// The fused CPU path of this module.
@@ -47,20 +35,24 @@ pub enum Kernel {
     Burn,
 }
 
-impl Kernel {
-    /// `model` behind the batch interface, evaluated by this kernel.
-    pub fn dynamics<'a>(self, model: &'a NeuralSde) -> Box<dyn BatchDynamics + 'a> {
-        match self {
-            Kernel::Fused => Box::new(FusedSde::new(model)),
-            Kernel::Burn => Box::new(model),
-        }
+impl std::fmt::Display for Kernel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Kernel::Fused => "fused",
+            Kernel::Burn => "burn",
+        })
     }
+}
 
-    /// `policy` behind the batch interface, evaluated by this kernel.
-    pub fn policy(self, policy: ActorPolicy) -> Box<dyn BatchPolicy> {
-        match self {
-            Kernel::Fused => Box::new(FusedActor::new(&policy)),
-            Kernel::Burn => Box::new(policy),
+/// The names command lines take (`--kernel fused|burn`).
+impl std::str::FromStr for Kernel {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "fused" => Ok(Kernel::Fused),
+            "burn" => Ok(Kernel::Burn),
+            other => Err(format!("unknown kernel `{other}` (expected fused or burn)")),
         }
     }
 }

@@ -9,6 +9,7 @@
 //! instruction where FMA exists, a (slow, exact) libm call on the rare x86-64
 //! CPU without it.
 
+use super::simd::{SimdLevel, simd_level};
 use crate::nn::Activation;
 
 /// Adds `bias` to every row of `values` (rows as wide as `bias`), then
@@ -78,22 +79,17 @@ pub fn column_sums(values: &[f32], sums: &mut [f32]) {
     widest(Sums(values, sums));
 }
 
-/// Runs `work` compiled for the widest vector instructions this CPU has.
+/// Runs `work` compiled for the widest vector instructions this CPU has
+/// (capped: [`super::simd`]).
 #[inline(always)]
 pub(crate) fn widest(work: impl Vectorized) {
     #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("fma")
-        {
-            // SAFETY: the CPU supports AVX-512F and FMA, checked just above.
-            return unsafe { avx512(work) };
-        }
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
-            // SAFETY: the CPU supports AVX2 and FMA, checked just above.
-            return unsafe { avx2(work) };
-        }
+    match simd_level() {
+        // SAFETY: simd_level() is at most what the CPU supports (AVX-512F and FMA).
+        SimdLevel::Avx512 => return unsafe { avx512(work) },
+        // SAFETY: as above, AVX2 and FMA.
+        SimdLevel::Avx2 => return unsafe { avx2(work) },
+        SimdLevel::Portable => {}
     }
     work.run();
 }

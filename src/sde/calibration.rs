@@ -17,7 +17,6 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use super::batch::{BatchDynamics, ModelStep};
 use super::eta_report::{check_dims, mean, uniform_actions};
 use super::threshold::{
     ThresholdConfig, ThresholdTable, accumulated_eta_along, window_starts_and_actions,
@@ -25,6 +24,7 @@ use super::threshold::{
 use super::{NeuralSde, SdeError};
 use crate::data::{Dataset, WindowSampler};
 use crate::nn::standard_normal;
+use crate::shared::{BatchDynamics, ModelStep};
 
 /// The band a calibrated z std falls in (the target; Gaussian: 1).
 pub const Z_STD_BAND: (f32, f32) = (0.7, 1.4);

@@ -1,7 +1,8 @@
-//! Open-loop prediction error by horizon: the model's drift-only rollouts along
-//! held-out action sequences against the truth, next to the constant-velocity
-//! predictor (`pos' = pos + vel·dt`, `vel' = vel`) as the baseline a learned
-//! model must beat.
+//! How well a model predicts: open-loop prediction error by horizon on held-out
+//! windows of a dataset, next to the constant-velocity predictor (`pos' = pos +
+//! vel·dt`, `vel' = vel`) as the baseline a learned model must beat; and one
+//! action sequence run in the model and in the real MuJoCo task side by side
+//! ([`compare_with_task`], the server's `/validate`).
 
 use burn::tensor::Device;
 use rand::SeedableRng;
@@ -12,6 +13,8 @@ use serde::{Deserialize, Serialize};
 use super::model::NeuralSde;
 use super::rollout::OpenLoop;
 use crate::data::{Dataset, WindowSampler};
+use crate::envs::{EnvError, MujocoTask, TaskConfig, TaskRules};
+use crate::shared::{BatchDynamics, Cancel, scaled_noise};
 
 /// RMSE after `horizon` open-loop steps, in normalised state units.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -89,4 +92,126 @@ pub fn prediction_error(
         });
     }
     out
+}
+
+/// One action sequence in the model and in the real task, from the same start.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TaskComparison {
+    pub obs_dim: usize,
+    /// Steps compared: until the sequence ends, the real task terminates, or a
+    /// model particle terminates (the task's rule) or stops being finite.
+    pub steps: usize,
+    /// Real observations, `[steps + 1, obs_dim]`.
+    pub real_states: Vec<f32>,
+    /// The model's particle-mean observations, `[steps + 1, obs_dim]`.
+    pub model_states: Vec<f32>,
+    /// RMSE over the observation entries after each step, physical units: `[steps]`.
+    pub rmse: Vec<f32>,
+    /// The same with each entry divided by `state_std`: `[steps]`.
+    pub normalized_rmse: Vec<f32>,
+}
+
+/// How [`compare_with_task`] samples the model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TaskComparisonConfig {
+    /// The real task resets with this seed; the model's noise is seeded by it too.
+    pub seed: u64,
+    /// Model samples averaged per step.
+    pub particles: usize,
+    /// Multiplies ε (0: the drift alone).
+    pub noise_scale: f32,
+}
+
+/// Runs `actions` (`[horizon, act_dim]`) open loop in the real task from its
+/// reset state and in `dynamics` from the same observation, and compares them
+/// step by step. Stops with [`EnvError::Cancelled`] between steps once
+/// `cancel` is set.
+pub fn compare_with_task(
+    dynamics: &dyn BatchDynamics,
+    task: TaskConfig,
+    rules: &TaskRules,
+    state_std: &[f32],
+    actions: &[f32],
+    config: &TaskComparisonConfig,
+    cancel: &Cancel,
+) -> Result<TaskComparison, EnvError> {
+    let (obs_dim, act_dim) = (dynamics.obs_dim(), dynamics.act_dim());
+    let state_dim = dynamics.state_dim();
+    let particles = config.particles.max(1);
+
+    let mut real_task = MujocoTask::new(task)?;
+    let start: Vec<f32> = real_task
+        .reset(Some(config.seed))
+        .iter()
+        .map(|&x| x as f32)
+        .collect();
+    let mut real_states = start.clone();
+    for action in actions.chunks_exact(act_dim) {
+        cancel.check()?;
+        let action: Vec<f64> = action.iter().map(|&a| f64::from(a)).collect();
+        let step = real_task.step(&action)?;
+        real_states.extend(step.observation.iter().map(|&x| x as f32));
+        if step.terminated {
+            break;
+        }
+    }
+    let real_steps = real_states.len() / obs_dim - 1;
+
+    // The particles step in lockstep; the comparison ends where the first one does.
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    let mut observations: Vec<f32> = start.repeat(particles);
+    let mut model_states = start.clone();
+    for action in actions.chunks_exact(act_dim).take(real_steps) {
+        cancel.check()?;
+        let states = dynamics.states_from_observations(&observations);
+        let noise = scaled_noise(states.len(), config.noise_scale, &mut rng);
+        let step = dynamics.step(&states, &action.repeat(particles), &noise);
+        let next: Vec<f32> = step
+            .next_states
+            .chunks_exact(state_dim)
+            .flat_map(|row| row[..obs_dim].iter().copied())
+            .collect();
+        let ended = next
+            .chunks_exact(obs_dim)
+            .zip(step.next_states.chunks_exact(state_dim))
+            .zip(&step.eta)
+            .any(|((obs, state), eta)| {
+                !(eta.is_finite() && state.iter().all(|x| x.is_finite())) || rules.terminal(obs)
+            });
+        let diverged =
+            next.iter().any(|x| !x.is_finite()) || step.eta.iter().any(|e| !e.is_finite());
+        if !diverged {
+            model_states.extend(
+                (0..obs_dim).map(|i| {
+                    next.chunks_exact(obs_dim).map(|p| p[i]).sum::<f32>() / particles as f32
+                }),
+            );
+        }
+        observations = next;
+        if ended {
+            break;
+        }
+    }
+    let steps = model_states.len() / obs_dim - 1;
+    let rmse = |scale: &dyn Fn(usize) -> f32| -> Vec<f32> {
+        (1..=steps)
+            .map(|k| {
+                let sum: f32 = (0..obs_dim)
+                    .map(|i| {
+                        let at = k * obs_dim + i;
+                        ((model_states[at] - real_states[at]) / scale(i)).powi(2)
+                    })
+                    .sum();
+                (sum / obs_dim as f32).sqrt()
+            })
+            .collect()
+    };
+    Ok(TaskComparison {
+        obs_dim,
+        steps,
+        rmse: rmse(&|_| 1.0),
+        normalized_rmse: rmse(&|i| state_std[i]),
+        real_states: real_states[..(steps + 1) * obs_dim].to_vec(),
+        model_states,
+    })
 }

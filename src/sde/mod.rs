@@ -10,13 +10,15 @@ mod eta;
 mod eta_report;
 mod evaluation;
 mod fit;
+mod fused;
 mod losses;
 mod model;
 mod rollout;
 mod spec;
 mod threshold;
 
-pub use batch::{BatchDynamics, ModelStep, euler_maruyama};
+/// The batch interface, re-exported where it was first defined.
+pub use crate::shared::{BatchDynamics, ModelStep, euler_maruyama};
 pub use calibration::{
     CalibrationConfig, CalibrationReport, DiffusionAt, DimensionCalibration, HorizonCalibration,
     TruncationRate, Z_STD_BAND, calibration_report,
@@ -25,8 +27,11 @@ pub use config::{FitConfig, LikelihoodPath, LossConfig, SdeConfig};
 pub use device::ComputeDevice;
 pub use eta::{DistanceAware, EtaLosses, FarField};
 pub use eta_report::{EtaComparison, EtaReport, EtaReportConfig, auroc, eta_report};
-pub use evaluation::{HorizonError, prediction_error};
+pub use evaluation::{
+    HorizonError, TaskComparison, TaskComparisonConfig, compare_with_task, prediction_error,
+};
 pub use fit::{FitRecord, FitSummary, fit, fit_eta, validation_nll, window_tensors};
+pub use fused::FusedSde;
 pub use losses::{LossTerms, WindowTensors};
 pub use model::{NeuralSde, SdeConstants, SdeTerms};
 pub use rollout::{OpenLoop, OpenLoopRollout};

@@ -25,6 +25,7 @@ use super::config::SdeConfig;
 use super::eta::DistanceAware;
 use super::spec::{DynamicsSpec, PhysicalScales};
 use crate::nn::{Activation, Mlp, MlpConfig, to_f32_vec};
+use crate::shared::BatchShape;
 
 /// What the model does not learn: the system and the data's scales.
 #[derive(Debug, Clone, PartialEq)]
@@ -38,6 +39,16 @@ impl SdeConstants {
     /// Width of the integrated state: observations, plus r_c for NUNO^R.
     pub fn state_dim(&self) -> usize {
         self.spec.obs_dim + usize::from(self.config.reward_model)
+    }
+
+    /// What the batch interface reports of a model with these constants.
+    pub fn batch_shape(&self) -> BatchShape {
+        BatchShape {
+            obs_dim: self.spec.obs_dim,
+            act_dim: self.spec.act_dim,
+            learns_reward: self.config.reward_model,
+            dt: self.spec.dt,
+        }
     }
 }
 

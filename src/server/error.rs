@@ -62,8 +62,8 @@ impl ApiError {
     }
 }
 
-impl From<crate::cancel::Cancelled> for ApiError {
-    fn from(_: crate::cancel::Cancelled) -> Self {
+impl From<crate::shared::cancel::Cancelled> for ApiError {
+    fn from(_: crate::shared::cancel::Cancelled) -> Self {
         ApiError::Cancelled
     }
 }

@@ -31,8 +31,8 @@ use tokio::sync::Semaphore;
 use tracing::Instrument;
 use utoipa::ToSchema;
 
-use crate::cancel::Cancel;
 use crate::infer::Kernel;
+use crate::shared::cancel::Cancel;
 
 pub use body::{BINARY, TensorBytes};
 pub use error::{ApiError, ErrorBody, ErrorDetail, V2ErrorBody};

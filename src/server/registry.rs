@@ -12,12 +12,14 @@ use burn::tensor::Device;
 use serde::Serialize;
 use utoipa::ToSchema;
 
+use crate::agent::FusedActor;
 use crate::agent::{ActionMode, Actor, ActorPolicy, BatchPolicy};
 use crate::artifact::{
     BEST_POLICY, DynamicsMetadata, PolicyMetadata, has_policy, load_dynamics, load_policy,
 };
 use crate::envs::{TaskConfig, TaskRules};
-use crate::infer::{FusedActor, FusedSde, Kernel};
+use crate::infer::Kernel;
+use crate::sde::FusedSde;
 use crate::sde::{BatchDynamics, NeuralSde};
 
 /// One servable model.

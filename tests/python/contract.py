@@ -41,7 +41,7 @@ run = subprocess.run(
         "--no-color",
     ],
     env=env,
-    cwd=here,
+    cwd=os.getcwd(),
     capture_output=True,
     text=True,
 )

@@ -35,8 +35,8 @@ pub struct Args {
     /// Print the full report as JSON instead of a table.
     #[arg(long)]
     json: bool,
-    /// What evaluates the policy: the fused CPU path or burn.
-    #[arg(long, value_enum, default_value_t = Kernel::Fused)]
+    /// What evaluates the policy: the fused CPU path or burn (`fused` or `burn`).
+    #[arg(long, default_value_t = Kernel::Fused)]
     kernel: Kernel,
 }
 

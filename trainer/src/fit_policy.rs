@@ -85,7 +85,7 @@ pub struct Args {
     /// What runs SAC's updates, model rollouts and evaluation episodes: the
     /// fused CPU path, or burn on --device (default: fused on cpu, burn on wgpu).
     /// Either kernel resumes the other's checkpoints.
-    #[arg(long, value_enum)]
+    #[arg(long)]
     kernel: Option<Kernel>,
 }
 

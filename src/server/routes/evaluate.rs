@@ -4,16 +4,15 @@
 
 use axum::Json;
 use axum::extract::{Path, State};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::fields::{DEFAULT_EPISODES, integer, one, optional_integer};
-use crate::agent::{ActionMode, RolloutActions, RolloutConfig, rollout_model_or_cancel};
+use crate::agent::ActionMode;
 use crate::envs::{
-    EnvError, EvaluationConfig, EvaluationReport, MujocoTask, evaluate_or_cancel as run_episodes,
+    EnvError, EvaluationConfig, EvaluationReport, evaluate_or_cancel as run_episodes,
 };
+use crate::sde::{TaskComparisonConfig, compare_with_task};
 use crate::server::body::RawBody;
 use crate::server::rows::Rows;
 use crate::server::validate::within;
@@ -153,79 +152,39 @@ pub async fn validate(
         ));
     }
     state.metrics.batch("validate", &id, horizon * r.particles);
+    let config = TaskComparisonConfig {
+        seed: r.seed,
+        particles: r.particles,
+        noise_scale: r.noise_scale,
+    };
     let worker = model.clone();
-    let (real, predicted) = state
+    let comparison = state
         .compute(move |cancel| {
-            let internal = |e: crate::envs::EnvError| ApiError::Internal(e.to_string());
-            let mut task = MujocoTask::new(worker.task).map_err(internal)?;
-            let start: Vec<f32> = task.reset(Some(r.seed)).iter().map(|&x| x as f32).collect();
-            let mut real = vec![start.clone()];
-            for action in actions.chunks(act_dim) {
-                cancel.check()?;
-                let action: Vec<f64> = action.iter().map(|&a| f64::from(a)).collect();
-                let t = task
-                    .step(&action)
-                    .map_err(|e| ApiError::Invalid(e.to_string()))?;
-                real.push(t.observation.iter().map(|&x| x as f32).collect());
-                if t.terminated {
-                    break;
-                }
-            }
-            let config = RolloutConfig {
-                horizon,
-                particles: r.particles,
-                penalty: 0.0,
-                threshold: None,
-                noise_scale: r.noise_scale,
-            };
-            let mut rng = ChaCha8Rng::seed_from_u64(r.seed);
-            let out = rollout_model_or_cancel(
+            let std = &worker.metadata.scales.normalizer.state.std;
+            compare_with_task(
                 worker.batch_dynamics(),
-                RolloutActions::Sequence(&actions),
+                worker.task,
                 &worker.rules,
-                &start,
+                std,
+                &actions,
                 &config,
-                &mut rng,
                 cancel,
-            )?;
-            Ok((real, out.trace.observations))
+            )
+            .map_err(|e| match e {
+                EnvError::Cancelled(_) => ApiError::Cancelled,
+                e @ EnvError::Model { .. } => ApiError::Internal(e.to_string()),
+                e => ApiError::Invalid(e.to_string()),
+            })
         })
         .await?;
-
-    // Mean over particles, as far as every particle got.
-    let kept = predicted
-        .iter()
-        .map(|p| p.len() / obs_dim)
-        .min()
-        .unwrap_or(1);
-    let steps = (real.len() - 1).min(kept - 1);
-    let model_states: Vec<Vec<f32>> = (0..=steps)
-        .map(|k| {
-            (0..obs_dim)
-                .map(|i| {
-                    predicted.iter().map(|p| p[k * obs_dim + i]).sum::<f32>()
-                        / predicted.len() as f32
-                })
-                .collect()
-        })
-        .collect();
-    let std = &model.metadata.scales.normalizer.state.std;
-    let rmse = |scale: &dyn Fn(usize) -> f32| -> Vec<f32> {
-        (1..=steps)
-            .map(|k| {
-                let sum: f32 = (0..obs_dim)
-                    .map(|i| ((model_states[k][i] - real[k][i]) / scale(i)).powi(2))
-                    .sum();
-                (sum / obs_dim as f32).sqrt()
-            })
-            .collect()
-    };
+    let rows =
+        |values: &[f32]| -> Vec<Vec<f32>> { values.chunks(obs_dim).map(<[f32]>::to_vec).collect() };
     Ok(Json(ValidateResponse {
         model: id,
-        steps,
-        rmse: rmse(&|_| 1.0),
-        normalized_rmse: rmse(&|i| std[i]),
-        real_states: real.into_iter().take(steps + 1).collect(),
-        model_states,
+        steps: comparison.steps,
+        real_states: rows(&comparison.real_states),
+        model_states: rows(&comparison.model_states),
+        rmse: comparison.rmse,
+        normalized_rmse: comparison.normalized_rmse,
     }))
 }

@@ -6,9 +6,11 @@ use std::sync::Arc;
 
 use rand::RngCore;
 
-use super::dense::{DenseMlp, MlpScratch, Rows};
-use super::tiles::{row_chunks, run_tiles, tile_rows, with_buffers};
-use crate::agent::{ActionMode, ActorConfig, ActorPolicy, BatchPolicy, action_noise};
+use super::{ActionMode, ActorConfig, ActorPolicy, action_noise};
+use crate::infer::{
+    DenseMlp, Kernel, MlpScratch, Rows, row_chunks, run_tiles, tile_rows, with_buffers,
+};
+use crate::shared::{BatchPolicy, act_batch};
 
 /// A trained actor's weights laid out for [`BatchPolicy::act`] on the CPU.
 #[derive(Debug, Clone)]
@@ -96,8 +98,8 @@ impl BatchPolicy for FusedActor {
     }
 
     fn act(&self, observations: &[f32], rng: &mut dyn RngCore) -> Vec<f32> {
+        let batch = act_batch(self, observations);
         let (obs_dim, act_dim) = (self.obs_dim(), self.act_dim());
-        let batch = observations.len() / obs_dim;
         let noise = match self.mode {
             ActionMode::Deterministic => Vec::new(),
             ActionMode::Sampled => action_noise(batch * act_dim, rng),
@@ -119,5 +121,15 @@ impl BatchPolicy for FusedActor {
             with_buffers(&SCRATCH, |s| self.act_tile(tile, s))
         });
         actions
+    }
+}
+
+impl Kernel {
+    /// `policy` behind the batch interface, evaluated by this kernel.
+    pub fn policy(self, policy: ActorPolicy) -> Box<dyn BatchPolicy> {
+        match self {
+            Kernel::Fused => Box::new(FusedActor::new(&policy)),
+            Kernel::Burn => Box::new(policy),
+        }
     }
 }

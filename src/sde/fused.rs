@@ -4,9 +4,12 @@
 use std::cell::RefCell;
 use std::sync::Mutex;
 
-use super::dense::{DenseMlp, GEMM_MIN_ROWS, MlpScratch, Rows};
-use super::tiles::{row_chunks, run_tiles, tile_rows, with_buffers};
-use crate::sde::{BatchDynamics, DynamicsSpec, ModelStep, NeuralSde, SdeConstants, euler_maruyama};
+use super::{NeuralSde, SdeConstants};
+use crate::infer::{
+    DenseMlp, GEMM_MIN_ROWS, Kernel, MlpScratch, Rows, row_chunks, run_tiles, tile_rows,
+    with_buffers,
+};
+use crate::shared::{BatchDynamics, BatchShape, ModelStep, euler_maruyama, step_batch};
 
 /// A [`NeuralSde`]'s weights laid out for [`BatchDynamics::step`] on the CPU.
 #[derive(Debug, Clone)]
@@ -281,21 +284,13 @@ impl FusedSde {
 }
 
 impl BatchDynamics for FusedSde {
-    fn spec(&self) -> &DynamicsSpec {
-        &self.constants.spec
-    }
-
-    fn state_dim(&self) -> usize {
-        self.constants.state_dim()
-    }
-
-    fn learns_reward(&self) -> bool {
-        self.reward.is_some()
+    fn shape(&self) -> BatchShape {
+        self.constants.batch_shape()
     }
 
     fn step(&self, states: &[f32], actions: &[f32], noise: &[f32]) -> ModelStep {
+        let batch = step_batch(self, states, actions, noise);
         let (state_dim, act_dim) = (self.state_dim(), self.constants.spec.act_dim);
-        let batch = states.len() / state_dim;
         let zeros = vec![0.0; batch * state_dim];
         let mut out = ModelStep {
             next_states: zeros.clone(),
@@ -331,5 +326,15 @@ impl BatchDynamics for FusedSde {
             with_buffers(&SCRATCH, |scratch| self.step_tile(tile, scratch));
         });
         out
+    }
+}
+
+impl Kernel {
+    /// `model` behind the batch interface, evaluated by this kernel.
+    pub fn dynamics<'a>(self, model: &'a NeuralSde) -> Box<dyn BatchDynamics + 'a> {
+        match self {
+            Kernel::Fused => Box::new(FusedSde::new(model)),
+            Kernel::Burn => Box::new(model),
+        }
     }
 }

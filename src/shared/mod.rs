@@ -1,0 +1,13 @@
+//! What every concern may import, and which imports none of them: the batch
+//! interfaces, the cancellation flag and the atomic file writer.
+
+pub mod atomic;
+pub mod batch;
+pub mod cancel;
+
+pub use atomic::write_atomically;
+pub use batch::{
+    BatchDynamics, BatchPolicy, BatchShape, ModelStep, TransitionBatch, act_batch, euler_maruyama,
+    scaled_noise, step_batch,
+};
+pub use cancel::{Cancel, CancelOnDrop, Cancelled};
