@@ -12,7 +12,7 @@ BODIES="$(mktemp -d)"
 trap 'kill "$SERVER" 2>/dev/null || true; rm -rf "$BODIES"' EXIT
 
 .venv/bin/python benches/server_bodies.py "$BODIES"
-"${CARGO_TARGET_DIR:-target}/release/nuno-server" --models models --addr "127.0.0.1:$PORT" &
+"${CARGO_TARGET_DIR:-target}/release/nuno-server" --models models --addr "127.0.0.1:$PORT" 2>"$BODIES/server.log" &
 SERVER=$!
 until curl -fs "http://127.0.0.1:$PORT/readyz" >/dev/null; do sleep 0.2; done
 
