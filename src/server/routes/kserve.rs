@@ -155,6 +155,54 @@ pub struct InferTensor {
     pub parameters: Option<serde_json::Map<String, serde_json::Value>>,
 }
 
+/// One input tensor of a request: as [`InferTensor`], with its inline `data`
+/// read straight into f32 while the body is parsed.
+#[derive(Debug, Clone, Deserialize, ToSchema)]
+pub struct InferInput {
+    pub name: String,
+    #[serde(deserialize_with = "integers")]
+    #[schema(value_type = Vec<u64>)]
+    pub shape: Vec<usize>,
+    pub datatype: String,
+    /// The values, flattened row-major (or `parameters.binary_data_size`
+    /// bytes after the JSON header instead).
+    #[serde(default)]
+    #[schema(value_type = Option<Vec<f32>>)]
+    pub data: Option<InputData>,
+    #[serde(default)]
+    #[schema(value_type = Option<Object>)]
+    pub parameters: Option<serde_json::Map<String, serde_json::Value>>,
+}
+
+/// An input's inline values: a flat JSON array of numbers, 4 bytes each as
+/// read (no JSON value tree). Numbers beyond f32's range read as ±inf and are
+/// refused by name with the other non-finite values.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct InputData(pub Vec<f32>);
+
+impl<'de> Deserialize<'de> for InputData {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Numbers;
+        impl<'de> serde::de::Visitor<'de> for Numbers {
+            type Value = InputData;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a flat array of numbers")
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                mut seq: A,
+            ) -> Result<InputData, A::Error> {
+                let mut values = Vec::with_capacity(seq.size_hint().unwrap_or(0));
+                while let Some(v) = seq.next_element::<f64>()? {
+                    values.push(v as f32);
+                }
+                Ok(InputData(values))
+            }
+        }
+        deserializer.deserialize_seq(Numbers)
+    }
+}
+
 /// An output the client asks for; `parameters.binary_data: true` answers it
 /// in binary.
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
@@ -165,11 +213,11 @@ pub struct RequestedOutput {
     pub parameters: Option<serde_json::Map<String, serde_json::Value>>,
 }
 
-#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Deserialize, ToSchema)]
 pub struct InferRequest {
     #[serde(default)]
     pub id: Option<String>,
-    pub inputs: Vec<InferTensor>,
+    pub inputs: Vec<InferInput>,
     /// The outputs to answer (default: all of them).
     #[serde(default)]
     pub outputs: Option<Vec<RequestedOutput>>,
@@ -225,14 +273,14 @@ pub async fn infer(
             .into());
         }
     };
-    let r: InferRequest = body.json_prefix(header_length).await?;
+    let mut r: InferRequest = body.json_prefix(header_length).await?;
     let model = state.model(&id)?;
     let spec = &model.metadata.spec;
     // Each input's values: inline JSON, or its slice of the binary tail, in order.
     let mut tail = &body.bytes[header_length..];
     let mut inputs = Vec::with_capacity(r.inputs.len());
-    for t in &r.inputs {
-        let values = match binary_size(t)? {
+    for t in r.inputs.iter_mut() {
+        let values = match binary_size(&t.name, t.parameters.as_ref())? {
             Some(size) => {
                 if size > tail.len() {
                     return Err(ApiError::Malformed(format!(
@@ -258,9 +306,9 @@ pub async fn infer(
         .into());
     }
     let max_batch = state.config.limits.max_batch;
-    let input = |name: &str, width: usize| -> Result<Vec<f32>, ApiError> {
+    let mut input = |name: &str, width: usize| -> Result<Vec<f32>, ApiError> {
         let (t, binary) = inputs
-            .iter()
+            .iter_mut()
             .find(|(t, _)| t.name == name)
             .ok_or_else(|| ApiError::Invalid(format!("input `{name}` is missing")))?;
         if t.datatype != "FP32" {
@@ -275,13 +323,9 @@ pub async fn infer(
             t.shape.first().copied().unwrap_or(0),
             max_batch,
         )?;
-        let values: Vec<f32> = match (binary, &t.data) {
+        let values: Vec<f32> = match (*binary, t.data.take()) {
             (Some(bytes), _) => decode_fp32(name, bytes)?,
-            (None, Some(data)) => serde_json::from_value::<Vec<f64>>(data.clone())
-                .map_err(|e| ApiError::Invalid(format!("input `{name}` data: {e}")))?
-                .into_iter()
-                .map(|v| v as f32)
-                .collect(),
+            (None, Some(InputData(values))) => values,
             (None, None) => {
                 return Err(ApiError::Invalid(format!(
                     "input `{name}` has neither `data` nor parameters.binary_data_size"

@@ -6,24 +6,21 @@
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
 
-use super::kserve::InferTensor;
 use crate::server::ApiError;
 use crate::server::body::{BINARY, INFERENCE_HEADER_LENGTH};
 
 /// `parameters.binary_data_size` of a tensor: how many bytes of the body's
 /// tail hold its data (`None`: the data is inline JSON).
-pub fn binary_size(tensor: &InferTensor) -> Result<Option<usize>, ApiError> {
-    let Some(size) = tensor
-        .parameters
-        .as_ref()
-        .and_then(|p| p.get("binary_data_size"))
-    else {
+pub fn binary_size(
+    name: &str,
+    parameters: Option<&serde_json::Map<String, serde_json::Value>>,
+) -> Result<Option<usize>, ApiError> {
+    let Some(size) = parameters.and_then(|p| p.get("binary_data_size")) else {
         return Ok(None);
     };
     size.as_u64().map(|n| Some(n as usize)).ok_or_else(|| {
         ApiError::Invalid(format!(
-            "input `{}`: parameters.binary_data_size must be a byte count, got {size}",
-            tensor.name
+            "input `{name}`: parameters.binary_data_size must be a byte count, got {size}"
         ))
     })
 }

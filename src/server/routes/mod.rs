@@ -17,7 +17,8 @@ pub use evaluate::{EvaluateRequest, EvaluateResponse, ValidateRequest, ValidateR
 pub use health::{Health, Readiness};
 pub(super) use kserve::OUTPUTS;
 pub use kserve::{
-    InferRequest, InferResponse, InferTensor, RequestedOutput, V2ModelMetadata, V2TensorMetadata,
+    InferInput, InferRequest, InferResponse, InferTensor, InputData, RequestedOutput,
+    V2ModelMetadata, V2TensorMetadata,
 };
 pub use models::{ModelDetail, ModelList, ModelSummary};
 pub use rollout::{RolloutRequest, RolloutResponse, Trajectory};
