@@ -26,12 +26,12 @@ serve: mujoco
 
 ## test: the full suite (unit, integration, Gymnasium parity), then the fused
 ## kernels' numerics again on each narrower vector level (NUNO_SIMD), so every
-## variant runs whatever the machine's widest is.
+## variant runs whatever the machine's widest is (--workspace: the same build as above).
 test: mujoco venv
 	$(CARGO) test --workspace --release
 	for level in portable avx2; do \
-	  NUNO_SIMD=$$level $(CARGO) test --release --lib infer:: || exit 1; \
-	  NUNO_SIMD=$$level $(CARGO) test --release --test infer || exit 1; \
+	  NUNO_SIMD=$$level $(CARGO) test --workspace --release --lib infer:: || exit 1; \
+	  NUNO_SIMD=$$level $(CARGO) test --workspace --release --test infer || exit 1; \
 	done
 
 build: mujoco
