@@ -775,6 +775,44 @@ async fn concurrent_requests_metrics_kserve_and_reload() {
         .await;
     assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
     assert!(err["error"].as_str().unwrap().contains("states"));
+    // Inline data is read as numbers while the body is parsed: anything else is a
+    // malformed body; a number past f32's range is refused by name as not finite.
+    let with_states = |data: Value| {
+        json!({"inputs": [
+            {"name": "states", "shape": [1, 11], "datatype": "FP32", "data": data},
+            {"name": "actions", "shape": [1, 3], "datatype": "FP32", "data": [0.0, 0.0, 0.0]},
+        ]})
+    };
+    let mut huge = upright(1)
+        .concat()
+        .iter()
+        .map(|&x| json!(x))
+        .collect::<Vec<_>>();
+    huge[4] = json!(1e39);
+    for (data, status, needle) in [
+        (
+            json!(vec!["x"; 11]),
+            StatusCode::BAD_REQUEST,
+            "invalid type: string",
+        ),
+        (
+            json!([vec![1.0; 11]]),
+            StatusCode::BAD_REQUEST,
+            "invalid type: sequence",
+        ),
+        (
+            Value::Array(huge),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "`states[0][4]` is not a finite number",
+        ),
+    ] {
+        let (got, err) = server
+            .post(&format!("/v2/models/{MODEL}/infer"), &with_states(data))
+            .await;
+        let message = err["error"].as_str().unwrap();
+        assert_eq!(got, status, "{message}");
+        assert!(message.contains(needle), "{message}");
+    }
 
     // Reload: a new model appears, a broken one is refused and not served.
     copy_model(&server.models_path.join("second"));
