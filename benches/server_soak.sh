@@ -5,25 +5,15 @@
 # totals and latency percentiles, the failed requests (non-2xx and socket
 # errors), and the RSS after warm-up, at the end and at its highest.
 # Needs `make venv` and a release build; results go to BENCHMARKS.md by hand.
-set -euo pipefail
-cd "$(dirname "$0")/.."
 PORT="${PORT:-18091}"
 WARMUP="${WARMUP:-60s}"
 DURATION="${DURATION:-10m}"
-CONNECTIONS="${CONNECTIONS:-4}"
 SAMPLE_S="${SAMPLE_S:-10}"
 BATCH="${BATCH:-256}"
-WORK="$(mktemp -d)"
-trap 'kill "$SERVER" "$SAMPLER" 2>/dev/null || true; rm -rf "$WORK"' EXIT
-
-.venv/bin/python benches/server_bodies.py "$WORK"
-"${CARGO_TARGET_DIR:-target}/release/nuno-server" --models models --addr "127.0.0.1:$PORT" 2>"$WORK/server.log" &
-SERVER=$!
-until curl -fs "http://127.0.0.1:$PORT/readyz" >/dev/null; do sleep 0.2; done
+source "$(dirname "$0")/server_common.sh"
 url="http://127.0.0.1:$PORT/v1/models/hopper-random/step"
 load() { # duration
-  wrk -t2 -c"$CONNECTIONS" -d"$1" --timeout 120s --latency -s benches/wrk_post.lua "$url" -- \
-    "$WORK/step-$BATCH.bin" application/octet-stream
+  post_load "$1" "$url" "$WORK/step-$BATCH.bin" application/octet-stream
 }
 rss_kb() { awk '/^VmRSS/ {print $2}' "/proc/$SERVER/status"; }
 
@@ -32,6 +22,7 @@ load "$WARMUP" | grep -E "Requests/sec|Non-2xx|Socket errors"
 warm=$(rss_kb)
 (while sleep "$SAMPLE_S"; do rss_kb; done >"$WORK/rss.txt") &
 SAMPLER=$!
+EXTRA_PIDS=$SAMPLER
 echo "== soak $DURATION, step batch $BATCH binary, $CONNECTIONS connections"
 load "$DURATION" | grep -E "Requests/sec|Non-2xx|Socket errors|requests in|Latency  |^ +(50|75|90|99)%"
 kill "$SAMPLER" 2>/dev/null || true

@@ -166,29 +166,22 @@ pub fn compare_with_task(
         let states = dynamics.states_from_observations(&observations);
         let noise = scaled_noise(states.len(), config.noise_scale, &mut rng);
         let step = dynamics.step(&states, &action.repeat(particles), &noise);
+        // A step that left the finite numbers is not compared (as a rollout drops it).
+        if !(step.eta.iter().chain(&step.next_states)).all(|x| x.is_finite()) {
+            break;
+        }
         let next: Vec<f32> = step
             .next_states
             .chunks_exact(state_dim)
             .flat_map(|row| row[..obs_dim].iter().copied())
             .collect();
-        let ended = next
-            .chunks_exact(obs_dim)
-            .zip(step.next_states.chunks_exact(state_dim))
-            .zip(&step.eta)
-            .any(|((obs, state), eta)| {
-                !(eta.is_finite() && state.iter().all(|x| x.is_finite())) || rules.terminal(obs)
-            });
-        let diverged =
-            next.iter().any(|x| !x.is_finite()) || step.eta.iter().any(|e| !e.is_finite());
-        if !diverged {
-            model_states.extend(
-                (0..obs_dim).map(|i| {
-                    next.chunks_exact(obs_dim).map(|p| p[i]).sum::<f32>() / particles as f32
-                }),
-            );
-        }
+        model_states.extend(
+            (0..obs_dim)
+                .map(|i| next.chunks_exact(obs_dim).map(|p| p[i]).sum::<f32>() / particles as f32),
+        );
+        let terminal = next.chunks_exact(obs_dim).any(|obs| rules.terminal(obs));
         observations = next;
-        if ended {
+        if terminal {
             break;
         }
     }

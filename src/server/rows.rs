@@ -56,6 +56,11 @@ impl Rows {
     }
 }
 
+/// A row-major buffer as the `[[f32]]` rows JSON answers carry.
+pub fn split_rows(values: &[f32], width: usize) -> Vec<Vec<f32>> {
+    values.chunks(width.max(1)).map(<[f32]>::to_vec).collect()
+}
+
 impl<'de> Deserialize<'de> for Rows {
     fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
         deserializer.deserialize_seq(RowsVisitor)

@@ -11,7 +11,7 @@ use utoipa::ToSchema;
 
 use crate::agent::ActionMode;
 use crate::server::body::{RawBody, json_response};
-use crate::server::rows::Rows;
+use crate::server::rows::{Rows, split_rows};
 use crate::server::validate::within;
 use crate::server::{ApiError, AppState};
 
@@ -78,7 +78,7 @@ pub async fn act(
             let actions = policy.act(&states, &mut rng);
             json_response(&ActResponse {
                 model: id,
-                actions: actions.chunks(act_dim).map(<[f32]>::to_vec).collect(),
+                actions: split_rows(&actions, act_dim),
             })
         })
         .await

@@ -14,7 +14,7 @@ use crate::envs::{
 };
 use crate::sde::{TaskComparisonConfig, compare_with_task};
 use crate::server::body::RawBody;
-use crate::server::rows::Rows;
+use crate::server::rows::{Rows, split_rows};
 use crate::server::validate::within;
 use crate::server::{ApiError, AppState};
 
@@ -177,13 +177,11 @@ pub async fn validate(
             })
         })
         .await?;
-    let rows =
-        |values: &[f32]| -> Vec<Vec<f32>> { values.chunks(obs_dim).map(<[f32]>::to_vec).collect() };
     Ok(Json(ValidateResponse {
         model: id,
         steps: comparison.steps,
-        real_states: rows(&comparison.real_states),
-        model_states: rows(&comparison.model_states),
+        real_states: split_rows(&comparison.real_states, obs_dim),
+        model_states: split_rows(&comparison.model_states, obs_dim),
         rmse: comparison.rmse,
         normalized_rmse: comparison.normalized_rmse,
     }))

@@ -40,15 +40,17 @@ where
         .ok_or_else(|| D::Error::custom("expected a non-negative integer"))
 }
 
+/// One [`integer`], where serde needs a type (in an `Option`, a `Vec`).
+#[derive(Deserialize)]
+#[serde(bound = "T: TryFrom<u64>")]
+struct Integer<T>(#[serde(deserialize_with = "integer")] T);
+
 /// [`integer`] for a field that may be absent or null.
 pub(super) fn optional_integer<'de, D, T>(deserializer: D) -> Result<Option<T>, D::Error>
 where
     D: Deserializer<'de>,
     T: TryFrom<u64>,
 {
-    #[derive(Deserialize)]
-    #[serde(bound = "T: TryFrom<u64>")]
-    struct Integer<T>(#[serde(deserialize_with = "integer")] T);
     Ok(Option::<Integer<T>>::deserialize(deserializer)?.map(|Integer(v)| v))
 }
 
@@ -58,9 +60,6 @@ where
     D: Deserializer<'de>,
     T: TryFrom<u64>,
 {
-    #[derive(Deserialize)]
-    #[serde(bound = "T: TryFrom<u64>")]
-    struct Integer<T>(#[serde(deserialize_with = "integer")] T);
     let values = Vec::<Integer<T>>::deserialize(deserializer)?;
     Ok(values.into_iter().map(|Integer(v)| v).collect())
 }

@@ -20,7 +20,7 @@ use crate::artifact::NamedTensors;
 use crate::server::body::{
     Format, RawBody, TensorBytes, answer_format, json_response, tensors_response,
 };
-use crate::server::rows::Rows;
+use crate::server::rows::{Rows, split_rows};
 use crate::server::validate::{answer_within, non_negative, within};
 use crate::server::{ApiError, AppState};
 
@@ -259,14 +259,8 @@ pub async fn rollout(
                     Trajectory {
                         start: row / r.particles,
                         particle: row % r.particles,
-                        states: t.observations[row]
-                            .chunks(obs_dim)
-                            .map(<[f32]>::to_vec)
-                            .collect(),
-                        actions: t.actions[row]
-                            .chunks(act_dim)
-                            .map(<[f32]>::to_vec)
-                            .collect(),
+                        states: split_rows(&t.observations[row], obs_dim),
+                        actions: split_rows(&t.actions[row], act_dim),
                         eta: t.eta[row].clone(),
                         accumulated_eta: t.accumulated_eta[row].clone(),
                         rewards: t.rewards[row].clone(),

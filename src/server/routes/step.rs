@@ -15,7 +15,7 @@ use super::fields::{integer, one, unit, unit_f32};
 use crate::agent::{ParticleConfig, ParticleStep, step_particles};
 use crate::artifact::NamedTensors;
 use crate::server::body::{Format, RawBody, TensorBytes, json_response, tensors_response};
-use crate::server::rows::Rows;
+use crate::server::rows::{Rows, split_rows as rows};
 use crate::server::validate::{answer_within, flat, non_negative, within};
 use crate::server::{ApiError, AppState};
 
@@ -201,10 +201,6 @@ fn option<T: std::str::FromStr>(
             ApiError::Invalid(format!("metadata `{key}` = `{text}` is not a valid value"))
         }),
     }
-}
-
-fn rows(values: &[f32], width: usize) -> Vec<Vec<f32>> {
-    values.chunks(width.max(1)).map(<[f32]>::to_vec).collect()
 }
 
 fn step_response(id: &str, s: &ParticleStep) -> StepResponse {
