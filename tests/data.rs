@@ -130,6 +130,7 @@ fn written_files_round_trip_and_h5py_reads_d4rl_layout() {
     assert_eq!(back.timeouts, dataset.timeouts);
     assert_eq!(back.qpos, dataset.qpos);
     assert_eq!(back.qvel, dataset.qvel);
+    assert_eq!(back.action_log_probs, dataset.action_log_probs);
     assert_eq!(back.trajectories(), dataset.trajectories());
     assert_eq!(back.metadata["seed"], "2");
     assert_eq!(
@@ -163,7 +164,7 @@ fn written_files_round_trip_and_h5py_reads_d4rl_layout() {
             "h5py misses `{key}`"
         );
     }
-    assert_eq!(report.infos, vec!["qpos", "qvel"]);
+    assert_eq!(report.infos, vec!["action_log_probs", "qpos", "qvel"]);
     assert_eq!(report.dtypes["observations"], "float32");
     assert_eq!(report.dtypes["rewards"], "float32");
     assert_eq!(report.dtypes["terminals"], "bool");
@@ -172,6 +173,7 @@ fn written_files_round_trip_and_h5py_reads_d4rl_layout() {
     assert_eq!(report.shapes["rewards"], vec![2000]);
     assert_eq!(report.shapes["infos/qpos"], vec![2000, 6]);
     assert_eq!(report.shapes["infos/qvel"], vec![2000, 6]);
+    assert_eq!(report.shapes["infos/action_log_probs"], vec![2000]);
     assert_eq!(report.compression.as_deref(), Some("gzip"));
     assert_eq!(report.metadata["task"], "hopper");
     assert_eq!(report.metadata["kind"], "random");
@@ -356,6 +358,7 @@ fn counting_dataset(lengths: &[usize]) -> Dataset {
         timeouts,
         qpos: None,
         qvel: None,
+        action_log_probs: None,
         metadata: Default::default(),
     };
     Dataset::from_parts(parts, Path::new("counting")).unwrap()

@@ -245,6 +245,19 @@ fn fused_actions_match_burn_deterministic_and_sampled() {
                 let a = fused.act(&obs, &mut ChaCha8Rng::seed_from_u64(seed));
                 let b = burn.act(&obs, &mut ChaCha8Rng::seed_from_u64(seed));
                 assert_close(&format!("{name} {mode:?} batch {batch}"), &a, &b);
+                // log π(a|s) as D4RL records it: the fused path's scalar
+                // formula against burn's tensor graph (`Actor::sample`).
+                let a = fused.act_logged(&obs, &mut ChaCha8Rng::seed_from_u64(seed));
+                let b = burn.act_logged(&obs, &mut ChaCha8Rng::seed_from_u64(seed));
+                assert_close(&format!("{name} {mode:?} logged"), &a.actions, &b.actions);
+                match (a.log_probs, b.log_probs, mode) {
+                    (None, None, ActionMode::Deterministic) => {}
+                    (Some(a), Some(b), ActionMode::Sampled) => {
+                        assert_eq!(a.len(), batch);
+                        assert_close(&format!("{name} log π batch {batch}"), &a, &b);
+                    }
+                    other => panic!("{name} {mode:?}: log-probabilities {other:?}"),
+                }
             }
         }
     }

@@ -551,6 +551,7 @@ fn calibration_z_scores_follow_an_independent_gaussian_reference() {
         timeouts: (0..n).map(|i| i % steps == steps - 1).collect(),
         qpos: None,
         qvel: None,
+        action_log_probs: None,
         metadata: Default::default(),
     };
     let synthetic = Dataset::from_parts(parts, Path::new("model samples")).unwrap();
@@ -808,6 +809,7 @@ fn oscillator_dataset(trajectories: usize, steps: usize, seed: u64) -> Dataset {
         timeouts,
         qpos: None,
         qvel: None,
+        action_log_probs: None,
         metadata: Default::default(),
     };
     Dataset::from_parts(parts, Path::new("oscillator")).unwrap()

@@ -12,7 +12,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::nn::{Activation, Mlp, MlpConfig, standard_normal, to_f32_vec};
-use crate::shared::{BatchPolicy, act_batch};
+use crate::shared::{BatchPolicy, LoggedActions, act_batch};
 
 /// The actor's sizes and limits.
 #[derive(Config, Debug, PartialEq)]
@@ -169,6 +169,46 @@ impl BatchPolicy for ActorPolicy {
         };
         to_f32_vec(action)
     }
+
+    fn act_logged(&self, observations: &[f32], rng: &mut dyn RngCore) -> LoggedActions {
+        if self.mode == ActionMode::Deterministic {
+            return LoggedActions {
+                actions: self.act(observations, rng),
+                log_probs: None,
+            };
+        }
+        let device = self.actor.net.layers[0].weight.val().device();
+        let batch = act_batch(self, observations);
+        let obs = Tensor::from_data(
+            TensorData::new(observations.to_vec(), [batch, self.obs_dim()]),
+            &device,
+        );
+        let noise = action_noise(batch * self.act_dim(), rng);
+        let noise = Tensor::from_data(TensorData::new(noise, [batch, self.act_dim()]), &device);
+        let sample = self.actor.sample(obs, noise);
+        LoggedActions {
+            actions: to_f32_vec(sample.action),
+            log_probs: Some(to_f32_vec(sample.log_prob)),
+        }
+    }
+}
+
+/// ½·log(2π), the Gaussian's normalising constant per dimension.
+const HALF_LOG_TWO_PI: f32 = 0.918_938_5;
+
+/// log of the density of tanh(u), u = μ + σ·ε, for one dimension:
+/// log N(u; μ, σ) − log(1 − tanh²u), the tanh-Gaussian's change of variables
+/// (the action box's scale is the caller's). As [`Actor::sample`] computes it.
+#[inline]
+pub(crate) fn tanh_gaussian_log_density(eps: f32, log_std: f32, u: f32) -> f32 {
+    // log(1 − tanh²u) = 2·(log 2 − u − softplus(−2u)), stable for large |u|.
+    let squash = 2.0 * (std::f32::consts::LN_2 - u - softplus_f32(-2.0 * u));
+    -0.5 * eps * eps - log_std - HALF_LOG_TWO_PI - squash
+}
+
+/// log(1 + eˣ) without overflow.
+fn softplus_f32(x: f32) -> f32 {
+    x.max(0.0) + (-x.abs()).exp().ln_1p()
 }
 
 /// ε ~ N(0, I) for `n` sampled action entries: drawn from a local generator

@@ -1,7 +1,8 @@
-//! The model buffer: a ring of the most recent model transitions. Its capacity
-//! is `rollout_batch · h · particles · retain_epochs`, so it holds the last
-//! `retain_epochs` rollouts (more when truncation kept rollouts short), as in
-//! MOPO's `model_retain_epochs`.
+//! A ring of the most recent transitions. As policy optimisation's model
+//! buffer its capacity is `rollout_batch · h · particles · retain_epochs`, so
+//! it holds the last `retain_epochs` rollouts (more when truncation kept
+//! rollouts short), as in MOPO's `model_retain_epochs`; as online SAC's replay
+//! buffer it holds the run's steps.
 
 use rand::Rng;
 
@@ -45,30 +46,36 @@ impl ReplayBuffer {
     pub fn push(&mut self, batch: &TransitionBatch) {
         let (o, a) = (self.obs_dim, self.act_dim);
         for i in 0..batch.len() {
-            if self.len < self.capacity {
-                let d = &mut self.data;
-                d.observations
-                    .extend_from_slice(&batch.observations[i * o..(i + 1) * o]);
-                d.actions
-                    .extend_from_slice(&batch.actions[i * a..(i + 1) * a]);
-                d.rewards.push(batch.rewards[i]);
-                d.next_observations
-                    .extend_from_slice(&batch.next_observations[i * o..(i + 1) * o]);
-                d.terminals.push(batch.terminals[i]);
-                self.len += 1;
-            } else {
-                let r = self.next;
-                let d = &mut self.data;
-                d.observations[r * o..(r + 1) * o]
-                    .copy_from_slice(&batch.observations[i * o..(i + 1) * o]);
-                d.actions[r * a..(r + 1) * a].copy_from_slice(&batch.actions[i * a..(i + 1) * a]);
-                d.rewards[r] = batch.rewards[i];
-                d.next_observations[r * o..(r + 1) * o]
-                    .copy_from_slice(&batch.next_observations[i * o..(i + 1) * o]);
-                d.terminals[r] = batch.terminals[i];
-            }
-            self.next = (self.next + 1) % self.capacity.max(1);
+            self.push_row(
+                &batch.observations[i * o..(i + 1) * o],
+                &batch.actions[i * a..(i + 1) * a],
+                batch.rewards[i],
+                &batch.next_observations[i * o..(i + 1) * o],
+                batch.terminals[i],
+            );
         }
+    }
+
+    /// Adds one transition `(s, a, r, s', d)`, overwriting the oldest once full.
+    pub fn push_row(&mut self, obs: &[f32], action: &[f32], reward: f32, next: &[f32], done: f32) {
+        let (o, a) = (self.obs_dim, self.act_dim);
+        let d = &mut self.data;
+        if self.len < self.capacity {
+            d.observations.extend_from_slice(obs);
+            d.actions.extend_from_slice(action);
+            d.rewards.push(reward);
+            d.next_observations.extend_from_slice(next);
+            d.terminals.push(done);
+            self.len += 1;
+        } else {
+            let r = self.next;
+            d.observations[r * o..(r + 1) * o].copy_from_slice(obs);
+            d.actions[r * a..(r + 1) * a].copy_from_slice(action);
+            d.rewards[r] = reward;
+            d.next_observations[r * o..(r + 1) * o].copy_from_slice(next);
+            d.terminals[r] = done;
+        }
+        self.next = (self.next + 1) % self.capacity.max(1);
     }
 
     /// `n` transitions drawn uniformly with replacement (empty when the buffer is).

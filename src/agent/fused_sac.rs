@@ -7,13 +7,12 @@
 
 use rand_chacha::ChaCha8Rng;
 
+use super::actor::tanh_gaussian_log_density;
 use super::sac::{Sac, SacAdam, SacLosses};
 use crate::data::TransitionBatch;
 use crate::infer::{MlpTape, ReluMlp};
 use crate::nn::{Adam, AdamState, AdamStep, fill_standard_normal, to_f32_vec};
-
-/// ½·log(2π), the Gaussian's normalising constant per dimension.
-const HALF_LOG_TWO_PI: f32 = 0.918_938_5;
+use crate::shared::LoggedActions;
 
 /// The agent's networks, temperature and Adam state as host buffers.
 pub struct FusedSac {
@@ -252,10 +251,22 @@ impl FusedSac {
         }
     }
 
-    /// ã ~ π(·|s) for `observations`, drawn with `work.noise` (the actor's tape
-    /// and `work.sample` keep what its gradient needs), and `[s | ã]` into
-    /// `work.critic_input`.
-    fn act_into_critic_input(&mut self, observations: &[f32]) {
+    /// a ~ π(·|s) for `observations` with log π(a|s), ε drawn from `rng`:
+    /// how online SAC acts in the task between updates, on the weights it trains.
+    pub fn act_logged(&mut self, observations: &[f32], rng: &mut ChaCha8Rng) -> LoggedActions {
+        let b = observations.len() / self.obs_dim;
+        fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
+        self.sample_actor(observations);
+        let s = &self.work.sample;
+        LoggedActions {
+            actions: s.action.clone(),
+            log_probs: Some(s.log_prob.clone()),
+        }
+    }
+
+    /// ã ~ π(·|s) for `observations` with `work.noise` into `work.sample`
+    /// (the actor's tape keeps what its gradient needs).
+    fn sample_actor(&mut self, observations: &[f32]) {
         let b = observations.len() / self.obs_dim;
         let w = &mut self.work;
         self.actor.forward(observations, b, &mut w.actor_tape);
@@ -266,6 +277,14 @@ impl FusedSac {
             self.log_std,
             &mut w.sample,
         );
+    }
+
+    /// ã ~ π(·|s) for `observations`, drawn with `work.noise` (the actor's tape
+    /// and `work.sample` keep what its gradient needs), and `[s | ã]` into
+    /// `work.critic_input`.
+    fn act_into_critic_input(&mut self, observations: &[f32]) {
+        self.sample_actor(observations);
+        let w = &mut self.work;
         concat_rows(
             observations,
             &w.sample.action,
@@ -457,9 +476,7 @@ fn sample(
             let eps = noise[i];
             let u = mean + std * eps;
             let t = u.tanh();
-            // log(1 − tanh²u) = 2·(log 2 − u − softplus(−2u)), stable for large |u|.
-            let squash = 2.0 * (std::f32::consts::LN_2 - u - softplus(-2.0 * u));
-            log_prob += -0.5 * eps * eps - log_std - HALF_LOG_TWO_PI - squash;
+            log_prob += tanh_gaussian_log_density(eps, log_std, u);
             s.inside[i] = (low..=high).contains(&raw);
             s.std[i] = std;
             s.squashed[i] = t;
@@ -467,11 +484,6 @@ fn sample(
         }
         s.log_prob[r] = log_prob - log_half_sum;
     }
-}
-
-/// log(1 + eˣ) without overflow.
-fn softplus(x: f32) -> f32 {
-    x.max(0.0) + (-x.abs()).exp().ln_1p()
 }
 
 /// `[left | right]` row by row into `out`.

@@ -10,6 +10,7 @@ mod fused_actor;
 mod fused_sac;
 mod model_rollout;
 mod model_step;
+mod online_sac;
 mod policy;
 mod policy_loop;
 mod presets;
@@ -29,6 +30,7 @@ pub use model_rollout::{
     rollout_model, rollout_model_or_cancel,
 };
 pub use model_step::{ParticleConfig, ParticleStep, penalized_reward, step_particles};
+pub use online_sac::{OnlineRecord, OnlineSac, OnlineSacConfig, OnlineSeconds};
 pub use policy::RandomPolicy;
 pub use policy_loop::{
     EpochRecord, EtaProbe, EvalSummary, LoopContext, PhaseSeconds, PolicyLoopConfig, PolicyTraining,

@@ -25,7 +25,7 @@ use super::presets::Preset;
 use super::sac::{Sac, SacConfig, SacLosses};
 use super::{AgentError, BatchPolicy};
 use crate::data::{Dataset, StartStateSampler, TransitionBatch, TransitionSampler};
-use crate::envs::{EvaluationConfig, TaskConfig, TaskRules, evaluate};
+use crate::envs::{EvaluationConfig, EvaluationReport, TaskConfig, TaskRules, evaluate};
 use crate::infer::Kernel;
 use crate::sde::ThresholdTable;
 use crate::shared::BatchDynamics;
@@ -107,6 +107,17 @@ pub struct EvalSummary {
     /// `charts/normalized_score` (D4RL × 100).
     pub normalized_score: f64,
     pub std_normalized_score: f64,
+}
+
+impl From<&EvaluationReport> for EvalSummary {
+    fn from(report: &EvaluationReport) -> Self {
+        Self {
+            mean_return: report.mean_return,
+            std_return: report.std_return,
+            normalized_score: report.mean_normalized_score,
+            std_normalized_score: report.std_normalized_score,
+        }
+    }
 }
 
 /// Wall-clock seconds each phase of one epoch took.
@@ -275,7 +286,7 @@ impl PolicyTraining {
         let record = EpochRecord {
             epoch: self.epoch,
             step: self.step,
-            losses: mean_losses(&losses),
+            losses: SacLosses::mean(&losses),
             rollout,
             model_buffer: self.model_buffer.len(),
             sps,
@@ -331,13 +342,7 @@ impl PolicyTraining {
         let seed = self.config.seed.wrapping_add(1_000_003 * self.epoch as u64);
         let config = EvaluationConfig::new(ctx.task, self.config.eval_episodes, seed);
         let policy = ctx.kernel.policy(self.policy(ActionMode::Deterministic));
-        let report = evaluate(policy.as_ref(), &config)?;
-        Ok(EvalSummary {
-            mean_return: report.mean_return,
-            std_return: report.std_return,
-            normalized_score: report.mean_normalized_score,
-            std_normalized_score: report.std_normalized_score,
-        })
+        Ok(EvalSummary::from(&evaluate(policy.as_ref(), &config)?))
     }
 
     /// η of policy, dataset and uniformly random actions on the same dataset
@@ -385,18 +390,4 @@ fn mean_eta(dynamics: &dyn BatchDynamics, obs: &[f32], actions: &[f32]) -> f32 {
     let noise = vec![0.0; states.len()];
     let eta = dynamics.step(&states, actions, &noise).eta;
     eta.iter().sum::<f32>() / eta.len().max(1) as f32
-}
-
-fn mean_losses(losses: &[SacLosses]) -> SacLosses {
-    let n = losses.len().max(1) as f32;
-    let sum = |f: fn(&SacLosses) -> f32| losses.iter().map(f).sum::<f32>() / n;
-    SacLosses {
-        qf1_values: sum(|l| l.qf1_values),
-        qf1_loss: sum(|l| l.qf1_loss),
-        qf2_loss: sum(|l| l.qf2_loss),
-        actor_loss: sum(|l| l.actor_loss),
-        alpha: sum(|l| l.alpha),
-        alpha_loss: sum(|l| l.alpha_loss),
-        entropy: sum(|l| l.entropy),
-    }
 }

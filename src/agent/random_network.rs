@@ -9,7 +9,8 @@ use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-use crate::shared::{BatchPolicy, act_batch};
+use super::actor::tanh_gaussian_log_density;
+use crate::shared::{BatchPolicy, LoggedActions, act_batch};
 
 /// rlkit's output-layer init range (`init_w`).
 const OUTPUT_INIT: f32 = 1e-3;
@@ -110,7 +111,13 @@ impl BatchPolicy for RandomNetworkPolicy {
     }
 
     fn act(&self, observations: &[f32], rng: &mut dyn RngCore) -> Vec<f32> {
-        let mut actions = Vec::with_capacity(act_batch(self, observations) * self.act_dim());
+        self.act_logged(observations, rng).actions
+    }
+
+    fn act_logged(&self, observations: &[f32], rng: &mut dyn RngCore) -> LoggedActions {
+        let batch = act_batch(self, observations);
+        let mut actions = Vec::with_capacity(batch * self.act_dim());
+        let mut log_probs = Vec::with_capacity(batch);
         for obs in observations.chunks_exact(self.obs_dim) {
             let features = self
                 .hidden
@@ -118,12 +125,19 @@ impl BatchPolicy for RandomNetworkPolicy {
                 .fold(obs.to_vec(), |x, layer| layer.forward(&x, true));
             let mean = self.mean.forward(&features, false);
             let log_std = self.log_std.forward(&features, false);
+            let mut log_prob = 0.0;
             for (m, l) in mean.iter().zip(&log_std) {
-                let std = l.clamp(LOG_STD_RANGE.0, LOG_STD_RANGE.1).exp();
+                let log_std = l.clamp(LOG_STD_RANGE.0, LOG_STD_RANGE.1);
                 let noise: f32 = rng.sample(StandardNormal);
-                actions.push((m + std * noise).tanh());
+                let u = m + log_std.exp() * noise;
+                log_prob += tanh_gaussian_log_density(noise, log_std, u);
+                actions.push(u.tanh());
             }
+            log_probs.push(log_prob);
         }
-        actions
+        LoggedActions {
+            actions,
+            log_probs: Some(log_probs),
+        }
     }
 }

@@ -79,6 +79,26 @@ pub struct SacLosses {
     pub entropy: f32,
 }
 
+impl SacLosses {
+    /// The mean of each loss over `losses` (zeros when there are none).
+    pub fn mean(losses: &[SacLosses]) -> SacLosses {
+        if losses.is_empty() {
+            return SacLosses::default();
+        }
+        let n = losses.len().max(1) as f32;
+        let sum = |f: fn(&SacLosses) -> f32| losses.iter().map(f).sum::<f32>() / n;
+        SacLosses {
+            qf1_values: sum(|l| l.qf1_values),
+            qf1_loss: sum(|l| l.qf1_loss),
+            qf2_loss: sum(|l| l.qf2_loss),
+            actor_loss: sum(|l| l.actor_loss),
+            alpha: sum(|l| l.alpha),
+            alpha_loss: sum(|l| l.alpha_loss),
+            entropy: sum(|l| l.entropy),
+        }
+    }
+}
+
 /// Adam's state for the actor, the critics and log α, by module path: what a
 /// checkpoint saves, and what both kernels step (`crate::nn::Adam`).
 #[derive(Debug, Clone, PartialEq, Default)]

@@ -2,29 +2,39 @@
 //! metadata, validated on load, and the atomic write every file goes through,
 //! so a reader never sees a half-written file.
 
+mod behaviour;
 mod checkpoint;
 mod dynamics;
 mod json_file;
+mod online_run;
 mod policy;
+mod sac_state;
 mod safetensors_file;
 mod tensors;
 
 use std::path::{Path, PathBuf};
 
 pub use crate::shared::write_atomically;
-pub use checkpoint::{
-    CHECKPOINT_SCHEMA_VERSION, latest_checkpoint, load_checkpoint, save_checkpoint,
+pub use behaviour::{
+    BEHAVIOUR_SCHEMA_VERSION, Behaviour, BehaviourEntry, BehaviourIndex, behaviour_dir,
+    load_behaviour, save_behaviour,
 };
+pub use checkpoint::{CHECKPOINT_SCHEMA_VERSION, load_checkpoint, save_checkpoint};
 pub use dynamics::{
     DYNAMICS_METADATA, DYNAMICS_SCHEMA_VERSION, DYNAMICS_WEIGHTS, DatasetInfo, DynamicsMetadata,
     DynamicsProvenance, load_dynamics, read_dynamics_metadata, save_dynamics, sha256_file,
     sha256_hex,
 };
 pub use json_file::{read_checked_weights, read_versioned_json, write_json};
+pub use online_run::{
+    ONLINE_RUN_SCHEMA_VERSION, OnlineRunInfo, RunPolicy, load_online_checkpoint, read_online_run,
+    read_run_transitions, run_policies, save_online_checkpoint, start_online_run,
+};
 pub use policy::{
     BEST_POLICY, LAST_POLICY, POLICY_SCHEMA_VERSION, PolicyMetadata, PolicyProvenance, has_policy,
     load_policy, save_policy,
 };
+pub use sac_state::latest_checkpoint;
 pub use safetensors_file::{parse_safetensors, parse_safetensors_with_metadata, safetensors_bytes};
 pub use tensors::{NamedTensors, collect_tensors, load_tensors};
 

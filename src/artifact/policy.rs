@@ -14,7 +14,7 @@ use super::json_file::{read_checked_weights, read_versioned_json, write_json};
 use super::safetensors_file::{safetensors_bytes, write_bytes};
 use super::tensors::{collect_tensors, load_tensors};
 use super::{ArtifactError, sha256_hex};
-use crate::agent::{Actor, ActorConfig, PolicyLoopConfig};
+use crate::agent::{Actor, ActorConfig, OnlineSacConfig, PolicyLoopConfig};
 use crate::envs::TaskConfig;
 use crate::nn::seeded_init;
 
@@ -36,6 +36,12 @@ pub struct PolicyProvenance {
     pub step: usize,
     /// D4RL normalised score at that epoch's evaluation.
     pub normalized_score: Option<f64>,
+    /// Mean undiscounted return of that evaluation (absent in policies written before it was kept).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean_return: Option<f64>,
+    /// The online SAC run that trained it (a behaviour policy), if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub online_training: Option<OnlineSacConfig>,
 }
 
 /// The contents of `{stem}.json`.

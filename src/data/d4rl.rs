@@ -1,5 +1,6 @@
 //! D4RL's HDF5 layout: `observations`, `actions`, `rewards`, `terminals`,
-//! `timeouts`, optional `next_observations`, `infos/qpos`, `infos/qvel`, and a
+//! `timeouts`, optional `next_observations`, `infos/qpos`, `infos/qvel`,
+//! `infos/action_log_probs`, and a
 //! `metadata/` group. The reader takes real D4RL files; the writer produces
 //! files that h5py and D4RL-style loaders read unchanged.
 
@@ -118,11 +119,20 @@ pub fn read_d4rl(path: &Path) -> Result<Dataset, DataError> {
             Ok(None)
         }
     };
+    let infos_column = |key: &str| -> Result<Option<Array1<f32>>, DataError> {
+        let full = format!("infos/{key}");
+        if file.link_exists("infos") && file.link_exists(&full) {
+            read_column(&file, &full, path).map(Some)
+        } else {
+            Ok(None)
+        }
+    };
     let mut metadata = read_metadata(&file, path)?;
     metadata.insert("source".into(), path.display().to_string());
     let mut parts = DatasetParts {
         qpos: infos("qpos")?,
         qvel: infos("qvel")?,
+        action_log_probs: infos_column("action_log_probs")?,
         next_observations: Array2::zeros((0, observations.ncols())),
         observations,
         actions,
@@ -174,6 +184,7 @@ fn next_states_from_successors(
         .collect();
     parts.qpos = parts.qpos.map(|a| a.select(Axis(0), &keep));
     parts.qvel = parts.qvel.map(|a| a.select(Axis(0), &keep));
+    parts.action_log_probs = parts.action_log_probs.map(|a| a.select(Axis(0), &keep));
     parts.metadata.insert(
         "dropped_without_next_observation".into(),
         dropped.to_string(),
@@ -250,8 +261,18 @@ fn write_file(dataset: &Dataset, tmp: &Path, path: &Path) -> Result<(), DataErro
             .create(key)
             .map_err(&err)?;
     }
-    if dataset.qpos.is_some() || dataset.qvel.is_some() {
+    let has_infos =
+        dataset.qpos.is_some() || dataset.qvel.is_some() || dataset.action_log_probs.is_some();
+    if has_infos {
         let infos = file.create_group("infos").map_err(&err)?;
+        if let Some(log_probs) = &dataset.action_log_probs {
+            infos
+                .new_dataset_builder()
+                .with_data(log_probs.view())
+                .deflate(GZIP_LEVEL)
+                .create("action_log_probs")
+                .map_err(&err)?;
+        }
         if let Some(qpos) = &dataset.qpos {
             matrix(&infos, "qpos", qpos).map_err(&err)?;
         }

@@ -50,6 +50,9 @@ pub struct DatasetParts {
     /// Full MuJoCo state at `observations[i]` (D4RL's `infos/qpos`, `infos/qvel`), when known.
     pub qpos: Option<Array2<f32>>,
     pub qvel: Option<Array2<f32>>,
+    /// log π(a|s) of the behaviour policy for each action (D4RL's
+    /// `infos/action_log_probs`), when it had a density.
+    pub action_log_probs: Option<Array1<f32>>,
     pub metadata: DatasetMetadata,
 }
 
@@ -86,6 +89,7 @@ impl Dataset {
             timeouts,
             qpos,
             qvel,
+            action_log_probs,
             ..
         } = &mut parts;
         let n = observations.nrows();
@@ -102,6 +106,10 @@ impl Dataset {
             ("timeouts", timeouts.len()),
             ("infos/qpos", qpos.as_ref().map_or(n, |a| a.nrows())),
             ("infos/qvel", qvel.as_ref().map_or(n, |a| a.nrows())),
+            (
+                "infos/action_log_probs",
+                action_log_probs.as_ref().map_or(n, |a| a.len()),
+            ),
         ];
         check_rows(file, n, &rows)?;
         if next_observations.ncols() != observations.ncols() {
@@ -134,6 +142,12 @@ impl Dataset {
             parts,
             trajectories,
         })
+    }
+
+    /// The same dataset with `metadata` in place of its own.
+    pub fn with_metadata(mut self, metadata: DatasetMetadata) -> Self {
+        self.parts.metadata = metadata;
+        self
     }
 
     /// Number of transitions.
@@ -218,12 +232,86 @@ impl Dataset {
             timeouts: pick_flags(&self.timeouts),
             qpos: self.qpos.as_ref().map(pick2),
             qvel: self.qvel.as_ref().map(pick2),
+            action_log_probs: self
+                .action_log_probs
+                .as_ref()
+                .map(|a| a.select(Axis(0), &rows)),
             metadata: self.metadata.clone(),
         };
         Dataset {
             parts,
             trajectories,
         }
+    }
+
+    /// `datasets` one after another (D4RL's medium-expert), with `metadata`.
+    /// They must agree in widths and in which of D4RL's `infos` they carry.
+    pub fn concat(datasets: &[&Dataset], metadata: DatasetMetadata) -> Result<Dataset, DataError> {
+        let source = Path::new("<concatenated>");
+        let invalid = |message: String| DataError::Invalid {
+            file: source.to_path_buf(),
+            message,
+        };
+        let first = datasets
+            .first()
+            .ok_or_else(|| invalid("nothing to concatenate".into()))?;
+        let shape = |d: &Dataset| {
+            (
+                d.obs_dim(),
+                d.act_dim(),
+                d.qpos.as_ref().map(|a| a.ncols()),
+                d.qvel.as_ref().map(|a| a.ncols()),
+                d.action_log_probs.is_some(),
+            )
+        };
+        if let Some((i, other)) = datasets
+            .iter()
+            .enumerate()
+            .find(|(_, d)| shape(d) != shape(first))
+        {
+            return Err(invalid(format!(
+                "part {i} has widths and infos {:?}, part 0 has {:?}",
+                shape(other),
+                shape(first)
+            )));
+        }
+        // The shapes agree, so an info the first part carries, every part does.
+        let stack =
+            |f: fn(&Dataset) -> Option<&Array2<f32>>| -> Result<Option<Array2<f32>>, DataError> {
+                let views: Vec<ArrayView2<f32>> = datasets
+                    .iter()
+                    .filter_map(|d| f(d))
+                    .map(|a| a.view())
+                    .collect();
+                if views.len() < datasets.len() {
+                    return Ok(None);
+                }
+                ndarray::concatenate(Axis(0), &views)
+                    .map(Some)
+                    .map_err(|e| invalid(e.to_string()))
+            };
+        let required =
+            |a: Option<Array2<f32>>| a.ok_or_else(|| invalid("a part lacks a column".into()));
+        let flags =
+            |f: fn(&Dataset) -> &[bool]| datasets.iter().flat_map(|d| f(d).to_vec()).collect();
+        let parts = DatasetParts {
+            observations: required(stack(|d| Some(&d.observations))?)?,
+            actions: required(stack(|d| Some(&d.actions))?)?,
+            rewards: datasets.iter().flat_map(|d| d.rewards.to_vec()).collect(),
+            next_observations: required(stack(|d| Some(&d.next_observations))?)?,
+            terminals: flags(|d| &d.terminals),
+            timeouts: flags(|d| &d.timeouts),
+            qpos: stack(|d| d.qpos.as_ref())?,
+            qvel: stack(|d| d.qvel.as_ref())?,
+            action_log_probs: first.action_log_probs.is_some().then(|| {
+                datasets
+                    .iter()
+                    .flat_map(|d| d.action_log_probs.iter().flatten().copied())
+                    .collect()
+            }),
+            metadata,
+        };
+        Dataset::from_parts(parts, source)
     }
 
     /// Splits whole trajectories into (train, validation), about `valid_fraction`

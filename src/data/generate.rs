@@ -4,57 +4,56 @@
 //! own seed and draws policy noise from its own stream, so the dataset depends
 //! on the seed alone, never on the number of cores.
 
-use ndarray::{Array1, Array2};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::dataset::DatasetParts;
+use super::recording::Recording;
 use super::{DataError, Dataset, DatasetMetadata};
-use crate::envs::{MujocoTask, TaskConfig};
+use crate::envs::{MujocoTask, ObservationLayout, TaskConfig};
 use crate::shared::BatchPolicy;
+
+/// How much to record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Budget {
+    /// This many transitions (D4RL's 1M); the last episode is cut (as a timeout) to fit.
+    Transitions(usize),
+    /// This many whole episodes (NeoRL's 1000 trajectories).
+    Episodes(usize),
+}
 
 /// What to generate.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct GenerateConfig {
     pub task: TaskConfig,
-    /// Transitions to record; the last episode is cut (as a timeout) to fit.
-    pub transitions: usize,
+    pub budget: Budget,
     pub seed: u64,
     /// The recipe's name, stored in the metadata (`random`, `medium`, ...).
     pub kind: String,
     /// Episodes run in parallel per round.
     pub episodes_per_round: usize,
+    /// The observations the policy takes: the task's, or D4RL's in a NeoRL
+    /// task (root x dropped), so one behaviour policy serves both benchmarks.
+    pub policy_layout: ObservationLayout,
 }
 
 impl GenerateConfig {
     pub fn new(task: TaskConfig, kind: &str, transitions: usize, seed: u64) -> Self {
         Self {
             task,
-            transitions,
+            budget: Budget::Transitions(transitions),
             seed,
             kind: kind.into(),
             episodes_per_round: 64,
+            policy_layout: task.layout,
         }
     }
 }
 
-/// The rows of one recorded episode.
-#[derive(Default)]
-struct Episode {
-    observations: Vec<f32>,
-    actions: Vec<f32>,
-    rewards: Vec<f32>,
-    next_observations: Vec<f32>,
-    terminals: Vec<bool>,
-    timeouts: Vec<bool>,
-    qpos: Vec<f32>,
-    qvel: Vec<f32>,
-}
-
-/// Runs `policy` in `config.task` until `config.transitions` transitions are
-/// recorded. `progress` is called with the length of each finished episode.
+/// Runs `policy` in `config.task` until `config.budget` is recorded.
+/// `progress` is called with the length of each finished episode.
 pub fn generate(
     config: &GenerateConfig,
     policy: &dyn BatchPolicy,
@@ -62,32 +61,54 @@ pub fn generate(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Dataset, DataError> {
     let probe = MujocoTask::new(config.task)?;
-    let (obs_dim, act_dim) = (probe.obs_dim(), probe.act_dim());
-    let (nq, nv) = (probe.qpos().len(), probe.qvel().len());
-    let mut all = Episode::default();
-    let mut recorded = 0;
+    let root_x = usize::from(config.task.layout != config.policy_layout);
+    let expected = (probe.obs_dim() - root_x, probe.act_dim());
+    if config.task.layout == ObservationLayout::D4rl && root_x == 1 {
+        return Err(DataError::Behaviour(
+            "a policy on NeoRL observations cannot act in a D4RL-layout task (root x is not observed)"
+                .into(),
+        ));
+    }
+    if (policy.obs_dim(), policy.act_dim()) != expected {
+        return Err(DataError::Behaviour(format!(
+            "the policy takes observations of width {} and gives actions of width {}; {} ({:?} observations) needs {} and {}",
+            policy.obs_dim(),
+            policy.act_dim(),
+            config.task.name,
+            config.policy_layout,
+            expected.0,
+            expected.1
+        )));
+    }
+    let mut all = Recording::for_task(&probe);
+    let mut episodes_kept = 0;
+    let done = |recorded: usize, episodes: usize| match config.budget {
+        Budget::Transitions(n) => recorded >= n,
+        Budget::Episodes(n) => episodes >= n,
+    };
     let mut next_episode = 0u64;
-    while recorded < config.transitions {
+    while !done(all.len(), episodes_kept) {
         let round = next_episode..next_episode + config.episodes_per_round.max(1) as u64;
         next_episode = round.end;
-        let episodes: Vec<Episode> = round
+        let episodes: Vec<Recording> = round
             .into_par_iter()
             .map(|e| {
                 let episode = run_episode(config, policy, e)?;
-                progress(episode.rewards.len());
+                progress(episode.len());
                 Ok(episode)
             })
             .collect::<Result<_, DataError>>()?;
         for mut episode in episodes {
-            let keep = episode.rewards.len().min(config.transitions - recorded);
-            if keep == 0 {
+            if done(all.len(), episodes_kept) {
                 break;
             }
-            if keep < episode.rewards.len() {
-                truncate(&mut episode, keep, obs_dim, act_dim, nq, nv);
+            if let Budget::Transitions(n) = config.budget
+                && episode.len() > n - all.len()
+            {
+                episode.truncate(n - all.len());
             }
-            recorded += keep;
-            append(&mut all, episode);
+            episodes_kept += 1;
+            all.append(episode);
         }
     }
 
@@ -101,29 +122,14 @@ pub fn generate(
     metadata.insert("seed".into(), config.seed.to_string());
     metadata.insert("policy".into(), policy_description.into());
     metadata.insert(
+        "policy_observation_layout".into(),
+        format!("{:?}", config.policy_layout).to_lowercase(),
+    );
+    metadata.insert(
         "generator".into(),
         format!("nuno {}", env!("CARGO_PKG_VERSION")),
     );
-    let n = all.rewards.len();
-    let generated = std::path::Path::new("<generated>");
-    let matrix = |v: Vec<f32>, width: usize| {
-        Array2::from_shape_vec((n, width), v).map_err(|e| DataError::Invalid {
-            file: generated.to_path_buf(),
-            message: format!("recorded rows do not form [{n}, {width}]: {e}"),
-        })
-    };
-    let parts = DatasetParts {
-        observations: matrix(all.observations, obs_dim)?,
-        actions: matrix(all.actions, act_dim)?,
-        rewards: Array1::from(all.rewards),
-        next_observations: matrix(all.next_observations, obs_dim)?,
-        terminals: all.terminals,
-        timeouts: all.timeouts,
-        qpos: Some(matrix(all.qpos, nq)?),
-        qvel: Some(matrix(all.qvel, nv)?),
-        metadata,
-    };
-    Dataset::from_parts(parts, generated)
+    all.into_dataset(metadata, std::path::Path::new("<generated>"))
 }
 
 /// One full episode of `policy`, seeded by `(config.seed, episode)`.
@@ -131,7 +137,7 @@ fn run_episode(
     config: &GenerateConfig,
     policy: &dyn BatchPolicy,
     episode: u64,
-) -> Result<Episode, DataError> {
+) -> Result<Recording, DataError> {
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     rng.set_stream(episode);
     let mut task = MujocoTask::new(config.task)?;
@@ -141,49 +147,18 @@ fn run_episode(
         .iter()
         .map(|&x| x as f32)
         .collect();
-    let mut out = Episode::default();
+    let mut out = Recording::for_task(&task);
     loop {
-        let action = policy.act(&obs, &mut rng);
-        let action_f64: Vec<f64> = action.iter().map(|&a| f64::from(a)).collect();
-        out.qpos.extend(task.qpos().iter().map(|&x| x as f32));
-        out.qvel.extend(task.qvel().iter().map(|&x| x as f32));
-        let step = task.step(&action_f64)?;
-        let next: Vec<f32> = step.observation.iter().map(|&x| x as f32).collect();
-        out.observations.extend(&obs);
-        out.actions.extend(&action);
-        out.rewards.push(step.reward as f32);
-        out.next_observations.extend(&next);
-        out.terminals.push(step.terminated);
-        out.timeouts.push(step.truncated && !step.terminated);
+        let root_x = usize::from(config.task.layout != config.policy_layout);
+        let logged = policy.act_logged(&obs[root_x..], &mut rng);
+        let action: Vec<f64> = logged.actions.iter().map(|&a| f64::from(a)).collect();
+        let state = (task.qpos().to_vec(), task.qvel().to_vec());
+        let step = task.step(&action)?;
+        let log_prob = logged.log_probs.map(|l| l[0]);
+        out.push(&obs, (&state.0, &state.1), &logged.actions, log_prob, &step);
         if step.terminated || step.truncated {
             return Ok(out);
         }
-        obs = next;
+        obs = step.observation.iter().map(|&x| x as f32).collect();
     }
-}
-
-/// Keeps the first `keep` transitions of an episode, the last one now a timeout.
-fn truncate(e: &mut Episode, keep: usize, obs_dim: usize, act_dim: usize, nq: usize, nv: usize) {
-    e.observations.truncate(keep * obs_dim);
-    e.actions.truncate(keep * act_dim);
-    e.rewards.truncate(keep);
-    e.next_observations.truncate(keep * obs_dim);
-    e.terminals.truncate(keep);
-    e.timeouts.truncate(keep);
-    e.qpos.truncate(keep * nq);
-    e.qvel.truncate(keep * nv);
-    if let (Some(t), Some(c)) = (e.terminals.last(), e.timeouts.last_mut()) {
-        *c = !*t;
-    }
-}
-
-fn append(all: &mut Episode, e: Episode) {
-    all.observations.extend(e.observations);
-    all.actions.extend(e.actions);
-    all.rewards.extend(e.rewards);
-    all.next_observations.extend(e.next_observations);
-    all.terminals.extend(e.terminals);
-    all.timeouts.extend(e.timeouts);
-    all.qpos.extend(e.qpos);
-    all.qvel.extend(e.qvel);
 }

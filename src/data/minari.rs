@@ -103,6 +103,7 @@ pub fn read_minari(path: &Path) -> Result<Dataset, DataError> {
         timeouts,
         qpos: None,
         qvel: None,
+        action_log_probs: None,
         metadata,
     };
     Dataset::from_parts(parts, path)

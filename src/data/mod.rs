@@ -3,6 +3,7 @@
 //! the per-dimension normaliser, and the samplers that fitting and policy
 //! optimisation draw from.
 
+mod behaviour;
 mod d4rl;
 mod dataset;
 mod format;
@@ -10,19 +11,22 @@ mod generate;
 mod minari;
 mod neorl;
 mod normalizer;
+mod recording;
 mod sampler;
 
 use std::path::PathBuf;
 
 /// The transition batch, re-exported where it was first defined.
 pub use crate::shared::TransitionBatch;
+pub use behaviour::{BehaviourLevel, BehaviourPick, LEVEL_TOLERANCE, select_behaviour};
 pub use d4rl::{read_d4rl, write_d4rl};
 pub use dataset::{Dataset, DatasetMetadata, DatasetParts, Trajectory};
 pub use format::{DatasetFormat, read_dataset};
-pub use generate::{GenerateConfig, generate};
+pub use generate::{Budget, GenerateConfig, generate};
 pub use minari::read_minari;
-pub use neorl::read_neorl;
+pub use neorl::{read_neorl, write_neorl};
 pub use normalizer::{Normalizer, NormalizerConfig, Stats};
+pub use recording::Recording;
 pub use sampler::{StartStateSampler, TransitionSampler, WindowBatch, WindowSampler};
 
 use crate::envs::EnvError;
@@ -73,6 +77,8 @@ pub enum DataError {
     },
     #[error("{file}: {message}")]
     Invalid { file: PathBuf, message: String },
+    #[error("behaviour policy: {0}")]
+    Behaviour(String),
     #[error("{file}: the dataset has no transitions")]
     Empty { file: PathBuf },
     #[error("the dataset has no window of {horizon} steps inside one trajectory")]

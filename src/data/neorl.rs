@@ -1,15 +1,17 @@
 //! NeoRL's `.npz` datasets (e.g. `Hopper-v3-low-1000-train-noise.npz`): keys
 //! `obs`, `next_obs`, `action`, `reward`, `done` and `index`, the first row of
-//! each trajectory. NeoRL observations include the root x position.
+//! each trajectory. NeoRL observations include the root x position. The
+//! reader takes NeoRL's files; the writer produces files it reads back.
 
 use std::fs::File;
 use std::path::Path;
 
 use ndarray::{Array1, Array2, ArrayD, Ix2};
-use ndarray_npy::NpzReader;
+use ndarray_npy::{NpzReader, NpzWriter};
 
 use super::dataset::DatasetParts;
 use super::{DataError, Dataset, DatasetMetadata};
+use crate::shared::write_atomically;
 
 /// Reads a NeoRL `.npz` file. Trajectory `k` spans `index[k]..index[k + 1]`;
 /// its last transition is a terminal if `done` says so, else a timeout.
@@ -74,9 +76,54 @@ pub fn read_neorl(path: &Path) -> Result<Dataset, DataError> {
         timeouts,
         qpos: None,
         qvel: None,
+        action_log_probs: None,
         metadata,
     };
     Dataset::from_parts(parts, path)
+}
+
+/// Writes `dataset` as a NeoRL `.npz` (float32 `obs`, `next_obs`, `action`,
+/// `reward` and `done` as `[n, 1]`, int64 `index`), atomically. Timeouts are
+/// where a trajectory ends without `done`, as NeoRL keeps them.
+pub fn write_neorl(dataset: &Dataset, path: &Path) -> Result<(), DataError> {
+    let npz_error = |message: String| DataError::Npz {
+        file: path.to_path_buf(),
+        message,
+    };
+    let n = dataset.len();
+    let column = |v: Vec<f32>| Array2::from_shape_vec((n, 1), v);
+    let reward = column(dataset.rewards.to_vec()).map_err(|e| npz_error(e.to_string()))?;
+    let done = column(
+        dataset
+            .terminals
+            .iter()
+            .map(|&d| f32::from(u8::from(d)))
+            .collect(),
+    )
+    .map_err(|e| npz_error(e.to_string()))?;
+    let index = Array1::from_iter(dataset.trajectories().iter().map(|t| t.start as i64));
+    write_atomically(
+        path,
+        |tmp| {
+            let file = File::create(tmp).map_err(|source| DataError::Io {
+                file: path.to_path_buf(),
+                source,
+            })?;
+            let mut npz = NpzWriter::new_compressed(file);
+            npz.add_array("obs", &dataset.observations)
+                .and_then(|()| npz.add_array("next_obs", &dataset.next_observations))
+                .and_then(|()| npz.add_array("action", &dataset.actions))
+                .and_then(|()| npz.add_array("reward", &reward))
+                .and_then(|()| npz.add_array("done", &done))
+                .and_then(|()| npz.add_array("index", &index))
+                .and_then(|()| npz.finish().map(drop))
+                .map_err(|e| npz_error(e.to_string()))
+        },
+        |source| DataError::Io {
+            file: path.to_path_buf(),
+            source,
+        },
+    )
 }
 
 /// Reads any numeric or bool `.npy` member as f32.

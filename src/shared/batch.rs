@@ -116,6 +116,25 @@ pub trait BatchPolicy: Sync {
     /// - `observations`: row-major `[batch, obs_dim]`
     /// - returns: row-major `[batch, act_dim]`
     fn act(&self, observations: &[f32], rng: &mut dyn RngCore) -> Vec<f32>;
+
+    /// The actions [`act`](Self::act) gives for the same generator, with each
+    /// row's log π(a|s) where the policy has a density (D4RL records it as
+    /// `infos/action_log_probs`).
+    fn act_logged(&self, observations: &[f32], rng: &mut dyn RngCore) -> LoggedActions {
+        LoggedActions {
+            actions: self.act(observations, rng),
+            log_probs: None,
+        }
+    }
+}
+
+/// Actions and, for a stochastic policy with a density, log π(a|s) per row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoggedActions {
+    /// Row-major `[batch, act_dim]`.
+    pub actions: Vec<f32>,
+    /// `[batch]`
+    pub log_probs: Option<Vec<f32>>,
 }
 
 /// Transitions `(s, a, r, s', terminal)`, row-major.

@@ -7,7 +7,7 @@ pub mod cancel;
 
 pub use atomic::write_atomically;
 pub use batch::{
-    BatchDynamics, BatchPolicy, BatchShape, ModelStep, TransitionBatch, act_batch, euler_maruyama,
-    scaled_noise, step_batch,
+    BatchDynamics, BatchPolicy, BatchShape, LoggedActions, ModelStep, TransitionBatch, act_batch,
+    euler_maruyama, scaled_noise, step_batch,
 };
 pub use cancel::{Cancel, CancelOnDrop, Cancelled};

@@ -2,6 +2,7 @@
 
 Usage:
   datasets.py inspect-d4rl FILE OUT.json   what h5py sees in a nuno-written file
+  datasets.py inspect-neorl FILE OUT.json  what numpy sees in a nuno-written NeoRL .npz
   datasets.py write-fixtures DIR           D4RL, NeoRL and Minari files, good and bad
 """
 
@@ -25,7 +26,8 @@ def inspect_d4rl(path, out):
                                                    "next_observations", "terminals", "timeouts"]},
             "shapes": {k: list(f[k].shape) for k in ["observations", "actions", "rewards",
                                                     "next_observations", "terminals", "timeouts",
-                                                    "infos/qpos", "infos/qvel"]},
+                                                    "infos/qpos", "infos/qvel",
+                                                    "infos/action_log_probs"] if k in f},
             "compression": f["observations"].compression,
         }
         obs, nxt = f["observations"][:], f["next_observations"][:]
@@ -37,6 +39,20 @@ def inspect_d4rl(path, out):
         report["qpos_max_error"] = float(np.abs(obs[:, :5] - qpos[:, 1:]).max())
         report["qvel_max_error"] = float(np.abs(obs[:, 5:] - np.clip(qvel, -10, 10)).max())
         report["return_sum"] = float(f["rewards"][:].astype(np.float64).sum())
+    with open(out, "w") as fh:
+        json.dump(report, fh)
+
+
+def inspect_neorl(path, out):
+    with np.load(path) as f:
+        report = {
+            "keys": sorted(f.files),
+            "dtypes": {k: str(f[k].dtype) for k in f.files},
+            "shapes": {k: list(f[k].shape) for k in f.files},
+            "index": f["index"].tolist(),
+            "done_sum": float(f["done"].sum()),
+            "return_sum": float(f["reward"].astype(np.float64).sum()),
+        }
     with open(out, "w") as fh:
         json.dump(report, fh)
 
@@ -133,6 +149,8 @@ def write_fixtures(d):
 if __name__ == "__main__":
     if sys.argv[1] == "inspect-d4rl":
         inspect_d4rl(sys.argv[2], sys.argv[3])
+    elif sys.argv[1] == "inspect-neorl":
+        inspect_neorl(sys.argv[2], sys.argv[3])
     elif sys.argv[1] == "write-fixtures":
         write_fixtures(sys.argv[2])
     else:

@@ -1,15 +1,22 @@
 //! `nuno-trainer dataset`: generate datasets in D4RL's layout, and inspect any
 //! dataset nuno reads.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::Context;
 use clap::{Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
-use nuno::agent::RandomNetworkPolicy;
-use nuno::data::{DatasetFormat, GenerateConfig, generate, read_dataset, write_d4rl};
+use nuno::agent::{
+    ActionMode, ActorPolicy, BatchPolicy, FusedActor, OnlineSacConfig, RandomNetworkPolicy,
+};
+use nuno::artifact::{Behaviour, load_behaviour, read_online_run, read_run_transitions};
+use nuno::data::{
+    BehaviourLevel, Budget, Dataset, DatasetFormat, DatasetMetadata, GenerateConfig, generate,
+    read_dataset, write_d4rl, write_neorl,
+};
 use nuno::envs::{MujocoTask, TaskConfig, TaskName};
+use nuno::sde::ComputeDevice;
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
@@ -19,10 +26,32 @@ pub enum Command {
     Info(InfoArgs),
 }
 
-#[derive(Debug, Clone, Copy, ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Kind {
-    /// D4RL's recipe: a randomly initialised tanh-Gaussian actor, actions sampled.
+    /// D4RL: a randomly initialised tanh-Gaussian actor, actions sampled.
     Random,
+    /// D4RL: the early-stopped SAC policy (~1/3 of the expert's return);
+    /// NeoRL (`--layout neorl`): the policy at ~50 %.
+    Medium,
+    /// D4RL: the online run's transitions up to the medium policy's checkpoint.
+    MediumReplay,
+    /// D4RL: the converged SAC policy.
+    Expert,
+    /// D4RL: medium then expert, concatenated.
+    MediumExpert,
+    /// NeoRL: the policy at ~25 % of the expert's return.
+    Low,
+    /// NeoRL: the policy at ~75 % of the expert's return.
+    High,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Layout {
+    /// D4RL's HDF5 layout and observations (root x excluded).
+    D4rl,
+    /// NeoRL's observations (root x included), written as NeoRL's `.npz`
+    /// and in D4RL's layout beside it.
+    Neorl,
 }
 
 #[derive(Debug, clap::Args)]
@@ -31,15 +60,25 @@ pub struct GenerateArgs {
     task: TaskName,
     #[arg(long, value_enum)]
     kind: Kind,
-    /// Transitions to record.
+    #[arg(long, value_enum, default_value = "d4rl")]
+    layout: Layout,
+    /// Transitions to record per policy (D4RL kinds; medium-expert records
+    /// this many of each).
     #[arg(long, default_value_t = 1_000_000)]
     transitions: usize,
+    /// Whole trajectories to record (NeoRL kinds).
+    #[arg(long, default_value_t = 1000)]
+    trajectories: usize,
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// NeoRL's observation layout (root x included).
+    /// Behaviour policies, `<dir>/<task>/<level>.safetensors` (from `collect select`).
+    #[arg(long, default_value = "models/behaviour")]
+    behaviour: PathBuf,
+    /// medium-replay: the online run (`collect online-sac --out`) the medium policy came from.
     #[arg(long)]
-    neorl: bool,
-    /// Output HDF5 file (written atomically).
+    run: Option<PathBuf>,
+    /// Output file, written atomically: D4RL's `.hdf5`; with `--layout neorl`
+    /// NeoRL's `.npz`, with the `.hdf5` of the same stem beside it.
     #[arg(long)]
     out: PathBuf,
 }
@@ -75,35 +114,272 @@ fn task_config(task: TaskName, neorl: bool) -> TaskConfig {
     }
 }
 
+/// A kind as its flag spells it.
+fn name(kind: Kind) -> String {
+    kind.to_possible_value()
+        .map_or_else(|| format!("{kind:?}"), |v| v.get_name().to_string())
+}
+
+/// The behaviour level a recipe runs, checked against the layout.
+fn level(kind: Kind, layout: Layout) -> anyhow::Result<Option<BehaviourLevel>> {
+    use {BehaviourLevel as L, Kind as K, Layout as Y};
+    Ok(match (kind, layout) {
+        (K::Random, _) => None,
+        (K::Medium | K::MediumReplay, Y::D4rl) => Some(L::Medium),
+        (K::Expert, Y::D4rl) => Some(L::Expert),
+        (K::MediumExpert, Y::D4rl) => None,
+        (K::Low, Y::Neorl) => Some(L::NeorlLow),
+        (K::Medium, Y::Neorl) => Some(L::NeorlMedium),
+        (K::High, Y::Neorl) => Some(L::NeorlHigh),
+        (K::Low | K::High, Y::D4rl) => {
+            anyhow::bail!("--kind {} is a NeoRL level: add --layout neorl", name(kind))
+        }
+        (K::MediumReplay | K::Expert | K::MediumExpert, Y::Neorl) => {
+            anyhow::bail!(
+                "--kind {} is a D4RL recipe; NeoRL's are low, medium and high",
+                name(kind)
+            )
+        }
+    })
+}
+
 fn generate_cmd(args: GenerateArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.transitions > 0, "--transitions must be at least 1");
-    let task = task_config(args.task, args.neorl);
-    let probe = MujocoTask::new(task)?;
-    let (policy, kind) = match args.kind {
-        Kind::Random => (
-            RandomNetworkPolicy::new(probe.obs_dim(), probe.act_dim(), &[256, 256], args.seed),
-            "random",
-        ),
-    };
-    let config = GenerateConfig::new(task, kind, args.transitions, args.seed);
-    let bar = ProgressBar::new(args.transitions as u64).with_style(ProgressStyle::with_template(
-        "{bar:40} {pos}/{len} transitions, {per_sec}, eta {eta}",
-    )?);
-    let done = AtomicUsize::new(0);
-    let progress = |steps: usize| {
-        let total = done.fetch_add(steps, Ordering::Relaxed) + steps;
-        bar.set_position(total.min(args.transitions) as u64);
-    };
-    let dataset = generate(&config, &policy, &policy.description(), &progress)?;
-    bar.finish();
-    write_d4rl(&dataset, &args.out).with_context(|| format!("writing {}", args.out.display()))?;
-    println!(
-        "wrote {} transitions in {} trajectories to {}",
-        dataset.len(),
-        dataset.trajectories().len(),
+    anyhow::ensure!(args.trajectories > 0, "--trajectories must be at least 1");
+    let neorl = args.layout == Layout::Neorl;
+    let extension = args.out.extension().and_then(|e| e.to_str());
+    let wanted = if neorl { "npz" } else { "hdf5" };
+    anyhow::ensure!(
+        extension == Some(wanted),
+        "--out must end in .{wanted} for --layout {:?}, got {}",
+        args.layout,
         args.out.display()
     );
+    let task = task_config(args.task, neorl);
+    // Everything the recipe needs is loaded and checked before any episode runs.
+    let level = level(args.kind, args.layout)?;
+    let device = ComputeDevice::Cpu.device().map_err(anyhow::Error::msg)?;
+    let load = |level| {
+        load_behaviour(&args.behaviour, args.task, level, &device)
+            .with_context(|| format!("loading the {level} behaviour policy"))
+    };
+    let dataset = match (args.kind, level) {
+        (Kind::Random, _) => {
+            let probe = MujocoTask::new(task)?;
+            let policy =
+                RandomNetworkPolicy::new(probe.obs_dim(), probe.act_dim(), &[256, 256], args.seed);
+            let config = GenerateConfig::new(task, "random", args.transitions, args.seed);
+            record(
+                &config,
+                &policy,
+                &policy.description(),
+                &DatasetMetadata::new(),
+            )?
+        }
+        (Kind::MediumReplay, _) => {
+            let behaviour = load(BehaviourLevel::Medium)?;
+            let run = args.run.as_ref().context(
+                "--kind medium-replay needs --run, the online run the medium policy came from",
+            )?;
+            medium_replay(run, &behaviour)?
+        }
+        (Kind::MediumExpert, _) => {
+            let (medium, expert) = (load(BehaviourLevel::Medium)?, load(BehaviourLevel::Expert)?);
+            let parts = [
+                from_behaviour(task, "medium", &args, &medium)?,
+                from_behaviour(task, "expert", &args, &expert)?,
+            ];
+            let mut metadata = parts[0].metadata.clone();
+            metadata.retain(|k, _| !k.starts_with("behaviour"));
+            metadata.insert("kind".into(), "medium-expert".into());
+            metadata.insert(
+                "policy".into(),
+                format!(
+                    "the medium policy (step {}), then the expert policy (step {}); actions sampled",
+                    medium.entry.pick.step, expert.entry.pick.step
+                ),
+            );
+            metadata.insert(
+                "recipe".into(),
+                "D4RL medium-expert: the medium dataset, then the expert dataset, same seed".into(),
+            );
+            for (part, prefix) in parts.iter().zip(["medium", "expert"]) {
+                for (k, v) in part
+                    .metadata
+                    .iter()
+                    .filter(|(k, _)| k.starts_with("behaviour"))
+                {
+                    metadata.insert(k.replacen("behaviour", prefix, 1), v.clone());
+                }
+            }
+            Dataset::concat(&[&parts[0], &parts[1]], metadata)?
+        }
+        (_, Some(level)) => {
+            let behaviour = load(level)?;
+            let kind = name(args.kind);
+            let kind = if neorl { format!("neorl-{kind}") } else { kind };
+            from_behaviour(task, &kind, &args, &behaviour)?
+        }
+        (_, None) => unreachable!("every other kind has a level"),
+    };
+    let written = if neorl {
+        let hdf5 = args.out.with_extension("hdf5");
+        write_neorl(&dataset, &args.out)
+            .with_context(|| format!("writing {}", args.out.display()))?;
+        write_d4rl(&dataset, &hdf5).with_context(|| format!("writing {}", hdf5.display()))?;
+        format!("{} and {}", args.out.display(), hdf5.display())
+    } else {
+        write_d4rl(&dataset, &args.out)
+            .with_context(|| format!("writing {}", args.out.display()))?;
+        args.out.display().to_string()
+    };
+    println!(
+        "wrote {} transitions in {} trajectories to {written}",
+        dataset.len(),
+        dataset.trajectories().len(),
+    );
     Ok(())
+}
+
+/// Runs `behaviour`'s policy (actions sampled) in `task` for the recipe's budget.
+fn from_behaviour(
+    task: TaskConfig,
+    kind: &str,
+    args: &GenerateArgs,
+    behaviour: &Behaviour,
+) -> anyhow::Result<Dataset> {
+    let mut config = GenerateConfig::new(task, kind, args.transitions, args.seed);
+    if args.layout == Layout::Neorl {
+        config.budget = Budget::Episodes(args.trajectories);
+    }
+    config.policy_layout = behaviour.metadata.task.layout;
+    let policy = FusedActor::new(&ActorPolicy {
+        actor: behaviour.actor.clone(),
+        mode: ActionMode::Sampled,
+    });
+    let p = &behaviour.entry.pick;
+    let recipe = match args.layout {
+        Layout::D4rl => "D4RL: 1M transitions of an online SAC policy, actions sampled".to_string(),
+        Layout::Neorl => format!(
+            "NeoRL: {} whole trajectories of an online SAC policy at a fraction of the expert's return, actions sampled",
+            args.trajectories
+        ),
+    };
+    let metadata = DatasetMetadata::from([
+        ("recipe".into(), recipe),
+        (
+            "behaviour_policy".into(),
+            behaviour.path.display().to_string(),
+        ),
+        (
+            "behaviour_sha256".into(),
+            behaviour.metadata.weights_sha256.clone(),
+        ),
+        ("behaviour_step".into(), p.step.to_string()),
+        (
+            "behaviour_eval_return".into(),
+            format!("{:.3}", p.mean_return),
+        ),
+        (
+            "behaviour_target_return".into(),
+            format!("{:.3}", p.target_return),
+        ),
+        (
+            "behaviour_expert_return".into(),
+            format!("{:.3}", p.expert_return),
+        ),
+        ("behaviour_run".into(), behaviour.entry.run.clone()),
+        (
+            "behaviour_run_seed".into(),
+            behaviour
+                .metadata
+                .provenance
+                .online_training
+                .as_ref()
+                .map_or("unknown".into(), |c| c.seed.to_string()),
+        ),
+    ]);
+    let description = format!(
+        "online SAC policy at step {} (tanh-Gaussian, actions sampled)",
+        p.step
+    );
+    record(&config, &policy, &description, &metadata)
+}
+
+/// The medium policy's run, from its start to the medium checkpoint.
+fn medium_replay(run: &Path, medium: &Behaviour) -> anyhow::Result<Dataset> {
+    let info =
+        read_online_run(run).with_context(|| format!("reading the run in {}", run.display()))?;
+    // The same run, possibly extended since (more steps).
+    let same_run = medium
+        .metadata
+        .provenance
+        .online_training
+        .as_ref()
+        .is_some_and(|c| {
+            OnlineSacConfig {
+                steps: info.config.steps,
+                ..c.clone()
+            } == info.config
+        });
+    anyhow::ensure!(
+        same_run && info.task == medium.metadata.task,
+        "{} is not the run the medium policy came from ({})",
+        run.display(),
+        medium.entry.run
+    );
+    let step = medium.entry.pick.step;
+    let mut dataset = read_run_transitions(run, step)?;
+    let mut metadata = dataset.metadata.clone();
+    metadata.insert("kind".into(), "medium-replay".into());
+    metadata.insert(
+        "recipe".into(),
+        "D4RL medium-replay: every transition of the online SAC run up to the medium policy's checkpoint".into(),
+    );
+    metadata.insert("run".into(), run.display().to_string());
+    metadata.insert("run_seed".into(), info.config.seed.to_string());
+    metadata.insert("behaviour_step".into(), step.to_string());
+    metadata.insert(
+        "behaviour_eval_return".into(),
+        format!("{:.3}", medium.entry.pick.mean_return),
+    );
+    metadata.insert(
+        "generator".into(),
+        format!("nuno {}", env!("CARGO_PKG_VERSION")),
+    );
+    dataset = dataset.with_metadata(metadata);
+    Ok(dataset)
+}
+
+/// Generates with a progress bar, adding `extra` to the dataset's metadata.
+fn record(
+    config: &GenerateConfig,
+    policy: &dyn BatchPolicy,
+    description: &str,
+    extra: &DatasetMetadata,
+) -> anyhow::Result<Dataset> {
+    let (total, unit) = match config.budget {
+        Budget::Transitions(n) => (n, "transitions"),
+        Budget::Episodes(n) => (n, "trajectories"),
+    };
+    let bar = ProgressBar::new(total as u64).with_style(ProgressStyle::with_template(&format!(
+        "{{bar:40}} {{pos}}/{{len}} {unit} ({}), {{per_sec}}, eta {{eta}}",
+        config.kind
+    ))?);
+    let done = AtomicUsize::new(0);
+    let progress = |steps: usize| {
+        let count = match config.budget {
+            Budget::Transitions(_) => steps,
+            Budget::Episodes(_) => 1,
+        };
+        let so_far = done.fetch_add(count, Ordering::Relaxed) + count;
+        bar.set_position(so_far.min(total) as u64);
+    };
+    let dataset = generate(config, policy, description, &progress)?;
+    bar.finish();
+    let mut metadata = dataset.metadata.clone();
+    metadata.extend(extra.clone());
+    Ok(dataset.with_metadata(metadata))
 }
 
 fn info(args: InfoArgs) -> anyhow::Result<()> {

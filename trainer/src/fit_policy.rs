@@ -213,6 +213,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         epoch: record.epoch,
         step: record.step,
         normalized_score: Some(record.eval.normalized_score),
+        mean_return: Some(record.eval.mean_return),
+        online_training: None,
     };
     while training.epoch < epochs {
         let record = training.run_epoch(&ctx)?;

@@ -2,6 +2,7 @@
 //! thin layer that parses flags, calls the library and reports; no algorithm
 //! code lives here.
 
+mod collect;
 mod dataset;
 mod eta_report;
 mod evaluate;
@@ -22,6 +23,9 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Train behaviour policies online in the MuJoCo tasks and pick their levels.
+    #[command(subcommand)]
+    Collect(collect::Command),
     /// Generate or inspect offline datasets.
     #[command(subcommand)]
     Dataset(dataset::Command),
@@ -38,6 +42,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Collect(command) => collect::run(command),
         Command::Dataset(command) => dataset::run(command),
         Command::Evaluate(args) => evaluate::run(args),
         Command::EtaReport(args) => eta_report::run(args),

@@ -1,0 +1,333 @@
+//! An online SAC run on disk, growing one checkpoint interval at a time:
+//!
+//! ```text
+//! run.json                                      what the run is (config, task)
+//! transitions/steps-00000000-00010000.safetensors every step of one interval, as D4RL records it
+//! policies/step-00010000.{safetensors,json}     the actor at each checkpoint, with its evaluation
+//! checkpoints/LATEST, checkpoints/step-00010000/ networks, Adam, generator, counters, history
+//! ```
+//!
+//! Every file is written atomically, the interval's transitions and policy
+//! before the checkpoint that lists them, so `LATEST` always names a
+//! checkpoint whose files are complete. The replay buffer is not saved twice:
+//! a resumed run rebuilds it from the recorded intervals (checked against
+//! their hashes), and the run's transitions up to any checkpoint are D4RL's
+//! medium-replay.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::json_file::{read_checked_weights, read_versioned_json, write_json};
+use super::policy::{PolicyMetadata, PolicyProvenance, save_policy};
+use super::sac_state::{
+    RngState, SacFiles, latest_checkpoint, read_sac, save_checkpoint_dir, write_sac,
+};
+use super::safetensors_file::{safetensors_bytes, write_bytes};
+use super::tensors::NamedTensors;
+use super::{ArtifactError, sha256_hex};
+use crate::agent::{OnlineRecord, OnlineSac, OnlineSacConfig};
+use crate::data::{Dataset, DatasetMetadata, Recording};
+use crate::envs::TaskConfig;
+
+pub const ONLINE_RUN_SCHEMA_VERSION: u32 = 1;
+const RUN: &str = "run.json";
+const TRANSITIONS: &str = "transitions";
+const POLICIES: &str = "policies";
+const CHECKPOINTS: &str = "checkpoints";
+const STATE: &str = "state.json";
+
+/// `run.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OnlineRunInfo {
+    pub schema_version: u32,
+    pub config: OnlineSacConfig,
+    pub task: TaskConfig,
+}
+
+/// One recorded interval: steps `from..to` in `file`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Interval {
+    file: String,
+    from: usize,
+    to: usize,
+    sha256: String,
+}
+
+/// A checkpoint's `state.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct OnlineState {
+    schema_version: u32,
+    step: usize,
+    updates: usize,
+    episodes: usize,
+    rng: RngState,
+    history: Vec<OnlineRecord>,
+    intervals: Vec<Interval>,
+    #[serde(flatten)]
+    sac: SacFiles,
+}
+
+/// A policy saved at a checkpoint, with its evaluation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunPolicy {
+    pub step: usize,
+    /// The directory and file stem to load it with [`super::load_policy`].
+    pub dir: PathBuf,
+    pub stem: String,
+    pub metadata: PolicyMetadata,
+}
+
+/// Reads `run.json` in `dir`.
+pub fn read_online_run(dir: &Path) -> Result<OnlineRunInfo, ArtifactError> {
+    read_versioned_json(&dir.join(RUN), ONLINE_RUN_SCHEMA_VERSION)
+}
+
+/// Starts a run in `dir`, or checks that the run already there is `run`'s
+/// (the same knobs; a resumed run may take more steps).
+pub fn start_online_run(dir: &Path, run: &OnlineSac) -> Result<(), ArtifactError> {
+    let path = dir.join(RUN);
+    if path.exists() {
+        let saved = read_online_run(dir)?;
+        let comparable = OnlineSacConfig {
+            steps: run.config.steps,
+            ..saved.config.clone()
+        };
+        if comparable != run.config || saved.task != run.task {
+            return Err(ArtifactError::Invalid(format!(
+                "{}: the run there was started with other settings; resume it with the same flags or choose another directory",
+                path.display()
+            )));
+        }
+    }
+    std::fs::create_dir_all(dir).map_err(|e| ArtifactError::io(dir, e))?;
+    write_json(
+        &path,
+        &OnlineRunInfo {
+            schema_version: ONLINE_RUN_SCHEMA_VERSION,
+            config: run.config.clone(),
+            task: run.task,
+        },
+    )
+}
+
+/// Saves the interval `run` just finished: its transitions, its policy, then
+/// the checkpoint naming them.
+pub fn save_online_checkpoint(dir: &Path, run: &OnlineSac) -> Result<PathBuf, ArtifactError> {
+    let mut intervals = match latest_checkpoint(&dir.join(CHECKPOINTS))? {
+        Some(checkpoint) => read_state(&checkpoint)?.intervals,
+        None => Vec::new(),
+    };
+    let from = intervals.last().map_or(0, |i| i.to);
+    let to = run.step;
+    if to != from + run.recording.len() {
+        return Err(ArtifactError::Invalid(format!(
+            "the run is at step {to} but its last checkpoint ends at step {from} and {} steps are recorded since",
+            run.recording.len()
+        )));
+    }
+    std::fs::create_dir_all(dir.join(TRANSITIONS)).map_err(|e| ArtifactError::io(dir, e))?;
+    let file = format!("{TRANSITIONS}/steps-{from:08}-{to:08}.safetensors");
+    let bytes = safetensors_bytes(&recording_tensors(&run.recording), None)?;
+    write_bytes(&dir.join(&file), &bytes)?;
+    intervals.push(Interval {
+        file,
+        from,
+        to,
+        sha256: sha256_hex(&bytes),
+    });
+
+    let record = run.history.last();
+    std::fs::create_dir_all(dir.join(POLICIES)).map_err(|e| ArtifactError::io(dir, e))?;
+    save_policy(
+        &dir.join(POLICIES),
+        &policy_stem(to),
+        &run.sac.actor,
+        run.task,
+        PolicyProvenance {
+            step: to,
+            normalized_score: record.map(|r| r.eval.normalized_score),
+            mean_return: record.map(|r| r.eval.mean_return),
+            online_training: Some(run.config.clone()),
+            ..PolicyProvenance::default()
+        },
+    )?;
+
+    let name = format!("step-{to:08}");
+    save_checkpoint_dir(&dir.join(CHECKPOINTS), &name, |tmp| {
+        let state = OnlineState {
+            schema_version: ONLINE_RUN_SCHEMA_VERSION,
+            step: run.step,
+            updates: run.updates,
+            episodes: run.episodes,
+            rng: RngState::of(&run.rng),
+            history: run.history.clone(),
+            intervals,
+            sac: write_sac(tmp, &run.sac)?,
+        };
+        write_json(&tmp.join(STATE), &state)
+    })
+}
+
+/// Restores the latest checkpoint in `dir` into `run`, a fresh run built with
+/// the same settings; `false` when there is none yet.
+pub fn load_online_checkpoint(dir: &Path, run: &mut OnlineSac) -> Result<bool, ArtifactError> {
+    let Some(checkpoint) = latest_checkpoint(&dir.join(CHECKPOINTS))? else {
+        return Ok(false);
+    };
+    let state = read_state(&checkpoint)?;
+    read_sac(&checkpoint, &state.sac, &mut run.sac)?;
+    for interval in &state.intervals {
+        let recording = read_interval(dir, interval, &run.recording)?;
+        let (o, a) = (recording.obs_dim, recording.act_dim);
+        for i in 0..recording.len() {
+            run.buffer.push_row(
+                &recording.observations[i * o..(i + 1) * o],
+                &recording.actions[i * a..(i + 1) * a],
+                recording.rewards[i],
+                &recording.next_observations[i * o..(i + 1) * o],
+                if recording.terminals[i] { 1.0 } else { 0.0 },
+            );
+        }
+    }
+    run.rng = state.rng.restore();
+    run.step = state.step;
+    run.updates = state.updates;
+    run.episodes = state.episodes;
+    run.history = state.history;
+    Ok(true)
+}
+
+/// The run's transitions from its start to checkpoint step `to`, in D4RL's
+/// layout: D4RL's medium-replay when `to` is the medium policy's step.
+pub fn read_run_transitions(dir: &Path, to: usize) -> Result<Dataset, ArtifactError> {
+    let info = read_online_run(dir)?;
+    let checkpoint = latest_checkpoint(&dir.join(CHECKPOINTS))?.ok_or_else(|| {
+        ArtifactError::Invalid(format!("{}: the run has no checkpoint yet", dir.display()))
+    })?;
+    let state = read_state(&checkpoint)?;
+    let Some(last) = state.intervals.iter().position(|i| i.to == to) else {
+        let ends: Vec<usize> = state.intervals.iter().map(|i| i.to).collect();
+        return Err(ArtifactError::Invalid(format!(
+            "{}: step {to} is not a checkpoint of the run (its checkpoints end at steps {ends:?})",
+            dir.display()
+        )));
+    };
+    let probe = crate::envs::MujocoTask::new(info.task)
+        .map_err(|e| ArtifactError::Invalid(e.to_string()))?;
+    let mut all = Recording::for_task(&probe);
+    for interval in &state.intervals[..=last] {
+        all.append(read_interval(dir, interval, &all)?);
+    }
+    let mut metadata = DatasetMetadata::new();
+    metadata.insert("task".into(), info.task.name.to_string());
+    metadata.insert(
+        "observation_layout".into(),
+        format!("{:?}", info.task.layout).to_lowercase(),
+    );
+    all.into_dataset(metadata, dir)
+        .map_err(|e| ArtifactError::Invalid(e.to_string()))
+}
+
+/// Every policy the run saved, by step, with its evaluation.
+pub fn run_policies(dir: &Path) -> Result<Vec<RunPolicy>, ArtifactError> {
+    let checkpoint = latest_checkpoint(&dir.join(CHECKPOINTS))?.ok_or_else(|| {
+        ArtifactError::Invalid(format!("{}: the run has no checkpoint yet", dir.display()))
+    })?;
+    let state = read_state(&checkpoint)?;
+    let policies = dir.join(POLICIES);
+    state
+        .intervals
+        .iter()
+        .map(|interval| {
+            let stem = policy_stem(interval.to);
+            let metadata = read_versioned_json(
+                &policies.join(format!("{stem}.json")),
+                super::POLICY_SCHEMA_VERSION,
+            )?;
+            Ok(RunPolicy {
+                step: interval.to,
+                dir: policies.clone(),
+                stem,
+                metadata,
+            })
+        })
+        .collect()
+}
+
+fn policy_stem(step: usize) -> String {
+    format!("step-{step:08}")
+}
+
+fn read_state(checkpoint: &Path) -> Result<OnlineState, ArtifactError> {
+    read_versioned_json(&checkpoint.join(STATE), ONLINE_RUN_SCHEMA_VERSION)
+}
+
+/// The columns of a recording as named tensors (flags as 0/1).
+fn recording_tensors(r: &Recording) -> NamedTensors {
+    let n = r.len();
+    let flags = |v: &[bool]| v.iter().map(|&b| f32::from(u8::from(b))).collect();
+    let mut tensors = NamedTensors::from([
+        (
+            "observations".into(),
+            (vec![n, r.obs_dim], r.observations.clone()),
+        ),
+        ("actions".into(), (vec![n, r.act_dim], r.actions.clone())),
+        ("rewards".into(), (vec![n], r.rewards.clone())),
+        (
+            "next_observations".into(),
+            (vec![n, r.obs_dim], r.next_observations.clone()),
+        ),
+        ("terminals".into(), (vec![n], flags(&r.terminals))),
+        ("timeouts".into(), (vec![n], flags(&r.timeouts))),
+        ("qpos".into(), (vec![n, r.nq], r.qpos.clone())),
+        ("qvel".into(), (vec![n, r.nv], r.qvel.clone())),
+    ]);
+    if r.logged {
+        tensors.insert("action_log_probs".into(), (vec![n], r.log_probs.clone()));
+    }
+    tensors
+}
+
+/// Reads one interval, checked against its hash and `like`'s widths.
+fn read_interval(
+    dir: &Path,
+    interval: &Interval,
+    like: &Recording,
+) -> Result<Recording, ArtifactError> {
+    let path = dir.join(&interval.file);
+    let mut tensors = read_checked_weights(&path, &interval.sha256)?;
+    let n = interval.to - interval.from;
+    let mut take = |name: &str, width: Option<usize>| -> Result<Vec<f32>, ArtifactError> {
+        let (dims, values) = tensors
+            .remove(name)
+            .ok_or_else(|| ArtifactError::MissingTensor(format!("{}: {name}", path.display())))?;
+        let expected: Vec<usize> = std::iter::once(n).chain(width).collect();
+        if dims != expected {
+            return Err(ArtifactError::TensorShape {
+                name: format!("{}: {name}", path.display()),
+                expected,
+                got: dims,
+            });
+        }
+        Ok(values)
+    };
+    let flags = |v: Vec<f32>| v.into_iter().map(|x| x != 0.0).collect();
+    let log_probs = take("action_log_probs", None).ok();
+    Ok(Recording {
+        observations: take("observations", Some(like.obs_dim))?,
+        actions: take("actions", Some(like.act_dim))?,
+        rewards: take("rewards", None)?,
+        next_observations: take("next_observations", Some(like.obs_dim))?,
+        terminals: flags(take("terminals", None)?),
+        timeouts: flags(take("timeouts", None)?),
+        qpos: take("qpos", Some(like.nq))?,
+        qvel: take("qvel", Some(like.nv))?,
+        logged: log_probs.is_some(),
+        log_probs: log_probs.unwrap_or_default(),
+        obs_dim: like.obs_dim,
+        act_dim: like.act_dim,
+        nq: like.nq,
+        nv: like.nv,
+    })
+}

@@ -1,0 +1,248 @@
+//! `nuno-trainer collect`: train behaviour policies online in the real tasks
+//! (`online-sac`, with checkpoints, `--resume`, metrics and a return curve),
+//! and pick the checkpoints each dataset recipe uses (`select`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Subcommand;
+use indicatif::{ProgressBar, ProgressStyle};
+use nuno::agent::{OnlineRecord, OnlineSac, OnlineSacConfig, SacConfig};
+use nuno::artifact::{
+    load_online_checkpoint, run_policies, save_behaviour, save_online_checkpoint, start_online_run,
+    write_atomically,
+};
+use nuno::data::{BehaviourLevel, LEVEL_TOLERANCE, select_behaviour};
+use nuno::envs::{TaskConfig, TaskName};
+use nuno::sde::ComputeDevice;
+
+use crate::plot::{Series, line_chart};
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Train SAC online in a MuJoCo task, saving the policy at every checkpoint.
+    OnlineSac(OnlineArgs),
+    /// Pick a run's checkpoints for each behaviour level and write them to a
+    /// behaviour directory (`models/behaviour`), with their evaluations.
+    Select(SelectArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub struct OnlineArgs {
+    #[arg(long)]
+    task: TaskName,
+    /// Environment steps in all (a resumed run may be given more).
+    #[arg(long, default_value_t = 1_000_000)]
+    steps: usize,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Steps between checkpoints (evaluation, policy, run state).
+    #[arg(long, default_value_t = 10_000)]
+    checkpoint_every: usize,
+    /// Steps of uniformly random actions before SAC acts and updates.
+    #[arg(long, default_value_t = 5000)]
+    start_steps: usize,
+    /// Deterministic evaluation episodes per checkpoint.
+    #[arg(long, default_value_t = 10)]
+    eval_episodes: usize,
+    /// SAC batch size.
+    #[arg(long, default_value_t = 256)]
+    batch_size: usize,
+    /// Hidden sizes of the actor and critics.
+    #[arg(long, value_delimiter = ',', default_value = "256,256")]
+    hidden: Vec<usize>,
+    /// NeoRL's observation layout (root x included).
+    #[arg(long)]
+    neorl: bool,
+    /// Run directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// Continue from the last checkpoint in --out.
+    #[arg(long)]
+    resume: bool,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct SelectArgs {
+    /// Run directory written by `collect online-sac`.
+    #[arg(long)]
+    run: PathBuf,
+    /// Behaviour directory; the policies go to `<out>/<task>/`.
+    #[arg(long, default_value = "models/behaviour")]
+    out: PathBuf,
+    /// Levels to pick (default: all).
+    #[arg(long, value_delimiter = ',')]
+    levels: Vec<BehaviourLevel>,
+    /// How far a level's checkpoint may be from its target, as a fraction of
+    /// the expert's return.
+    #[arg(long, default_value_t = LEVEL_TOLERANCE)]
+    tolerance: f64,
+}
+
+pub fn run(command: Command) -> anyhow::Result<()> {
+    match command {
+        Command::OnlineSac(args) => online_sac(args),
+        Command::Select(args) => select(args),
+    }
+}
+
+fn online_sac(args: OnlineArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        !args.hidden.is_empty() && args.hidden.iter().all(|&h| h > 0),
+        "--hidden needs positive layer sizes"
+    );
+    let task = if args.neorl {
+        TaskConfig::neorl(args.task)
+    } else {
+        TaskConfig::d4rl(args.task)
+    };
+    let sac = SacConfig::new()
+        .with_batch_size(args.batch_size)
+        .with_actor_hidden(args.hidden.clone())
+        .with_critic_hidden(args.hidden.clone());
+    let config = OnlineSacConfig::new(sac)
+        .with_steps(args.steps)
+        .with_seed(args.seed)
+        .with_checkpoint_every(args.checkpoint_every)
+        .with_start_steps(args.start_steps)
+        .with_eval_episodes(args.eval_episodes);
+    let device = ComputeDevice::Cpu.device().map_err(anyhow::Error::msg)?;
+    let mut run = OnlineSac::new(config, task, &device)?;
+    let has_run = args.out.join("run.json").exists();
+    anyhow::ensure!(
+        args.resume || !has_run,
+        "{} already holds a run; pass --resume to continue it or choose another --out",
+        args.out.display()
+    );
+    start_online_run(&args.out, &run)?;
+    if args.resume && load_online_checkpoint(&args.out, &mut run)? {
+        println!("resumed at step {}", run.step);
+    }
+
+    let bar = ProgressBar::new(args.steps as u64).with_style(ProgressStyle::with_template(
+        "{bar:30} {pos}/{len} steps | {msg}",
+    )?);
+    bar.set_position(run.step as u64);
+    while !run.is_finished() {
+        let record = run.run_interval()?;
+        save_online_checkpoint(&args.out, &run)?;
+        write_metrics(&args.out, &run.history)?;
+        bar.set_position(run.step as u64);
+        bar.set_message(format!(
+            "return {:.0} (score {:.1}) | env steps/s {:.0} | updates/s {:.1}",
+            record.eval.mean_return,
+            record.eval.normalized_score,
+            record.env_steps_per_second,
+            record.updates_per_second
+        ));
+    }
+    bar.finish();
+    if let Some(last) = run.history.last() {
+        println!(
+            "{} steps, {} updates, {} episodes: evaluation return {:.1} (normalised {:.1}); run in {}",
+            last.step,
+            last.updates,
+            last.episodes,
+            last.eval.mean_return,
+            last.eval.normalized_score,
+            args.out.display()
+        );
+    }
+    Ok(())
+}
+
+fn select(args: SelectArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.tolerance > 0.0 && args.tolerance.is_finite(),
+        "--tolerance must be a positive fraction, got {}",
+        args.tolerance
+    );
+    let policies = run_policies(&args.run)
+        .with_context(|| format!("reading the run in {}", args.run.display()))?;
+    let levels = if args.levels.is_empty() {
+        BehaviourLevel::ALL.to_vec()
+    } else {
+        args.levels.clone()
+    };
+    let returns: Vec<(usize, f64)> = policies
+        .iter()
+        .map(|p| {
+            (
+                p.step,
+                p.metadata.provenance.mean_return.unwrap_or(f64::NAN),
+            )
+        })
+        .collect();
+    // Every level is checked before anything is written.
+    let picks = levels
+        .iter()
+        .map(|&level| Ok((level, select_behaviour(&returns, level, args.tolerance)?)))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    for (level, pick) in picks {
+        let policy = policies
+            .iter()
+            .find(|p| p.step == pick.step)
+            .context("the selected checkpoint has no policy")?;
+        let written = save_behaviour(&args.out, &args.run, policy, level, &pick)?;
+        println!(
+            "{level}: step {} (return {:.1}, target {:.1}) -> {}",
+            pick.step,
+            pick.mean_return,
+            pick.target_return,
+            written.display()
+        );
+    }
+    Ok(())
+}
+
+/// metrics.csv and the return curve, rewritten from the whole history.
+fn write_metrics(out: &Path, history: &[OnlineRecord]) -> anyhow::Result<()> {
+    let mut csv = String::from(
+        "step,updates,episodes,charts/episodic_return,eval/mean_return,eval/std_return,\
+         eval/normalized_score,losses/qf1_values,losses/qf1_loss,losses/qf2_loss,losses/actor_loss,\
+         losses/alpha,losses/alpha_loss,losses/entropy,charts/env_steps_per_second,\
+         charts/updates_per_second,time/environment,time/updates,time/evaluation\n",
+    );
+    for r in history {
+        let l = &r.losses;
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.1},{:.2},{:.3},{:.3},{:.3}\n",
+            r.step,
+            r.updates,
+            r.episodes,
+            r.train_return,
+            r.eval.mean_return,
+            r.eval.std_return,
+            r.eval.normalized_score,
+            l.qf1_values,
+            l.qf1_loss,
+            l.qf2_loss,
+            l.actor_loss,
+            l.alpha,
+            l.alpha_loss,
+            l.entropy,
+            r.env_steps_per_second,
+            r.updates_per_second,
+            r.seconds.environment,
+            r.seconds.updates,
+            r.seconds.evaluation
+        ));
+    }
+    let path = out.join("metrics.csv");
+    write_atomically(&path, |tmp| std::fs::write(tmp, &csv), |e| e)
+        .with_context(|| format!("writing {}", path.display()))?;
+    let series = |name, f: fn(&OnlineRecord) -> f64| Series {
+        name,
+        points: history.iter().map(|r| (r.step as f64, f(r))).collect(),
+    };
+    line_chart(
+        &out.join("returns.svg"),
+        "Online SAC: return",
+        "environment step",
+        "return",
+        &[
+            series("evaluation (deterministic)", |r| r.eval.mean_return),
+            series("training episodes", |r| r.train_return),
+        ],
+    )
+}
