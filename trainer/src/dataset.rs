@@ -178,9 +178,12 @@ fn generate_cmd(args: GenerateArgs) -> anyhow::Result<()> {
         }
         (Kind::MediumReplay, _) => {
             let behaviour = load(BehaviourLevel::Medium)?;
-            let run = args.run.as_ref().context(
-                "--kind medium-replay needs --run, the online run the medium policy came from",
-            )?;
+            let Some(run) = args.run.as_ref() else {
+                anyhow::bail!(
+                    "--kind medium-replay needs --run, the online run the medium policy came from{}",
+                    rerun_hint(args.task, &behaviour)
+                );
+            };
             medium_replay(run, &behaviour)?
         }
         (Kind::MediumExpert, _) => {
@@ -304,6 +307,26 @@ fn from_behaviour(
         p.step
     );
     record(&config, &policy, &description, &metadata)
+}
+
+/// How to re-create the medium policy's run up to its checkpoint (the run is
+/// deterministic on the same machine).
+fn rerun_hint(task: TaskName, medium: &Behaviour) -> String {
+    let Some(c) = &medium.metadata.provenance.online_training else {
+        return String::new();
+    };
+    let hidden: Vec<String> = c.sac.actor_hidden.iter().map(usize::to_string).collect();
+    format!(
+        "; to re-create it: nuno-trainer collect online-sac --task {task} --seed {} --steps {} \
+         --checkpoint-every {} --start-steps {} --eval-episodes {} --batch-size {} --hidden {} --out runs/{task}-sac",
+        c.seed,
+        medium.entry.pick.step,
+        c.checkpoint_every,
+        c.start_steps,
+        c.eval_episodes,
+        c.sac.batch_size,
+        hidden.join(",")
+    )
 }
 
 /// The medium policy's run, from its start to the medium checkpoint.

@@ -334,6 +334,10 @@ fn behaviour_recipes_make_d4rl_and_neorl_datasets() {
     assert!(error.contains("mediocre"), "{error}");
     let error = fails(&generate("medium-replay", &p("x.hdf5"), &[]));
     assert!(error.contains("--run"), "{error}");
+    assert!(
+        error.contains(&format!("--seed 0 --steps {}", step("medium"))),
+        "the error says how to re-create the run: {error}"
+    );
     let other = p("other-run");
     ok(&online::<&str>(&other, 300, 9, &[]));
     let error = fails(&generate(
