@@ -23,6 +23,7 @@
 pub mod agent;
 pub mod artifact;
 pub mod data;
+pub mod ensemble;
 pub mod envs;
 pub mod infer;
 pub mod nn;

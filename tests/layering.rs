@@ -13,15 +13,21 @@ const LAYERS: &[(&str, &[&str])] = &[
     ("data", &["shared", "envs"]),
     ("infer", &["shared", "nn"]),
     ("sde", &["shared", "nn", "infer", "envs", "data"]),
-    ("agent", &["shared", "nn", "infer", "envs", "data", "sde"]),
+    ("ensemble", &["shared", "nn", "infer", "envs", "data"]),
+    (
+        "agent",
+        &["shared", "nn", "infer", "envs", "data", "sde", "ensemble"],
+    ),
     (
         "artifact",
-        &["shared", "nn", "infer", "envs", "data", "sde", "agent"],
+        &[
+            "shared", "nn", "infer", "envs", "data", "sde", "ensemble", "agent",
+        ],
     ),
     (
         "server",
         &[
-            "shared", "nn", "infer", "envs", "data", "sde", "agent", "artifact",
+            "shared", "nn", "infer", "envs", "data", "sde", "ensemble", "agent", "artifact",
         ],
     ),
 ];

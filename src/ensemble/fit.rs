@@ -1,0 +1,263 @@
+//! Fitting the ensemble (MOPO as OfflineRL-Kit trains it): a holdout of
+//! min(20 %, 1000) transitions; each member on its own bootstrap resample of
+//! the rest, reshuffled every epoch; Gaussian NLL with per-layer weight decay
+//! and the log-variance bounds' loss; an epoch counts as an update when some
+//! member's holdout MSE improves by more than 1 % on its best, and the fit
+//! stops after 5 epochs without one. Each member ends at its best epoch; the
+//! elites are the members with the lowest holdout MSE.
+
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams};
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::EnsembleError;
+use super::config::EnsembleConfig;
+use super::model::GaussianEnsemble;
+use crate::data::Dataset;
+use crate::nn::{Mlp, seeded_init, to_f32_vec};
+
+/// Inputs (s, a) and targets (s' − s, r) of a dataset, row-major.
+struct Rows {
+    inputs: Vec<f32>,
+    targets: Vec<f32>,
+    d_in: usize,
+    d_out: usize,
+}
+
+impl Rows {
+    fn of(dataset: &Dataset) -> Self {
+        let (o, a) = (dataset.obs_dim(), dataset.act_dim());
+        let n = dataset.len();
+        let mut inputs = Vec::with_capacity(n * (o + a));
+        let mut targets = Vec::with_capacity(n * (o + 1));
+        for i in 0..n {
+            let obs = dataset.observations.row(i);
+            inputs.extend(obs.iter());
+            inputs.extend(dataset.actions.row(i).iter());
+            let next = dataset.next_observations.row(i);
+            targets.extend(next.iter().zip(obs.iter()).map(|(n, s)| n - s));
+            targets.push(dataset.rewards[i]);
+        }
+        Self {
+            inputs,
+            targets,
+            d_in: o + a,
+            d_out: o + 1,
+        }
+    }
+
+    /// The rows `index` selects, inputs normalised, as tensors.
+    fn tensors(&self, index: &[usize], scaler: &Scaler, device: &Device) -> (Tensor<2>, Tensor<2>) {
+        let mut x = Vec::with_capacity(index.len() * self.d_in);
+        let mut y = Vec::with_capacity(index.len() * self.d_out);
+        for &i in index {
+            let row = &self.inputs[i * self.d_in..(i + 1) * self.d_in];
+            x.extend(
+                row.iter()
+                    .zip(&scaler.mean)
+                    .zip(&scaler.std)
+                    .map(|((v, m), s)| (v - m) / s),
+            );
+            y.extend_from_slice(&self.targets[i * self.d_out..(i + 1) * self.d_out]);
+        }
+        let n = index.len();
+        (
+            Tensor::from_data(TensorData::new(x, [n, self.d_in]), device),
+            Tensor::from_data(TensorData::new(y, [n, self.d_out]), device),
+        )
+    }
+}
+
+/// Per-input standardisation (OfflineRL-Kit's `StandardScaler`: a std below
+/// 1e-12 counts as 1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Scaler {
+    pub mean: Vec<f32>,
+    pub std: Vec<f32>,
+}
+
+impl Scaler {
+    fn fit(rows: &Rows, index: &[usize]) -> Self {
+        let d = rows.d_in;
+        let n = index.len().max(1) as f64;
+        let mut mean = vec![0.0f64; d];
+        let mut square = vec![0.0f64; d];
+        for &i in index {
+            for (j, &v) in rows.inputs[i * d..(i + 1) * d].iter().enumerate() {
+                mean[j] += f64::from(v);
+                square[j] += f64::from(v) * f64::from(v);
+            }
+        }
+        let std = mean
+            .iter()
+            .zip(&square)
+            .map(|(m, s)| {
+                let var = (s / n - (m / n) * (m / n)).max(0.0);
+                let std = var.sqrt();
+                if std < 1e-12 { 1.0 } else { std as f32 }
+            })
+            .collect();
+        Self {
+            mean: mean.iter().map(|m| (m / n) as f32).collect(),
+            std,
+        }
+    }
+}
+
+/// One epoch of the fit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EnsembleEpoch {
+    pub epoch: usize,
+    /// Mean training loss over the epoch's batches (all members summed).
+    pub train_loss: f64,
+    /// Each member's holdout MSE after the epoch.
+    pub holdout_mse: Vec<f32>,
+    /// Whether some member improved on its best by more than the threshold.
+    pub improved: bool,
+}
+
+/// A fitted ensemble, each member at its best epoch.
+#[derive(Debug, Clone)]
+pub struct EnsembleFit {
+    pub model: GaussianEnsemble,
+    pub scaler: Scaler,
+    /// Member indices by ascending holdout MSE, the first `config.elites`.
+    pub elites: Vec<usize>,
+    /// Each member's best holdout MSE.
+    pub holdout_mse: Vec<f32>,
+    pub history: Vec<EnsembleEpoch>,
+}
+
+/// Fits `config`'s ensemble to `dataset`; `progress` sees every epoch.
+pub fn fit_ensemble(
+    dataset: &Dataset,
+    config: &EnsembleConfig,
+    device: &Device,
+    progress: &mut dyn FnMut(&EnsembleEpoch),
+) -> Result<EnsembleFit, EnsembleError> {
+    config.validate()?;
+    let rows = Rows::of(dataset);
+    let n = dataset.len();
+    let holdout = ((n as f64 * config.holdout_fraction) as usize).min(config.max_holdout);
+    if holdout == 0 || holdout >= n {
+        return Err(EnsembleError::Config(format!(
+            "{n} transitions leave no holdout or no training set"
+        )));
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    let mut order: Vec<usize> = (0..n).collect();
+    order.shuffle(&mut rng);
+    let (holdout_index, train_index) = order.split_at(holdout);
+    let scaler = Scaler::fit(&rows, train_index);
+    let (holdout_x, holdout_y) = rows.tensors(holdout_index, &scaler, device);
+
+    let train_device = device.clone().autodiff();
+    let mut model = seeded_init(&train_device, config.seed, || {
+        GaussianEnsemble::init(
+            rows.d_in,
+            rows.d_out,
+            &config.hidden,
+            config.members,
+            (config.max_logvar_init, config.min_logvar_init),
+            &train_device,
+        )
+    });
+    let mut optimizer = AdamConfig::new().with_epsilon(1e-8).init();
+    // Each member's bootstrap resample of the training rows, drawn once.
+    let mut resamples: Vec<Vec<usize>> = (0..config.members)
+        .map(|_| {
+            (0..train_index.len())
+                .map(|_| train_index[rng.random_range(0..train_index.len())])
+                .collect()
+        })
+        .collect();
+
+    let mut best_mse = vec![f32::INFINITY; config.members];
+    let mut best: Vec<Mlp> = model.valid().members;
+    let mut history = Vec::new();
+    let mut since_update = 0;
+    let mut epoch = 0;
+    while since_update < config.max_epochs_since_update
+        && config.max_epochs.is_none_or(|cap| epoch < cap)
+    {
+        for resample in &mut resamples {
+            resample.shuffle(&mut rng);
+        }
+        let mut losses = Vec::new();
+        for start in (0..train_index.len()).step_by(config.batch_size) {
+            let end = (start + config.batch_size).min(train_index.len());
+            let mut loss = bounds_loss(&model, config.logvar_loss_coef);
+            for (m, resample) in resamples.iter().enumerate() {
+                let (x, y) = rows.tensors(&resample[start..end], &scaler, &train_device);
+                let (mean, logvar) = model.member(m, x);
+                let inverse_variance = logvar.clone().neg().exp();
+                let nll = (mean - y).powi_scalar(2).mul(inverse_variance).mean() + logvar.mean();
+                loss = loss + nll + weight_decay(&model.members[m], &config.weight_decay);
+            }
+            losses.push(f64::from(to_f32_vec(loss.clone())[0]));
+            let grads = GradientsParams::from_grads(loss.backward(), &model);
+            model = optimizer.step(config.learning_rate, model, grads);
+        }
+        epoch += 1;
+
+        let valid = model.valid();
+        let holdout_mse: Vec<f32> = (0..config.members)
+            .map(|m| {
+                let (mean, _) = valid.member(m, holdout_x.clone());
+                to_f32_vec((mean - holdout_y.clone()).powi_scalar(2).mean())[0]
+            })
+            .collect();
+        let mut improved = false;
+        for (m, &mse) in holdout_mse.iter().enumerate() {
+            if best_mse[m].is_infinite()
+                || (best_mse[m] - mse) / best_mse[m] > config.min_improvement as f32
+            {
+                best_mse[m] = mse;
+                best[m] = valid.members[m].clone();
+                improved = true;
+            }
+        }
+        since_update = if improved { 0 } else { since_update + 1 };
+        let record = EnsembleEpoch {
+            epoch,
+            train_loss: losses.iter().sum::<f64>() / losses.len().max(1) as f64,
+            holdout_mse,
+            improved,
+        };
+        progress(&record);
+        history.push(record);
+    }
+
+    let mut model = model.valid();
+    model.members = best;
+    let mut ranked: Vec<usize> = (0..config.members).collect();
+    ranked.sort_by(|&a, &b| best_mse[a].total_cmp(&best_mse[b]));
+    ranked.truncate(config.elites);
+    Ok(EnsembleFit {
+        model,
+        scaler,
+        elites: ranked,
+        holdout_mse: best_mse,
+        history,
+    })
+}
+
+/// Σ_l coef_l·‖W_l‖²/2 over a member's layers.
+fn weight_decay(member: &Mlp, coefficients: &[f64]) -> Tensor<1> {
+    member
+        .layers
+        .iter()
+        .zip(coefficients)
+        .map(|(layer, &c)| layer.weight.val().powi_scalar(2).sum() * (0.5 * c))
+        .reduce(|a, b| a + b)
+        .expect("at least one layer")
+}
+
+/// coef·(Σ max log σ² − Σ min log σ²): keeps the bounds tight.
+fn bounds_loss(model: &GaussianEnsemble, coef: f64) -> Tensor<1> {
+    (model.max_logvar.val().sum() - model.min_logvar.val().sum()) * coef
+}

@@ -1,0 +1,19 @@
+//! Gaussian-ensemble dynamics, the model of MOPO (Yu et al., 2020) and
+//! TATU+MOPO that NUNO is compared with (Table 1, Figures 4–5): N MLPs, each
+//! a diagonal Gaussian over (s' − s, r) given (s, a), fitted with OfflineRL-Kit's
+//! defaults; the elites predict.
+
+mod config;
+mod fit;
+mod model;
+
+pub use config::EnsembleConfig;
+pub use fit::{EnsembleEpoch, EnsembleFit, Scaler, fit_ensemble};
+pub use model::GaussianEnsemble;
+
+/// Everything that can go wrong building or fitting an ensemble.
+#[derive(Debug, thiserror::Error)]
+pub enum EnsembleError {
+    #[error("ensemble: {0}")]
+    Config(String),
+}

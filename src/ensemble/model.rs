@@ -1,0 +1,52 @@
+//! The ensemble's networks: member i maps normalised (s, a) to a diagonal
+//! Gaussian over y = (s' − s, r), mean μᵢ and log-variance bounded softly
+//! between learned limits (PETS, Chua et al. 2018):
+//! log σ² = max − softplus(max − raw), then min + softplus(log σ² − min).
+
+use burn::module::{Module, Param};
+use burn::tensor::activation::softplus;
+use burn::tensor::{Device, Tensor};
+
+use crate::nn::{Activation, Mlp, MlpConfig};
+
+#[derive(Module, Debug)]
+pub struct GaussianEnsemble {
+    pub members: Vec<Mlp>,
+    /// Upper and lower log-variance limits per output, shared by the members.
+    pub max_logvar: Param<Tensor<1>>,
+    pub min_logvar: Param<Tensor<1>>,
+}
+
+impl GaussianEnsemble {
+    pub fn init(
+        d_input: usize,
+        d_output: usize,
+        hidden: &[usize],
+        members: usize,
+        (max_logvar, min_logvar): (f32, f32),
+        device: &Device,
+    ) -> Self {
+        let member = MlpConfig::new(d_input, hidden.to_vec(), 2 * d_output, Activation::Swish);
+        Self {
+            members: (0..members).map(|_| member.init(device)).collect(),
+            max_logvar: Param::from_tensor(Tensor::full([d_output], max_logvar, device)),
+            min_logvar: Param::from_tensor(Tensor::full([d_output], min_logvar, device)),
+        }
+    }
+
+    /// Member `m`'s mean and bounded log-variance for normalised inputs.
+    ///
+    /// # Shapes
+    /// - `x`: `[batch, d_input]` → (`[batch, d_output]`, `[batch, d_output]`)
+    pub fn member(&self, m: usize, x: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
+        let out = self.members[m].forward(x);
+        let d = out.dims()[1] / 2;
+        let mean = out.clone().narrow(1, 0, d);
+        let raw = out.narrow(1, d, d);
+        let max = self.max_logvar.val().unsqueeze::<2>();
+        let min = self.min_logvar.val().unsqueeze::<2>();
+        let logvar = max.clone() - softplus(max - raw, 1.0);
+        let logvar = min.clone() + softplus(logvar - min, 1.0);
+        (mean, logvar)
+    }
+}
