@@ -18,7 +18,7 @@ PIP_DOWNLOAD      := $(PYTHON) -m pip download --quiet --no-deps --only-binary=:
 SERVE_ADDR   ?= 127.0.0.1:8080
 SERVE_MODELS ?= models
 
-.PHONY: serve test mujoco venv system-deps build lint bench openapi check-wgpu check-docker clean-runtime
+.PHONY: serve test mujoco venv system-deps slurm build lint bench openapi check-wgpu check-docker clean-runtime
 
 ## serve: fetch what is missing, build, and serve the shipped models on $(SERVE_ADDR).
 serve: mujoco
@@ -27,7 +27,7 @@ serve: mujoco
 ## test: the full suite (unit, integration, Gymnasium parity), then the fused
 ## kernels' numerics again on each narrower vector level (NUNO_SIMD), so every
 ## variant runs whatever the machine's widest is (--workspace: the same build as above).
-test: mujoco venv
+test: mujoco venv slurm
 	$(CARGO) test --workspace --release
 	for level in portable avx2; do \
 	  NUNO_SIMD=$$level $(CARGO) test --workspace --release --lib infer:: || exit 1; \
@@ -95,6 +95,14 @@ system-deps:
 	  sudo=""; [ "$$(id -u)" = 0 ] || sudo=sudo; \
 	  $$sudo apt-get update -qq && $$sudo apt-get install -y -qq $$missing; \
 	fi
+
+## slurm: Debian's Slurm and munge, for the experiment runner's test against a
+## real single-node cluster (deploy/slurm/local-cluster.sh starts and stops it).
+slurm:
+	@command -v slurmctld >/dev/null && command -v munged >/dev/null || { \
+	  echo "installing Debian packages: slurm-wlm munge"; \
+	  sudo=""; [ "$$(id -u)" = 0 ] || sudo=sudo; \
+	  $$sudo apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$sudo apt-get install -y -qq slurm-wlm munge; }
 
 ## venv: the Python side of the tests (Gymnasium parity, h5py/safetensors read-backs).
 venv: system-deps $(VENV_STAMP)

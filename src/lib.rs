@@ -25,6 +25,7 @@ pub mod artifact;
 pub mod data;
 pub mod ensemble;
 pub mod envs;
+pub mod experiment;
 pub mod infer;
 pub mod nn;
 pub mod sde;

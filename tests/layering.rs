@@ -25,6 +25,12 @@ const LAYERS: &[(&str, &[&str])] = &[
         ],
     ),
     (
+        "experiment",
+        &[
+            "shared", "nn", "infer", "envs", "data", "sde", "ensemble", "agent", "artifact",
+        ],
+    ),
+    (
         "server",
         &[
             "shared", "nn", "infer", "envs", "data", "sde", "ensemble", "agent", "artifact",

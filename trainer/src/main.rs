@@ -6,6 +6,7 @@ mod collect;
 mod dataset;
 mod eta_report;
 mod evaluate;
+mod experiment;
 mod fit_model;
 mod fit_policy;
 mod plot;
@@ -33,6 +34,9 @@ enum Command {
     FitModel(fit_model::Args),
     /// Train a NUNO policy with SAC on the model's penalised, truncated rollouts.
     FitPolicy(fit_policy::Args),
+    /// Run, follow and report grids of datasets × methods × seeds, locally or on Slurm.
+    #[command(subcommand)]
+    Experiment(experiment::Command),
     /// Run a policy in the real MuJoCo task and print returns and D4RL normalised scores.
     Evaluate(evaluate::Args),
     /// How well a model's η separates a dataset from random actions and perturbed data.
@@ -45,6 +49,7 @@ fn main() -> ExitCode {
         Command::Collect(command) => collect::run(command),
         Command::Dataset(command) => dataset::run(command),
         Command::Evaluate(args) => evaluate::run(args),
+        Command::Experiment(command) => experiment::run(command),
         Command::EtaReport(args) => eta_report::run(args),
         Command::FitModel(args) => fit_model::run(args),
         Command::FitPolicy(args) => fit_policy::run(args),

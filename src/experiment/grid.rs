@@ -1,0 +1,249 @@
+//! The grid file of an experiment (TOML): datasets × methods × seeds under one
+//! step budget, expanded into cells in a fixed order, every name checked
+//! before anything runs.
+//!
+//! ```toml
+//! [budget]
+//! model_steps = 5000        # fit-model's --max-steps
+//! policy_steps = 100000     # fit-policy's --steps (the same for every method)
+//! steps_per_epoch = 1000
+//! eval_episodes = 10
+//!
+//! [[datasets]]
+//! name = "hopper-random"
+//! file = "data/hopper-random.hdf5"   # relative to the grid file
+//! task = "hopper"
+//! preset = "hopper-random"           # Table 3 row: h, α, λ_pen
+//! methods = ["nuno", "nuno-r"]
+//! seeds = [0, 1, 2]
+//! ```
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+use super::ExperimentError;
+use crate::agent::preset;
+use crate::envs::{ObservationLayout, TaskName};
+
+/// A policy-learning method a cell runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// NUNO: the neural SDE with the task's reward, η-penalised and truncated rollouts.
+    Nuno,
+    /// NUNO^R: the neural SDE learning the reward too.
+    NunoR,
+}
+
+impl Method {
+    pub const ALL: [Method; 2] = [Method::Nuno, Method::NunoR];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Method::Nuno => "nuno",
+            Method::NunoR => "nuno-r",
+        }
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for Method {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Method::ALL
+            .into_iter()
+            .find(|m| m.as_str() == s)
+            .ok_or_else(|| {
+                let known: Vec<&str> = Method::ALL.iter().map(|m| m.as_str()).collect();
+                format!("unknown method `{s}` (known: {})", known.join(", "))
+            })
+    }
+}
+
+/// The step budget every cell gets.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Budget {
+    pub model_steps: usize,
+    pub policy_steps: usize,
+    #[serde(default = "default_steps_per_epoch")]
+    pub steps_per_epoch: usize,
+    #[serde(default = "default_eval_episodes")]
+    pub eval_episodes: usize,
+    /// fit-policy's rollout batch (NUNO's scripts: 5000).
+    #[serde(default = "default_rollout_batch")]
+    pub rollout_batch: usize,
+    /// Hidden sizes of SAC's networks.
+    #[serde(default = "default_hidden")]
+    pub hidden: Vec<usize>,
+}
+
+fn default_steps_per_epoch() -> usize {
+    1000
+}
+fn default_eval_episodes() -> usize {
+    10
+}
+fn default_rollout_batch() -> usize {
+    5000
+}
+fn default_hidden() -> Vec<usize> {
+    vec![256, 256]
+}
+
+/// One dataset row of the grid, as written.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GridDataset {
+    pub name: String,
+    pub file: PathBuf,
+    pub task: TaskName,
+    pub preset: String,
+    pub methods: Vec<String>,
+    pub seeds: Vec<u64>,
+}
+
+/// The grid file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Grid {
+    pub budget: Budget,
+    pub datasets: Vec<GridDataset>,
+}
+
+/// One run of the grid: a dataset, a method, a seed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Cell {
+    /// Position in the grid's order (the Slurm array index).
+    pub index: usize,
+    pub dataset: String,
+    /// The dataset file, resolved against the grid's folder.
+    pub file: PathBuf,
+    pub task: TaskName,
+    pub layout: ObservationLayout,
+    pub preset: String,
+    pub method: Method,
+    pub seed: u64,
+}
+
+impl Cell {
+    /// `dataset/method/seed-N`: the cell's folder under the experiment.
+    pub fn id(&self) -> String {
+        format!("{}/{}/seed-{}", self.dataset, self.method, self.seed)
+    }
+}
+
+impl Grid {
+    /// Reads and checks `path`; dataset files are resolved against its folder.
+    pub fn read(path: &Path) -> Result<(Grid, Vec<Cell>), ExperimentError> {
+        let text = std::fs::read_to_string(path).map_err(|e| ExperimentError::Grid {
+            file: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        let grid: Grid = toml::from_str(&text).map_err(|e| ExperimentError::Grid {
+            file: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        // Absolute, so a cell is the same whichever folder the grid was named from.
+        let parent = path.parent().filter(|p| !p.as_os_str().is_empty());
+        let base = std::path::absolute(parent.unwrap_or(Path::new("."))).map_err(|e| {
+            ExperimentError::Grid {
+                file: path.to_path_buf(),
+                message: e.to_string(),
+            }
+        })?;
+        let cells = grid.cells(&base).map_err(|message| ExperimentError::Grid {
+            file: path.to_path_buf(),
+            message,
+        })?;
+        Ok((grid, cells))
+    }
+
+    /// The cells, datasets in file order, then methods, then seeds; every name checked.
+    pub fn cells(&self, base: &Path) -> Result<Vec<Cell>, String> {
+        let b = &self.budget;
+        if b.model_steps == 0
+            || b.policy_steps == 0
+            || b.steps_per_epoch == 0
+            || b.rollout_batch == 0
+        {
+            return Err("budget: model_steps, policy_steps, steps_per_epoch and rollout_batch must be at least 1".into());
+        }
+        if b.hidden.is_empty() || b.hidden.contains(&0) {
+            return Err("budget: hidden needs positive layer sizes".into());
+        }
+        if self.datasets.is_empty() {
+            return Err("the grid names no dataset".into());
+        }
+        let mut cells = Vec::new();
+        let mut names = std::collections::BTreeSet::new();
+        for d in &self.datasets {
+            if !names.insert(d.name.as_str()) {
+                return Err(format!("dataset `{}` is named twice", d.name));
+            }
+            if d.name.is_empty() || d.name.contains(['/', '\\']) || d.name.starts_with('.') {
+                return Err(format!("dataset name `{}` cannot name a folder", d.name));
+            }
+            let file = base.join(&d.file);
+            if !file.exists() {
+                return Err(format!(
+                    "dataset `{}`: {} does not exist",
+                    d.name,
+                    file.display()
+                ));
+            }
+            let preset = preset(&d.preset).map_err(|e| format!("dataset `{}`: {e}", d.name))?;
+            if preset.task != d.task {
+                return Err(format!(
+                    "dataset `{}` is {} data, its preset `{}` is for {}",
+                    d.name, d.task, d.preset, preset.task
+                ));
+            }
+            if d.methods.is_empty() || d.seeds.is_empty() {
+                return Err(format!(
+                    "dataset `{}` needs at least one method and one seed",
+                    d.name
+                ));
+            }
+            let methods = d
+                .methods
+                .iter()
+                .map(|m| {
+                    m.parse::<Method>()
+                        .map_err(|e| format!("dataset `{}`: {e}", d.name))
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            for method in methods {
+                for &seed in &d.seeds {
+                    cells.push(Cell {
+                        index: cells.len(),
+                        dataset: d.name.clone(),
+                        file: file.clone(),
+                        task: d.task,
+                        layout: preset.layout,
+                        preset: d.preset.clone(),
+                        method,
+                        seed,
+                    });
+                }
+            }
+        }
+        let mut ids = std::collections::BTreeSet::new();
+        if let Some(twice) = cells.iter().find(|c| !ids.insert(c.id())) {
+            return Err(format!(
+                "cell {} appears twice (a repeated method or seed)",
+                twice.id()
+            ));
+        }
+        Ok(cells)
+    }
+}

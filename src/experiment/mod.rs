@@ -1,0 +1,32 @@
+//! Experiments: a grid of datasets × methods × seeds under one budget
+//! ([`grid`]), each cell's result and the Table 1/2-style aggregate
+//! ([`results`]). Running cells (locally or as a Slurm array) is the
+//! trainer's `experiment` subcommand; it calls the other subcommands per cell.
+
+pub mod grid;
+pub mod results;
+
+use std::path::PathBuf;
+
+pub use grid::{Budget, Cell, Grid, GridDataset, Method};
+pub use results::{
+    CellResult, CellStatus, Summary, cell_dir, cell_status, markdown_table, results_csv, summarize,
+    summarize_run, write_result,
+};
+
+/// Everything that can be wrong with an experiment.
+#[derive(Debug, thiserror::Error)]
+pub enum ExperimentError {
+    #[error("{file}: {message}")]
+    Grid { file: PathBuf, message: String },
+    #[error("{file}: {source}")]
+    Io {
+        file: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{0}")]
+    Invalid(String),
+    #[error(transparent)]
+    Artifact(#[from] crate::artifact::ArtifactError),
+}

@@ -1,0 +1,235 @@
+//! What a cell leaves behind and what a report makes of it: `result.json` in
+//! the cell's folder once it has finished (its best and final D4RL-normalised
+//! scores and its learning curve, from fit-policy's `metrics.jsonl`), the
+//! status of unfinished cells, and the Table 1/2-style aggregate (mean ± std
+//! over seeds per dataset × method).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::ExperimentError;
+use super::grid::{Cell, Method};
+use crate::agent::EpochRecord;
+use crate::artifact::{latest_checkpoint, read_versioned_json, write_json};
+
+pub const RESULT_SCHEMA_VERSION: u32 = 1;
+const RESULT: &str = "result.json";
+
+/// A finished cell.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CellResult {
+    pub schema_version: u32,
+    pub cell: Cell,
+    /// The best evaluation's normalised score (the paper's "best score") and its step.
+    pub best_score: f64,
+    pub best_step: usize,
+    /// The last evaluation's normalised score.
+    pub final_score: f64,
+    pub steps: usize,
+    /// (gradient step, normalised score) after every epoch.
+    pub curve: Vec<(usize, f64)>,
+}
+
+/// Where a cell stands.
+#[derive(Debug, Clone, PartialEq)]
+pub enum CellStatus {
+    Done(Box<CellResult>),
+    /// Policy training has checkpointed this many epochs.
+    Partial {
+        epochs: usize,
+    },
+    /// Nothing yet, or only the model.
+    Pending,
+}
+
+/// The cell's folder under the experiment's output folder.
+pub fn cell_dir(root: &Path, cell: &Cell) -> PathBuf {
+    root.join(cell.id())
+}
+
+/// Reads fit-policy's `metrics.jsonl` into a result for `cell`.
+pub fn summarize_run(cell: &Cell, metrics: &Path) -> Result<CellResult, ExperimentError> {
+    let text = std::fs::read_to_string(metrics).map_err(|e| ExperimentError::Io {
+        file: metrics.to_path_buf(),
+        source: e,
+    })?;
+    let records = text
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(serde_json::from_str::<EpochRecord>)
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| ExperimentError::Invalid(format!("{}: {e}", metrics.display())))?;
+    let last = records.last().ok_or_else(|| {
+        ExperimentError::Invalid(format!("{}: no finished epoch", metrics.display()))
+    })?;
+    let best = records
+        .iter()
+        .max_by(|a, b| a.eval.normalized_score.total_cmp(&b.eval.normalized_score))
+        .unwrap_or(last);
+    Ok(CellResult {
+        schema_version: RESULT_SCHEMA_VERSION,
+        cell: cell.clone(),
+        best_score: best.eval.normalized_score,
+        best_step: best.step,
+        final_score: last.eval.normalized_score,
+        steps: last.step,
+        curve: records
+            .iter()
+            .map(|r| (r.step, r.eval.normalized_score))
+            .collect(),
+    })
+}
+
+/// Marks `cell` finished with `result` (atomically: a cell is done or not).
+pub fn write_result(root: &Path, result: &CellResult) -> Result<(), ExperimentError> {
+    Ok(write_json(
+        &cell_dir(root, &result.cell).join(RESULT),
+        result,
+    )?)
+}
+
+/// Where `cell` stands under `root`.
+pub fn cell_status(root: &Path, cell: &Cell) -> Result<CellStatus, ExperimentError> {
+    let dir = cell_dir(root, cell);
+    let result = dir.join(RESULT);
+    if result.is_file() {
+        let result: CellResult = read_versioned_json(&result, RESULT_SCHEMA_VERSION)?;
+        if result.cell != *cell {
+            return Err(ExperimentError::Invalid(format!(
+                "{}: written for another grid's cell; move the old experiment away",
+                dir.display()
+            )));
+        }
+        return Ok(CellStatus::Done(Box::new(result)));
+    }
+    match latest_checkpoint(&dir.join("policy/checkpoints"))? {
+        Some(checkpoint) => {
+            let epochs = checkpoint
+                .file_name()
+                .and_then(|n| n.to_str()?.strip_prefix("epoch-")?.parse().ok())
+                .unwrap_or(0);
+            Ok(CellStatus::Partial { epochs })
+        }
+        None => Ok(CellStatus::Pending),
+    }
+}
+
+/// Mean ± std over the seeds of one dataset × method.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    pub dataset: String,
+    pub method: Method,
+    pub runs: usize,
+    pub best_mean: f64,
+    pub best_std: f64,
+    pub final_mean: f64,
+    pub final_std: f64,
+}
+
+/// Aggregates finished cells per dataset × method, in grid order.
+pub fn summarize(results: &[CellResult]) -> Vec<Summary> {
+    let mut groups: BTreeMap<(usize, Method), Vec<&CellResult>> = BTreeMap::new();
+    for r in results {
+        let first = results
+            .iter()
+            .find(|o| o.cell.dataset == r.cell.dataset)
+            .map_or(0, |o| o.cell.index);
+        groups.entry((first, r.cell.method)).or_default().push(r);
+    }
+    groups
+        .into_values()
+        .map(|runs| {
+            let (best_mean, best_std) = mean_std(runs.iter().map(|r| r.best_score));
+            let (final_mean, final_std) = mean_std(runs.iter().map(|r| r.final_score));
+            Summary {
+                dataset: runs[0].cell.dataset.clone(),
+                method: runs[0].cell.method,
+                runs: runs.len(),
+                best_mean,
+                best_std,
+                final_mean,
+                final_std,
+            }
+        })
+        .collect()
+}
+
+/// Mean and sample standard deviation (0 for one run).
+fn mean_std(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+    let n = values.clone().count();
+    let mean = values.clone().sum::<f64>() / n.max(1) as f64;
+    if n < 2 {
+        return (mean, 0.0);
+    }
+    let var = values.map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    (mean, var.sqrt())
+}
+
+/// One line per finished cell.
+pub fn results_csv(results: &[CellResult]) -> String {
+    let mut csv = String::from("dataset,method,seed,best_score,best_step,final_score,steps\n");
+    for r in results {
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{}\n",
+            r.cell.dataset,
+            r.cell.method,
+            r.cell.seed,
+            r.best_score,
+            r.best_step,
+            r.final_score,
+            r.steps
+        ));
+    }
+    csv
+}
+
+/// A Table 1/2-style markdown table: datasets as rows, methods as columns,
+/// best score mean ± std (runs), then the same for the final score.
+pub fn markdown_table(summaries: &[Summary]) -> String {
+    let mut methods: Vec<Method> = summaries.iter().map(|s| s.method).collect();
+    methods.sort();
+    methods.dedup();
+    let mut datasets: Vec<&str> = Vec::new();
+    for s in summaries {
+        if !datasets.contains(&s.dataset.as_str()) {
+            datasets.push(&s.dataset);
+        }
+    }
+    let mut out = String::new();
+    for (title, pick) in [
+        (
+            "Best normalised score",
+            (|s: &Summary| (s.best_mean, s.best_std)) as fn(&Summary) -> (f64, f64),
+        ),
+        ("Final normalised score", |s: &Summary| {
+            (s.final_mean, s.final_std)
+        }),
+    ] {
+        out.push_str(&format!(
+            "### {title} (mean ± std over seeds)\n\n| dataset |"
+        ));
+        for m in &methods {
+            out.push_str(&format!(" {m} |"));
+        }
+        out.push_str("\n|---|");
+        out.push_str(&"---|".repeat(methods.len()));
+        out.push('\n');
+        for d in &datasets {
+            out.push_str(&format!("| {d} |"));
+            for m in &methods {
+                match summaries.iter().find(|s| s.dataset == *d && s.method == *m) {
+                    Some(s) => {
+                        let (mean, std) = pick(s);
+                        out.push_str(&format!(" {mean:.1} ± {std:.1} ({}) |", s.runs));
+                    }
+                    None => out.push_str(" – |"),
+                }
+            }
+            out.push('\n');
+        }
+        out.push('\n');
+    }
+    out
+}

@@ -1,0 +1,392 @@
+//! `nuno-trainer experiment` end to end on a tiny grid: bad grids are refused
+//! by name before anything runs; a local run finishes every cell, reruns
+//! nothing, resumes a killed cell; the report's table is the mean ± std of
+//! the cells' own metrics; the Slurm executor submits one array job to a real
+//! single-node Slurm (deploy/slurm/local-cluster.sh) and its cells finish.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::{fails, generate_hopper, ok};
+
+/// A budget of `policy_steps` gradient steps in epochs of 10, tiny networks.
+fn budget(policy_steps: usize) -> String {
+    format!(
+        "[budget]\nmodel_steps = 20\npolicy_steps = {policy_steps}\nsteps_per_epoch = 10\n\
+         eval_episodes = 1\nrollout_batch = 32\nhidden = [16, 16]\n"
+    )
+}
+
+fn dataset_row(
+    name: &str,
+    file: &str,
+    task: &str,
+    preset: &str,
+    methods: &str,
+    seeds: &str,
+) -> String {
+    format!(
+        "\n[[datasets]]\nname = \"{name}\"\nfile = \"{file}\"\ntask = \"{task}\"\npreset = \"{preset}\"\nmethods = {methods}\nseeds = {seeds}\n"
+    )
+}
+
+fn write_grid(dir: &Path, name: &str, rows: &[String]) -> PathBuf {
+    write_grid_with(dir, name, 20, rows)
+}
+
+fn write_grid_with(dir: &Path, name: &str, policy_steps: usize, rows: &[String]) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, format!("{}{}", budget(policy_steps), rows.concat())).unwrap();
+    path
+}
+
+fn s(p: &Path) -> String {
+    p.to_str().unwrap().to_string()
+}
+
+/// Each epoch's normalised score from a cell's fit-policy metrics.jsonl.
+fn scores(cell: &Path) -> Vec<f64> {
+    std::fs::read_to_string(cell.join("policy/metrics.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let v: serde_json::Value = serde_json::from_str(l).unwrap();
+            v["eval"]["normalized_score"].as_f64().unwrap()
+        })
+        .collect()
+}
+
+#[test]
+fn bad_grids_are_refused_before_anything_runs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    generate_hopper(&s(&dir.join("hopper.hdf5")), 300, 0);
+    let out = s(&dir.join("out"));
+    let cases = [
+        (
+            dataset_row(
+                "h",
+                "hopper.hdf5",
+                "hopper",
+                "hopper-random",
+                "[\"nuno\", \"dreamer\"]",
+                "[0]",
+            ),
+            "unknown method `dreamer`",
+        ),
+        (
+            dataset_row(
+                "h",
+                "hopper.hdf5",
+                "hopper",
+                "hopper-randomish",
+                "[\"nuno\"]",
+                "[0]",
+            ),
+            "hopper-randomish",
+        ),
+        (
+            dataset_row(
+                "h",
+                "missing.hdf5",
+                "hopper",
+                "hopper-random",
+                "[\"nuno\"]",
+                "[0]",
+            ),
+            "does not exist",
+        ),
+        (
+            dataset_row(
+                "h",
+                "hopper.hdf5",
+                "walker2d",
+                "hopper-random",
+                "[\"nuno\"]",
+                "[0]",
+            ),
+            "its preset `hopper-random` is for hopper",
+        ),
+        (
+            dataset_row(
+                "h",
+                "hopper.hdf5",
+                "walker2d",
+                "walker2d-random",
+                "[\"nuno\"]",
+                "[0]",
+            ),
+            "does not fit walker2d",
+        ),
+        (
+            dataset_row(
+                "h",
+                "hopper.hdf5",
+                "hopper",
+                "hopper-random",
+                "[\"nuno\"]",
+                "[0, 0]",
+            ),
+            "appears twice",
+        ),
+        (
+            format!(
+                "{}{}",
+                dataset_row(
+                    "h",
+                    "hopper.hdf5",
+                    "hopper",
+                    "hopper-random",
+                    "[\"nuno\"]",
+                    "[0]"
+                ),
+                "colour = \"red\"\n"
+            ),
+            "colour",
+        ),
+    ];
+    for (i, (row, expected)) in cases.iter().enumerate() {
+        let grid = s(&write_grid(
+            dir,
+            &format!("grid-{i}.toml"),
+            std::slice::from_ref(row),
+        ));
+        let error = fails(&["experiment", "run", "--grid", &grid, "--out", &out]);
+        assert!(error.contains(expected), "case {i}: {error}");
+    }
+    assert!(!dir.join("out").exists(), "nothing ran");
+
+    // --executor slurm without Slurm's client.
+    let grid = s(&write_grid(
+        dir,
+        "grid.toml",
+        &[dataset_row(
+            "h",
+            "hopper.hdf5",
+            "hopper",
+            "hopper-random",
+            "[\"nuno\"]",
+            "[0]",
+        )],
+    ));
+    let output = Command::new(env!("CARGO_BIN_EXE_nuno-trainer"))
+        .args([
+            "experiment",
+            "run",
+            "--grid",
+            &grid,
+            "--out",
+            &out,
+            "--executor",
+            "slurm",
+        ])
+        .env("PATH", "/nonexistent")
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let error = String::from_utf8_lossy(&output.stderr);
+    assert!(error.contains("needs `sbatch` on PATH"), "{error}");
+    assert!(!dir.join("out/slurm").exists(), "nothing was submitted");
+}
+
+#[test]
+fn a_local_grid_runs_once_resumes_and_reports() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    generate_hopper(&s(&dir.join("hopper.hdf5")), 2000, 0);
+    let grid = s(&write_grid(
+        dir,
+        "grid.toml",
+        &[dataset_row(
+            "hopper-random",
+            "hopper.hdf5",
+            "hopper",
+            "hopper-random",
+            "[\"nuno\"]",
+            "[0, 1]",
+        )],
+    ));
+    let out = dir.join("out");
+    let run = [
+        "experiment",
+        "run",
+        "--grid",
+        &grid,
+        "--out",
+        &s(&out),
+        "--jobs",
+        "2",
+    ];
+    let first = ok(&run);
+    assert!(first.contains("2 to run"), "{first}");
+    let status = ok(&["experiment", "status", "--grid", &grid, "--out", &s(&out)]);
+    assert!(status.contains("2/2 cells done"), "{status}");
+    // Finished cells are never rerun.
+    let again = ok(&run);
+    assert!(again.contains("0 to run"), "{again}");
+
+    // A cell killed after its second epoch, before its result was written,
+    // resumes there: given a longer budget, it trains the third epoch only.
+    let cell = out.join("hopper-random/nuno/seed-1");
+    let before = scores(&cell);
+    assert_eq!(before.len(), 2);
+    std::fs::remove_file(cell.join("result.json")).unwrap();
+    let row = dataset_row(
+        "hopper-random",
+        "hopper.hdf5",
+        "hopper",
+        "hopper-random",
+        "[\"nuno\"]",
+        "[0, 1]",
+    );
+    write_grid_with(dir, "grid.toml", 30, &[row]);
+    let resumed = ok(&run);
+    assert!(resumed.contains("1 to run"), "{resumed}");
+    let log = std::fs::read_to_string(cell.join("log.txt")).unwrap();
+    assert!(log.contains("resumed from"), "{log}");
+    let after = scores(&cell);
+    assert_eq!(after.len(), 3);
+    assert_eq!(
+        after[..2],
+        before[..],
+        "the resumed cell kept its first two epochs"
+    );
+    assert_eq!(
+        scores(&out.join("hopper-random/nuno/seed-0")).len(),
+        2,
+        "the finished cell was not rerun"
+    );
+
+    let report = ok(&["experiment", "report", "--grid", &grid, "--out", &s(&out)]);
+    // The table against the cells' own metrics: best and final per seed, mean ± sample std.
+    let per_seed: Vec<(f64, f64)> = [0, 1]
+        .iter()
+        .map(|seed| {
+            let v = scores(&out.join(format!("hopper-random/nuno/seed-{seed}")));
+            (
+                v.iter().copied().fold(f64::MIN, f64::max),
+                *v.last().unwrap(),
+            )
+        })
+        .collect();
+    for pick in [|p: &(f64, f64)| p.0, |p: &(f64, f64)| p.1] {
+        let (a, b) = (pick(&per_seed[0]), pick(&per_seed[1]));
+        let mean = (a + b) / 2.0;
+        let std = ((a - mean).powi(2) + (b - mean).powi(2)).sqrt();
+        let cell = format!("{mean:.1} ± {std:.1} (2)");
+        assert!(report.contains(&cell), "expected {cell} in\n{report}");
+    }
+    let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3, "{csv}");
+    assert!(out.join("results.md").is_file());
+    assert!(out.join("curves-hopper-random.svg").is_file());
+}
+
+#[test]
+fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let script = root.join("deploy/slurm/local-cluster.sh");
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let cluster = dir.join("cluster");
+    let started = Command::new(&script)
+        .arg("start")
+        .arg(&cluster)
+        .output()
+        .unwrap();
+    assert!(
+        started.status.success(),
+        "a single-node Slurm is needed (`make test` installs slurm-wlm and munge; the daemons run as root): {}",
+        String::from_utf8_lossy(&started.stderr)
+    );
+    // Stop exactly what was started, whatever happens below.
+    struct Stop<'a>(&'a Path, PathBuf);
+    impl Drop for Stop<'_> {
+        fn drop(&mut self) {
+            let _ = Command::new(self.0).arg("stop").arg(&self.1).status();
+        }
+    }
+    let _stop = Stop(&script, cluster.clone());
+    let conf = cluster.join("slurm.conf");
+
+    generate_hopper(&s(&dir.join("hopper.hdf5")), 2000, 0);
+    let grid = s(&write_grid(
+        dir,
+        "grid.toml",
+        &[dataset_row(
+            "hopper-random",
+            "hopper.hdf5",
+            "hopper",
+            "hopper-random",
+            "[\"nuno\", \"nuno-r\"]",
+            "[0]",
+        )],
+    ));
+    let out = dir.join("out");
+    let submitted = Command::new(env!("CARGO_BIN_EXE_nuno-trainer"))
+        .args([
+            "experiment",
+            "run",
+            "--grid",
+            &grid,
+            "--out",
+            &s(&out),
+            "--executor",
+            "slurm",
+        ])
+        .arg("--slurm-arg=--cpus-per-task=1")
+        .env("SLURM_CONF", &conf)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&submitted.stdout);
+    assert!(
+        submitted.status.success(),
+        "{}",
+        String::from_utf8_lossy(&submitted.stderr)
+    );
+    assert!(stdout.contains("submitted Slurm job"), "{stdout}");
+    let script_text = std::fs::read_to_string(out.join("slurm/cells.sh")).unwrap();
+    assert!(script_text.contains("#SBATCH --array=0,1"), "{script_text}");
+
+    // Wait for the queue to empty (event polling, no fixed sleep budget).
+    loop {
+        let queue = Command::new("squeue")
+            .arg("-h")
+            .env("SLURM_CONF", &conf)
+            .output()
+            .unwrap();
+        assert!(
+            queue.status.success(),
+            "{}",
+            String::from_utf8_lossy(&queue.stderr)
+        );
+        if queue.stdout.is_empty() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    }
+    let status = ok(&["experiment", "status", "--grid", &grid, "--out", &s(&out)]);
+    assert!(
+        status.contains("2/2 cells done"),
+        "{status}\n{}",
+        logs(&out.join("slurm"))
+    );
+    let report = ok(&["experiment", "report", "--grid", &grid, "--out", &s(&out)]);
+    assert!(
+        report.contains("| hopper-random |") && report.contains("nuno-r"),
+        "{report}"
+    );
+}
+
+fn logs(dir: &Path) -> String {
+    std::fs::read_dir(dir)
+        .map(|entries| {
+            entries
+                .filter_map(|e| std::fs::read_to_string(e.ok()?.path()).ok())
+                .collect::<Vec<_>>()
+                .join("\n")
+        })
+        .unwrap_or_default()
+}
