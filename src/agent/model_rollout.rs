@@ -182,7 +182,7 @@ pub fn rollout_model_or_cancel(
                 .collect(),
         };
         let states = dynamics.states_from_observations(&obs);
-        let noise = scaled_noise(states.len(), config.noise_scale, rng);
+        let noise = scaled_noise(active.len() * dynamics.noise_dim(), config.noise_scale, rng);
         let step = dynamics.step(&states, &actions, &noise);
 
         let mut still_active = Vec::with_capacity(active.len());

@@ -66,13 +66,31 @@ pub fn step_particles(
     let state_dim = dynamics.state_dim();
     let batch = observations.len() / obs_dim;
     let rows = batch * particles;
+    let noise_dim = dynamics.noise_dim();
     // Drift, σ, h(η) and η depend on (s, a) only: the networks run once per
     // item (with ε = 0, so s' is the mean) and only the noise is per particle.
     let states = dynamics.states_from_observations(observations);
-    let terms = dynamics.step(&states, actions, &vec![0.0; states.len()]);
+    let terms = dynamics.step(&states, actions, &vec![0.0; batch * noise_dim]);
     // Particle p of item b is row b·particles + p, drawn in that order.
-    let noise = scaled_noise(rows * state_dim, noise_scale, rng);
+    let noise = scaled_noise(rows * noise_dim, noise_scale, rng);
     let sqrt_dt = dynamics.dt().sqrt() as f32;
+    // A model that draws more than its additive noise (an ensemble picking a
+    // member per sample) steps every particle through its networks.
+    let sampled = (noise_dim != state_dim).then(|| {
+        let repeat = |values: &[f32], width: usize| -> Vec<f32> {
+            values
+                .chunks_exact(width)
+                .flat_map(|row| std::iter::repeat_n(row, particles).flatten().copied())
+                .collect()
+        };
+        dynamics
+            .step(
+                &repeat(&states, state_dim),
+                &repeat(actions, act_dim),
+                &noise,
+            )
+            .next_states
+    });
 
     let observation_columns = |values: &[f32]| -> Vec<f32> {
         values
@@ -98,15 +116,20 @@ pub fn step_particles(
     for row in 0..rows {
         let b = row / particles.max(1);
         let item = b * state_dim..(b + 1) * state_dim;
-        let noise = &noise[row * state_dim..(row + 1) * state_dim];
-        for (d, next) in next.iter_mut().enumerate() {
-            *next = euler_maruyama(
-                terms.means[item.start + d],
-                terms.sigma[item.start + d],
-                terms.h_eta[item.start + d],
-                noise[d],
-                sqrt_dt,
-            );
+        let noise = &noise[row * noise_dim..(row + 1) * noise_dim];
+        match &sampled {
+            Some(samples) => next.copy_from_slice(&samples[row * state_dim..(row + 1) * state_dim]),
+            None => {
+                for (d, next) in next.iter_mut().enumerate() {
+                    *next = euler_maruyama(
+                        terms.means[item.start + d],
+                        terms.sigma[item.start + d],
+                        terms.h_eta[item.start + d],
+                        noise[d],
+                        sqrt_dt,
+                    );
+                }
+            }
         }
         let next_obs = &next[..obs_dim];
         let reward = if dynamics.learns_reward() {

@@ -387,7 +387,7 @@ impl PolicyTraining {
 /// Mean η(s, a) over rows.
 fn mean_eta(dynamics: &dyn BatchDynamics, obs: &[f32], actions: &[f32]) -> f32 {
     let states = dynamics.states_from_observations(obs);
-    let noise = vec![0.0; states.len()];
+    let noise = vec![0.0; obs.len() / dynamics.obs_dim() * dynamics.noise_dim()];
     let eta = dynamics.step(&states, actions, &noise).eta;
     eta.iter().sum::<f32>() / eta.len().max(1) as f32
 }

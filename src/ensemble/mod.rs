@@ -4,10 +4,12 @@
 //! defaults; the elites predict.
 
 mod config;
+mod dynamics;
 mod fit;
 mod model;
 
 pub use config::EnsembleConfig;
+pub use dynamics::{EnsembleDynamics, EnsembleUncertainty};
 pub use fit::{EnsembleEpoch, EnsembleFit, Scaler, fit_ensemble};
 pub use model::GaussianEnsemble;
 

@@ -164,7 +164,11 @@ pub fn compare_with_task(
     for action in actions.chunks_exact(act_dim).take(real_steps) {
         cancel.check()?;
         let states = dynamics.states_from_observations(&observations);
-        let noise = scaled_noise(states.len(), config.noise_scale, &mut rng);
+        let noise = scaled_noise(
+            particles * dynamics.noise_dim(),
+            config.noise_scale,
+            &mut rng,
+        );
         let step = dynamics.step(&states, &action.repeat(particles), &noise);
         // A step that left the finite numbers is not compared (as a rollout drops it).
         if !(step.eta.iter().chain(&step.next_states)).all(|x| x.is_finite()) {

@@ -72,6 +72,14 @@ pub trait BatchDynamics: Sync {
         shape.obs_dim + usize::from(shape.learns_reward)
     }
 
+    /// Width of a row of ε: one standard normal per state dimension, plus any
+    /// the model draws besides its additive noise (an ensemble's member choice).
+    /// When it equals `state_dim`, s' = mean + (σ + h(η))·ε·sqrt(dt) exactly, so
+    /// callers may run the networks once and add each particle's noise.
+    fn noise_dim(&self) -> usize {
+        self.state_dim()
+    }
+
     fn learns_reward(&self) -> bool {
         self.shape().learns_reward
     }
@@ -98,6 +106,10 @@ impl<T: BatchDynamics + ?Sized> BatchDynamics for &T {
 
     fn step(&self, states: &[f32], actions: &[f32], noise: &[f32]) -> ModelStep {
         (**self).step(states, actions, noise)
+    }
+
+    fn noise_dim(&self) -> usize {
+        (**self).noise_dim()
     }
 }
 
@@ -198,13 +210,14 @@ pub fn step_batch(
     noise: &[f32],
 ) -> usize {
     let (state_dim, act_dim) = (dynamics.state_dim(), dynamics.act_dim());
+    let noise_dim = dynamics.noise_dim();
     let batch = states.len() / state_dim.max(1);
     assert!(
         states.len() == batch * state_dim
-            && noise.len() == states.len()
+            && noise.len() == batch * noise_dim
             && actions.len() == batch * act_dim,
         "BatchDynamics::step: {} state, {} action and {} noise values are not \
-         [batch, {state_dim}], [batch, {act_dim}] and [batch, {state_dim}] rows of one batch",
+         [batch, {state_dim}], [batch, {act_dim}] and [batch, {noise_dim}] rows of one batch",
         states.len(),
         actions.len(),
         noise.len()

@@ -1,0 +1,189 @@
+//! A fitted ensemble behind [`BatchDynamics`], as MOPO steps it: every member
+//! predicts a Gaussian over (s' − s, r); each row samples from one elite,
+//! picked by the row's last noise column (Φ(z) uniform over the elites), and
+//! reports as its uncertainty "η" the model's disagreement in MOPO's or
+//! TATU's form. The state carries the reward like NUNO^R's (r_c), so rewards
+//! come from the model; dt is one step.
+
+use burn::tensor::{Device, Tensor, TensorData};
+use serde::{Deserialize, Serialize};
+
+use super::fit::{EnsembleFit, Scaler};
+use super::model::GaussianEnsemble;
+use crate::nn::to_f32_vec;
+use crate::shared::{BatchDynamics, BatchShape, ModelStep, step_batch};
+
+/// What a step reports as its uncertainty (the rollout's η).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EnsembleUncertainty {
+    /// MOPO's penalty: max over members of ‖σᵢ(s, a)‖₂.
+    #[default]
+    MaxAleatoric,
+    /// TATU's disagreement: max over members of ‖μᵢ(s, a) − μ̄(s, a)‖₂.
+    MaxDisagreement,
+}
+
+/// A fitted ensemble ready to step.
+#[derive(Debug, Clone)]
+pub struct EnsembleDynamics {
+    model: GaussianEnsemble,
+    scaler: Scaler,
+    elites: Vec<usize>,
+    obs_dim: usize,
+    act_dim: usize,
+    uncertainty: EnsembleUncertainty,
+    device: Device,
+}
+
+impl EnsembleDynamics {
+    pub fn new(
+        fit: &EnsembleFit,
+        obs_dim: usize,
+        act_dim: usize,
+        uncertainty: EnsembleUncertainty,
+    ) -> Self {
+        Self {
+            model: fit.model.clone(),
+            scaler: fit.scaler.clone(),
+            elites: fit.elites.clone(),
+            obs_dim,
+            act_dim,
+            uncertainty,
+            device: Device::flex(),
+        }
+    }
+
+    /// The same model reporting `uncertainty` as η.
+    pub fn with_uncertainty(&self, uncertainty: EnsembleUncertainty) -> Self {
+        Self {
+            uncertainty,
+            ..self.clone()
+        }
+    }
+
+    /// Every member's mean and std, `[members][batch · (obs_dim + 1)]`.
+    fn predict(
+        &self,
+        states: &[f32],
+        actions: &[f32],
+        batch: usize,
+    ) -> (Vec<Vec<f32>>, Vec<Vec<f32>>) {
+        let (o, a, s) = (self.obs_dim, self.act_dim, self.state_dim());
+        let mut x = Vec::with_capacity(batch * (o + a));
+        for r in 0..batch {
+            let row = states[r * s..r * s + o]
+                .iter()
+                .chain(&actions[r * a..(r + 1) * a]);
+            x.extend(
+                row.zip(&self.scaler.mean)
+                    .zip(&self.scaler.std)
+                    .map(|((v, m), d)| (v - m) / d),
+            );
+        }
+        let x = Tensor::<2>::from_data(TensorData::new(x, [batch, o + a]), &self.device);
+        (0..self.model.members.len())
+            .map(|m| {
+                let (mean, logvar) = self.model.member(m, x.clone());
+                (to_f32_vec(mean), to_f32_vec((logvar * 0.5).exp()))
+            })
+            .unzip()
+    }
+}
+
+impl BatchDynamics for EnsembleDynamics {
+    fn shape(&self) -> BatchShape {
+        BatchShape {
+            obs_dim: self.obs_dim,
+            act_dim: self.act_dim,
+            learns_reward: true,
+            dt: 1.0,
+        }
+    }
+
+    /// The state's noise, then one column that picks the elite.
+    fn noise_dim(&self) -> usize {
+        self.state_dim() + 1
+    }
+
+    fn step(&self, states: &[f32], actions: &[f32], noise: &[f32]) -> ModelStep {
+        let batch = step_batch(self, states, actions, noise);
+        let (s, k) = (self.state_dim(), self.noise_dim());
+        let (means, stds) = self.predict(states, actions, batch);
+        let members = means.len();
+        let mut out = ModelStep {
+            next_states: Vec::with_capacity(batch * s),
+            means: Vec::with_capacity(batch * s),
+            sigma: Vec::with_capacity(batch * s),
+            h_eta: vec![0.0; batch * s],
+            eta: Vec::with_capacity(batch),
+        };
+        for r in 0..batch {
+            let row = r * s..(r + 1) * s;
+            let eps = &noise[r * k..(r + 1) * k];
+            let pick = standard_normal_cdf(f64::from(eps[s])) * self.elites.len() as f64;
+            let elite = self.elites[(pick as usize).min(self.elites.len() - 1)];
+            for d in 0..s {
+                let mean = states[row.start + d] + means[elite][row.start + d];
+                let std = stds[elite][row.start + d];
+                out.means.push(mean);
+                out.sigma.push(std);
+                out.next_states.push(mean + std * eps[d]);
+            }
+            let norm = |v: &mut dyn Iterator<Item = f32>| v.map(|x| x * x).sum::<f32>().sqrt();
+            let eta = match self.uncertainty {
+                EnsembleUncertainty::MaxAleatoric => (0..members)
+                    .map(|m| norm(&mut stds[m][row.clone()].iter().copied()))
+                    .fold(0.0, f32::max),
+                EnsembleUncertainty::MaxDisagreement => {
+                    let centre: Vec<f32> = row
+                        .clone()
+                        .map(|i| means.iter().map(|m| m[i]).sum::<f32>() / members as f32)
+                        .collect();
+                    (0..members)
+                        .map(|m| norm(&mut row.clone().zip(&centre).map(|(i, c)| means[m][i] - c)))
+                        .fold(0.0, f32::max)
+                }
+            };
+            out.eta.push(eta);
+        }
+        out
+    }
+}
+
+/// Φ(z), the standard normal CDF (Abramowitz & Stegun 7.1.26, |error| < 1.5e-7:
+/// ample for picking among a handful of elites).
+fn standard_normal_cdf(z: f64) -> f64 {
+    let x = z.abs() / std::f64::consts::SQRT_2;
+    let t = 1.0 / (1.0 + 0.327_591_1 * x);
+    let poly = t
+        * (0.254_829_592
+            + t * (-0.284_496_736
+                + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+    let erf = 1.0 - poly * (-x * x).exp();
+    if z >= 0.0 {
+        0.5 * (1.0 + erf)
+    } else {
+        0.5 * (1.0 - erf)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::standard_normal_cdf;
+
+    #[test]
+    fn the_normal_cdf_matches_known_values() {
+        // Φ at 0, ±1, ±1.96, 3 from standard tables.
+        for (z, p) in [
+            (0.0, 0.5),
+            (1.0, 0.841_344_7),
+            (-1.0, 0.158_655_3),
+            (1.96, 0.975_002_1),
+            (-1.96, 0.024_997_9),
+            (3.0, 0.998_650_1),
+        ] {
+            assert!((standard_normal_cdf(z) - p).abs() < 2e-7, "Φ({z})");
+        }
+    }
+}
