@@ -280,3 +280,79 @@ fn stepped_as_dynamics_it_samples_the_system_and_reports_its_spread() {
     );
     assert!(step.h_eta.iter().all(|&h| h == 0.0));
 }
+
+#[test]
+fn a_saved_ensemble_loads_to_the_same_steps_and_refuses_damage() {
+    use nuno::agent::RandomNetworkPolicy;
+    use nuno::data::{GenerateConfig, generate};
+    use nuno::envs::{TaskConfig, TaskName};
+    let task = TaskConfig::d4rl(TaskName::Hopper);
+    let policy = RandomNetworkPolicy::new(11, 3, &[32, 32], 0);
+    let hopper = generate(
+        &GenerateConfig::new(task, "random", 1000, 0),
+        &policy,
+        "test",
+        &|_| {},
+    )
+    .unwrap();
+    let config = small_config().with_max_epochs(Some(2));
+    let fit = fit_ensemble(&hopper, &config, &Device::flex(), &mut |_| {}).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    // The synthetic system's ensemble does not fit hopper's widths.
+    let error = nuno::artifact::save_ensemble(dir.path(), &fitted(), &small_config(), task, None)
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("takes 3 inputs"), "{error}");
+    let saved = nuno::artifact::save_ensemble(dir.path(), &fit, &config, task, None).unwrap();
+    assert_eq!(
+        (saved.kind.as_str(), saved.obs_dim, saved.act_dim),
+        ("gaussian-ensemble", 11, 3)
+    );
+
+    let (loaded, _) = nuno::artifact::load_ensemble(dir.path(), &Device::flex()).unwrap();
+    assert_eq!(loaded.elites, fit.elites);
+    let n = 5;
+    let states: Vec<f32> = hopper
+        .observations
+        .rows()
+        .into_iter()
+        .take(n)
+        .flat_map(|r| r.iter().copied().chain([0.0]).collect::<Vec<_>>())
+        .collect();
+    let actions: Vec<f32> = hopper
+        .actions
+        .rows()
+        .into_iter()
+        .take(n)
+        .flat_map(|r| r.to_vec())
+        .collect();
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    let noise: Vec<f32> = (0..n * 13).map(|_| rng.sample(StandardNormal)).collect();
+    let step = |f: &EnsembleFit| {
+        EnsembleDynamics::new(f, 11, 3, EnsembleUncertainty::MaxAleatoric)
+            .step(&states, &actions, &noise)
+    };
+    assert_eq!(step(&loaded), step(&fit));
+
+    // A flipped byte in the weights, or elites the members cannot have.
+    let weights = dir.path().join("ensemble.safetensors");
+    let mut bytes = std::fs::read(&weights).unwrap();
+    let last = bytes.len() - 1;
+    bytes[last] ^= 1;
+    std::fs::write(&weights, &bytes).unwrap();
+    let error = nuno::artifact::load_ensemble(dir.path(), &Device::flex())
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("not the ones"), "{error}");
+    bytes[last] ^= 1;
+    std::fs::write(&weights, &bytes).unwrap();
+    let path = dir.path().join("ensemble.json");
+    let mut metadata: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    metadata["elites"] = serde_json::json!([0, 9]);
+    std::fs::write(&path, metadata.to_string()).unwrap();
+    let error = nuno::artifact::load_ensemble(dir.path(), &Device::flex())
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("elites"), "{error}");
+}

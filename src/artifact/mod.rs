@@ -5,6 +5,7 @@
 mod behaviour;
 mod checkpoint;
 mod dynamics;
+mod ensemble;
 mod json_file;
 mod online_run;
 mod policy;
@@ -24,6 +25,10 @@ pub use dynamics::{
     DYNAMICS_METADATA, DYNAMICS_SCHEMA_VERSION, DYNAMICS_WEIGHTS, DatasetInfo, DynamicsMetadata,
     DynamicsProvenance, load_dynamics, read_dynamics_metadata, save_dynamics, sha256_file,
     sha256_hex,
+};
+pub use ensemble::{
+    ENSEMBLE_METADATA, ENSEMBLE_SCHEMA_VERSION, ENSEMBLE_WEIGHTS, EnsembleMetadata, load_ensemble,
+    save_ensemble,
 };
 pub use json_file::{read_checked_weights, read_versioned_json, write_json};
 pub use online_run::{

@@ -7,6 +7,7 @@ mod dataset;
 mod eta_report;
 mod evaluate;
 mod experiment;
+mod fit_ensemble;
 mod fit_model;
 mod fit_policy;
 mod plot;
@@ -30,6 +31,8 @@ enum Command {
     /// Generate or inspect offline datasets.
     #[command(subcommand)]
     Dataset(dataset::Command),
+    /// Fit MOPO's Gaussian ensemble on a dataset and write it into a model directory.
+    FitEnsemble(fit_ensemble::Args),
     /// Fit the neural SDE on a dataset and write the model artifact.
     FitModel(fit_model::Args),
     /// Train a NUNO policy with SAC on the model's penalised, truncated rollouts.
@@ -51,6 +54,7 @@ fn main() -> ExitCode {
         Command::Evaluate(args) => evaluate::run(args),
         Command::Experiment(command) => experiment::run(command),
         Command::EtaReport(args) => eta_report::run(args),
+        Command::FitEnsemble(args) => fit_ensemble::run(args),
         Command::FitModel(args) => fit_model::run(args),
         Command::FitPolicy(args) => fit_policy::run(args),
     };

@@ -1,0 +1,144 @@
+//! `nuno-trainer fit-ensemble`: fit MOPO's Gaussian ensemble (OfflineRL-Kit's
+//! defaults) on a dataset and write it into a model directory
+//! (`ensemble.safetensors`, `ensemble.json`), with the fit's metrics and a
+//! holdout-error plot.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use nuno::artifact::{DatasetInfo, save_ensemble, sha256_file, write_atomically};
+use nuno::data::{DatasetFormat, read_dataset};
+use nuno::ensemble::{EnsembleConfig, fit_ensemble};
+use nuno::envs::{TaskConfig, TaskName};
+use nuno::sde::ComputeDevice;
+
+use crate::plot::{Series, line_chart};
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Dataset file (D4RL .hdf5, NeoRL .npz) or Minari directory.
+    #[arg(long)]
+    dataset: PathBuf,
+    /// Reader to use (default: detected).
+    #[arg(long)]
+    format: Option<DatasetFormat>,
+    #[arg(long)]
+    task: TaskName,
+    /// NeoRL's observation layout (root x included).
+    #[arg(long)]
+    neorl: bool,
+    /// Model directory (the ensemble's files are added to it).
+    #[arg(long)]
+    out: PathBuf,
+    #[arg(long, default_value_t = 7)]
+    members: usize,
+    #[arg(long, default_value_t = 5)]
+    elites: usize,
+    /// Hidden sizes of each member (swish).
+    #[arg(long, value_delimiter = ',', default_value = "200,200,200,200")]
+    hidden: Vec<usize>,
+    /// Weight decay per layer, hidden layers then the output (default: OfflineRL-Kit's for 4 hidden layers).
+    #[arg(long, value_delimiter = ',')]
+    weight_decay: Option<Vec<f64>>,
+    #[arg(long, default_value_t = 256)]
+    batch_size: usize,
+    /// A cap on epochs (default: until 5 epochs without a 1 % holdout improvement).
+    #[arg(long)]
+    max_epochs: Option<usize>,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let task = if args.neorl {
+        TaskConfig::neorl(args.task)
+    } else {
+        TaskConfig::d4rl(args.task)
+    };
+    let mut config = EnsembleConfig::new()
+        .with_members(args.members)
+        .with_elites(args.elites)
+        .with_hidden(args.hidden.clone())
+        .with_batch_size(args.batch_size)
+        .with_max_epochs(args.max_epochs)
+        .with_seed(args.seed);
+    if let Some(decay) = &args.weight_decay {
+        config.weight_decay = decay.clone();
+    }
+    config.validate()?;
+    let dataset = read_dataset(&args.dataset, args.format)?;
+    dataset.check_task(&task, &args.dataset)?;
+    let device = ComputeDevice::Cpu.device().map_err(anyhow::Error::msg)?;
+
+    let fit = fit_ensemble(&dataset, &config, &device, &mut |epoch| {
+        let best = epoch
+            .holdout_mse
+            .iter()
+            .copied()
+            .fold(f32::INFINITY, f32::min);
+        println!(
+            "epoch {:>4}: train loss {:.4}, best member's holdout MSE {best:.5}{}",
+            epoch.epoch,
+            epoch.train_loss,
+            if epoch.improved {
+                ""
+            } else {
+                " (no improvement)"
+            }
+        );
+    })?;
+    let info = DatasetInfo {
+        path: args.dataset.display().to_string(),
+        sha256: sha256_file(&args.dataset).unwrap_or_default(),
+        transitions: dataset.len(),
+        trajectories: dataset.trajectories().len(),
+    };
+    save_ensemble(&args.out, &fit, &config, task, Some(info))?;
+
+    let mut csv = String::from("epoch,train_loss,improved");
+    for m in 0..config.members {
+        csv.push_str(&format!(",holdout_mse/{m}"));
+    }
+    csv.push('\n');
+    for e in &fit.history {
+        csv.push_str(&format!("{},{},{}", e.epoch, e.train_loss, e.improved));
+        for mse in &e.holdout_mse {
+            csv.push_str(&format!(",{mse}"));
+        }
+        csv.push('\n');
+    }
+    let path = args.out.join("ensemble_metrics.csv");
+    write_atomically(&path, |tmp| std::fs::write(tmp, &csv), |e| e)
+        .with_context(|| format!("writing {}", path.display()))?;
+    let names: Vec<String> = (0..config.members).map(|m| format!("member {m}")).collect();
+    let series: Vec<Series> = names
+        .iter()
+        .enumerate()
+        .map(|(m, name)| Series {
+            name,
+            points: fit
+                .history
+                .iter()
+                .map(|e| (e.epoch as f64, f64::from(e.holdout_mse[m])))
+                .collect(),
+        })
+        .collect();
+    line_chart(
+        &args.out.join("ensemble_holdout.svg"),
+        "Gaussian ensemble: holdout MSE",
+        "epoch",
+        "holdout MSE of (s' − s, r)",
+        &series,
+    )?;
+    println!(
+        "{} epochs; elites {:?} (holdout MSE {:?}); written to {}",
+        fit.history.len(),
+        fit.elites,
+        fit.elites
+            .iter()
+            .map(|&e| fit.holdout_mse[e])
+            .collect::<Vec<_>>(),
+        args.out.display()
+    );
+    Ok(())
+}
