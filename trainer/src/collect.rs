@@ -13,9 +13,10 @@ use nuno::artifact::{
     write_atomically,
 };
 use nuno::data::{BehaviourLevel, LEVEL_TOLERANCE, select_behaviour};
-use nuno::envs::{TaskConfig, TaskName};
+use nuno::envs::TaskName;
 use nuno::sde::ComputeDevice;
 
+use crate::data_source::task_config;
 use crate::plot::{Series, line_chart};
 
 #[derive(Debug, Subcommand)]
@@ -91,11 +92,7 @@ fn online_sac(args: OnlineArgs) -> anyhow::Result<()> {
         !args.hidden.is_empty() && args.hidden.iter().all(|&h| h > 0),
         "--hidden needs positive layer sizes"
     );
-    let task = if args.neorl {
-        TaskConfig::neorl(args.task)
-    } else {
-        TaskConfig::d4rl(args.task)
-    };
+    let task = task_config(args.task, args.neorl);
     let sac = SacConfig::new()
         .with_batch_size(args.batch_size)
         .with_actor_hidden(args.hidden.clone())

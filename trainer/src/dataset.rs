@@ -18,6 +18,8 @@ use nuno::data::{
 use nuno::envs::{MujocoTask, TaskConfig, TaskName};
 use nuno::sde::ComputeDevice;
 
+use crate::data_source::task_config;
+
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Run a behaviour policy in the real task and write a D4RL-layout HDF5 file.
@@ -103,14 +105,6 @@ pub fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Generate(args) => generate_cmd(args),
         Command::Info(args) => info(args),
-    }
-}
-
-fn task_config(task: TaskName, neorl: bool) -> TaskConfig {
-    if neorl {
-        TaskConfig::neorl(task)
-    } else {
-        TaskConfig::d4rl(task)
     }
 }
 

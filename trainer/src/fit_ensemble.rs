@@ -6,27 +6,18 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use nuno::artifact::{DatasetInfo, save_ensemble, sha256_file, write_atomically};
-use nuno::data::{DatasetFormat, read_dataset};
+use nuno::artifact::{save_ensemble, write_atomically};
 use nuno::ensemble::{EnsembleConfig, fit_ensemble};
-use nuno::envs::{TaskConfig, TaskName};
 use nuno::sde::ComputeDevice;
+
+use crate::data_source::DataSource;
 
 use crate::plot::{Series, line_chart};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Dataset file (D4RL .hdf5, NeoRL .npz) or Minari directory.
-    #[arg(long)]
-    dataset: PathBuf,
-    /// Reader to use (default: detected).
-    #[arg(long)]
-    format: Option<DatasetFormat>,
-    #[arg(long)]
-    task: TaskName,
-    /// NeoRL's observation layout (root x included).
-    #[arg(long)]
-    neorl: bool,
+    #[command(flatten)]
+    data: DataSource,
     /// Model directory (the ensemble's files are added to it).
     #[arg(long)]
     out: PathBuf,
@@ -50,11 +41,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let task = if args.neorl {
-        TaskConfig::neorl(args.task)
-    } else {
-        TaskConfig::d4rl(args.task)
-    };
+    let task = args.data.task_config();
     let mut config = EnsembleConfig::new()
         .with_members(args.members)
         .with_elites(args.elites)
@@ -66,8 +53,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         config.weight_decay = decay.clone();
     }
     config.validate()?;
-    let dataset = read_dataset(&args.dataset, args.format)?;
-    dataset.check_task(&task, &args.dataset)?;
+    let dataset = args.data.read()?;
     let device = ComputeDevice::Cpu.device().map_err(anyhow::Error::msg)?;
 
     let fit = fit_ensemble(&dataset, &config, &device, &mut |epoch| {
@@ -87,13 +73,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         );
     })?;
-    let info = DatasetInfo {
-        path: args.dataset.display().to_string(),
-        sha256: sha256_file(&args.dataset).unwrap_or_default(),
-        transitions: dataset.len(),
-        trajectories: dataset.trajectories().len(),
-    };
-    save_ensemble(&args.out, &fit, &config, task, Some(info))?;
+    save_ensemble(
+        &args.out,
+        &fit,
+        &config,
+        task,
+        Some(args.data.info(&dataset)),
+    )?;
 
     let mut csv = String::from("epoch,train_loss,improved");
     for m in 0..config.members {

@@ -7,30 +7,21 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use nuno::artifact::{DatasetInfo, DynamicsProvenance, save_dynamics, sha256_file};
-use nuno::data::{DatasetFormat, read_dataset};
-use nuno::envs::{MujocoTask, TaskConfig, TaskName};
+use nuno::artifact::{DynamicsProvenance, save_dynamics};
+use nuno::envs::MujocoTask;
 use nuno::sde::{
     CalibrationConfig, ComputeDevice, DynamicsSpec, FitConfig, LikelihoodPath, LossConfig,
     SdeConfig, ThresholdConfig, calibration_report, compute_thresholds, fit, prediction_error,
 };
 
+use crate::data_source::DataSource;
 use crate::eta_report::{action_space, calibration_charts, print_calibration};
 use crate::plot::{Series, line_chart};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Dataset file (D4RL .hdf5, NeoRL .npz) or Minari directory.
-    #[arg(long)]
-    dataset: PathBuf,
-    /// Reader to use (default: detected).
-    #[arg(long)]
-    format: Option<DatasetFormat>,
-    #[arg(long)]
-    task: TaskName,
-    /// NeoRL's observation layout (root x included).
-    #[arg(long)]
-    neorl: bool,
+    #[command(flatten)]
+    data: DataSource,
     /// Output model directory (dynamics.safetensors, model.json, metrics.csv, plots).
     #[arg(long)]
     out: PathBuf,
@@ -92,11 +83,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         !args.drift_hidden.is_empty() && args.drift_hidden.iter().all(|&h| h > 0),
         "--drift-hidden needs positive layer sizes"
     );
-    let task = if args.neorl {
-        TaskConfig::neorl(args.task)
-    } else {
-        TaskConfig::d4rl(args.task)
-    };
+    let task = args.data.task_config();
     let probe = MujocoTask::new(task)?;
     let spec = DynamicsSpec {
         obs_dim: probe.obs_dim(),
@@ -124,8 +111,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     config.eval_every = args.eval_every;
     config.patience = args.patience;
     config.seed = args.seed;
-    let dataset = read_dataset(&args.dataset, args.format)?;
-    dataset.check_task(&task, &args.dataset)?;
+    let dataset = args.data.read()?;
     let (train, valid) = dataset.split_by_trajectory(config.valid_fraction, config.seed);
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
@@ -197,12 +183,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         thresholds: Some(thresholds),
         calibration: Some(calibration.clone()),
         training: Some(summary),
-        dataset: Some(DatasetInfo {
-            path: args.dataset.display().to_string(),
-            sha256: sha256_file(&args.dataset).unwrap_or_default(),
-            transitions: dataset.len(),
-            trajectories: dataset.trajectories().len(),
-        }),
+        dataset: Some(args.data.info(&dataset)),
     };
     save_dynamics(&args.out, &model, provenance)?;
 

@@ -3,6 +3,7 @@
 //! code lives here.
 
 mod collect;
+mod data_source;
 mod dataset;
 mod eta_report;
 mod evaluate;

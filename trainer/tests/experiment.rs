@@ -42,6 +42,20 @@ fn write_grid_with(dir: &Path, name: &str, policy_steps: usize, rows: &[String])
     path
 }
 
+/// A 2000-transition hopper-random file and a grid over it with `methods` and `seeds`.
+fn hopper_grid(dir: &Path, methods: &str, seeds: &str) -> String {
+    generate_hopper(&s(&dir.join("hopper.hdf5")), 2000, 0);
+    let row = dataset_row(
+        "hopper-random",
+        "hopper.hdf5",
+        "hopper",
+        "hopper-random",
+        methods,
+        seeds,
+    );
+    s(&write_grid(dir, "grid.toml", &[row]))
+}
+
 fn s(p: &Path) -> String {
     p.to_str().unwrap().to_string()
 }
@@ -195,19 +209,7 @@ fn bad_grids_are_refused_before_anything_runs() {
 fn a_local_grid_runs_once_resumes_and_reports() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    generate_hopper(&s(&dir.join("hopper.hdf5")), 2000, 0);
-    let grid = s(&write_grid(
-        dir,
-        "grid.toml",
-        &[dataset_row(
-            "hopper-random",
-            "hopper.hdf5",
-            "hopper",
-            "hopper-random",
-            "[\"nuno\"]",
-            "[0, 1]",
-        )],
-    ));
+    let grid = hopper_grid(dir, "[\"nuno\"]", "[0, 1]");
     let out = dir.join("out");
     let run = [
         "experiment",
@@ -311,19 +313,7 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
     let _stop = Stop(&script, cluster.clone());
     let conf = cluster.join("slurm.conf");
 
-    generate_hopper(&s(&dir.join("hopper.hdf5")), 2000, 0);
-    let grid = s(&write_grid(
-        dir,
-        "grid.toml",
-        &[dataset_row(
-            "hopper-random",
-            "hopper.hdf5",
-            "hopper",
-            "hopper-random",
-            "[\"nuno\", \"nuno-r\"]",
-            "[0]",
-        )],
-    ));
+    let grid = hopper_grid(dir, "[\"nuno\", \"nuno-r\"]", "[0]");
     let out = dir.join("out");
     let submitted = Command::new(env!("CARGO_BIN_EXE_nuno-trainer"))
         .args([
