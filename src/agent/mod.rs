@@ -35,7 +35,7 @@ pub use policy::RandomPolicy;
 pub use policy_loop::{
     EpochRecord, EtaProbe, EvalSummary, LoopContext, PhaseSeconds, PolicyLoopConfig, PolicyTraining,
 };
-pub use presets::{PRESETS, Preset, preset};
+pub use presets::{MOPO_PRESETS, PRESETS, Preset, mopo_preset, preset};
 pub use random_network::RandomNetworkPolicy;
 pub use sac::{Sac, SacAdam, SacConfig, SacLosses};
 

@@ -96,3 +96,37 @@ pub fn preset(name: &str) -> Result<&'static Preset, AgentError> {
                 .join(", "),
         })
 }
+
+/// MOPO's rollout length h and penalty coefficient λ for a D4RL dataset (the
+/// MOPO paper's hyperparameter table, Yu et al. 2020, Appendix), by the same
+/// names as Table 3's rows. MOPO gives none for NeoRL.
+pub const MOPO_PRESETS: [(&str, usize, f64); 12] = [
+    ("halfcheetah-random", 5, 0.5),
+    ("hopper-random", 5, 1.0),
+    ("walker2d-random", 1, 1.0),
+    ("halfcheetah-medium", 1, 1.0),
+    ("hopper-medium", 5, 5.0),
+    ("walker2d-medium", 5, 5.0),
+    ("halfcheetah-medium-replay", 5, 1.0),
+    ("hopper-medium-replay", 5, 1.0),
+    ("walker2d-medium-replay", 1, 1.0),
+    ("halfcheetah-medium-expert", 5, 1.0),
+    ("hopper-medium-expert", 5, 1.0),
+    ("walker2d-medium-expert", 1, 2.0),
+];
+
+/// MOPO's (h, λ) for the dataset `name` names.
+pub fn mopo_preset(name: &str) -> Result<(usize, f64), AgentError> {
+    MOPO_PRESETS
+        .iter()
+        .find(|(n, _, _)| *n == name)
+        .map(|&(_, h, penalty)| (h, penalty))
+        .ok_or_else(|| AgentError::UnknownPreset {
+            name: format!("{name} (for MOPO)"),
+            known: MOPO_PRESETS
+                .iter()
+                .map(|(n, _, _)| *n)
+                .collect::<Vec<_>>()
+                .join(", "),
+        })
+}

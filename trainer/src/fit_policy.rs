@@ -5,18 +5,30 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use burn::tensor::Device;
 use indicatif::{ProgressBar, ProgressStyle};
-use nuno::agent::{EpochRecord, LoopContext, PolicyLoopConfig, PolicyTraining, SacConfig, preset};
+use nuno::agent::{
+    EpochRecord, LoopContext, PolicyLoopConfig, PolicyTraining, Preset, SacConfig, mopo_preset,
+    preset,
+};
 use nuno::artifact::{
     BEST_POLICY, LAST_POLICY, PolicyProvenance, latest_checkpoint, load_checkpoint, load_dynamics,
-    save_checkpoint, save_policy, write_atomically,
+    load_ensemble, save_checkpoint, save_policy, write_atomically,
 };
 use nuno::data::{DatasetFormat, read_dataset};
-use nuno::envs::{TaskConfig, TaskRules};
+use nuno::ensemble::{EnsembleDynamics, EnsembleUncertainty};
+use nuno::envs::{MujocoTask, TaskConfig, TaskRules};
 use nuno::infer::Kernel;
-use nuno::sde::ComputeDevice;
+use nuno::sde::{ComputeDevice, NeuralSde, ThresholdTable};
+use nuno::shared::BatchDynamics;
 
 use crate::plot::{Series, line_chart};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Algo {
+    Nuno,
+    Mopo,
+}
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -29,9 +41,15 @@ pub struct Args {
     /// Reader to use (default: detected).
     #[arg(long)]
     format: Option<DatasetFormat>,
-    /// Table 3 row giving h, α and λ_pen, e.g. hopper-random or neorl-hopper-low.
+    /// Table 3 row giving h, α and λ_pen, e.g. hopper-random or neorl-hopper-low
+    /// (with --algo mopo: the same dataset's row of MOPO's h and λ).
     #[arg(long)]
     preset: String,
+    /// nuno: the neural SDE in --model (NUNO^R when it learned the reward), η-penalised
+    /// and truncated rollouts; mopo: the Gaussian ensemble in --model (fit-ensemble),
+    /// MOPO's max-‖σ‖ penalty, no truncation.
+    #[arg(long, value_enum, default_value = "nuno")]
+    algo: Algo,
     /// Total gradient steps (rounded up to whole epochs).
     #[arg(long, default_value_t = 1_000_000)]
     steps: usize,
@@ -109,13 +127,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let preset = preset(&args.preset)?;
     let device = args.device.device().map_err(anyhow::Error::msg)?;
-    let (dynamics, metadata) = load_dynamics(&args.model, &device)
-        .with_context(|| format!("loading the model in {}", args.model.display()))?;
-    let task = metadata.provenance.task.unwrap_or(TaskConfig {
-        name: preset.task,
-        layout: preset.layout,
-        ..TaskConfig::d4rl(preset.task)
-    });
+    let model = load_model(&args, preset, &device)?;
+    let task = model.task;
     anyhow::ensure!(
         task.name == preset.task && task.layout == preset.layout,
         "preset {} is for {} ({:?}), the model is for {} ({:?})",
@@ -133,10 +146,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_actor_hidden(args.hidden.clone())
         .with_critic_hidden(args.hidden.clone());
     let mut config = PolicyLoopConfig::from_preset(preset, sac);
+    if args.algo == Algo::Mopo {
+        // MOPO: its own h and λ, the ensemble's max ‖σ‖ as the penalty, no truncation.
+        (config.horizon, config.penalty) = mopo_preset(&args.preset)?;
+        config.truncate = false;
+    }
     config.horizon = args.horizon.unwrap_or(config.horizon);
     config.cvar_alpha = args.cvar_alpha.unwrap_or(config.cvar_alpha);
     config.penalty = args.penalty.unwrap_or(config.penalty);
-    config.truncate = !args.no_truncation;
+    config.truncate &= !args.no_truncation;
     config.rollout_freq = args.rollout_freq;
     config.rollout_batch = args.rollout_batch;
     config.particles = args.particles;
@@ -150,19 +168,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ComputeDevice::Cpu => Kernel::Fused,
         ComputeDevice::Wgpu => Kernel::Burn,
     });
-    let batch_dynamics = kernel.dynamics(&dynamics);
+    let batch_dynamics = model.dynamics(kernel);
     let ctx = LoopContext {
         dataset: &dataset,
         dynamics: batch_dynamics.as_ref(),
         task,
-        rules: TaskRules::new(
-            task,
-            &dynamics.constants.spec.split,
-            dynamics.constants.spec.dt,
-        ),
+        rules: model.rules,
         kernel,
     };
-    let thresholds = metadata.provenance.thresholds.as_ref();
+    let thresholds = model.thresholds.as_ref();
     let mut training = PolicyTraining::new(config, &ctx, thresholds, &device)?;
     let checkpoints = args.out.join("checkpoints");
     match (latest_checkpoint(&checkpoints)?, args.resume) {
@@ -203,12 +217,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.set_position(training.step as u64);
     let provenance = |record: &EpochRecord, training: &PolicyTraining| PolicyProvenance {
         preset: Some(preset.name.to_string()),
-        dynamics_sha256: Some(metadata.weights_sha256.clone()),
-        dataset_sha256: metadata
-            .provenance
-            .dataset
-            .as_ref()
-            .map(|d| d.sha256.clone()),
+        dynamics_sha256: Some(model.weights_sha256.clone()),
+        dataset_sha256: model.dataset_sha256.clone(),
         training: Some(training.config.clone()),
         epoch: record.epoch,
         step: record.step,
@@ -343,4 +353,73 @@ fn write_metrics(out: &Path, history: &[EpochRecord]) -> anyhow::Result<()> {
         ],
     )?;
     Ok(())
+}
+
+/// The dynamics a run trains in, whichever kind `--algo` reads from `--model`.
+struct LoadedModel {
+    sde: Option<NeuralSde>,
+    ensemble: Option<EnsembleDynamics>,
+    task: TaskConfig,
+    rules: TaskRules,
+    thresholds: Option<ThresholdTable>,
+    weights_sha256: String,
+    dataset_sha256: Option<String>,
+}
+
+impl LoadedModel {
+    /// The model behind the batch interface (the SDE on `kernel`; the ensemble on burn).
+    fn dynamics(&self, kernel: Kernel) -> Box<dyn BatchDynamics + '_> {
+        match (&self.sde, &self.ensemble) {
+            (Some(sde), _) => kernel.dynamics(sde),
+            (None, Some(ensemble)) => Box::new(ensemble),
+            (None, None) => unreachable!("a loaded model has one kind"),
+        }
+    }
+}
+
+fn load_model(args: &Args, preset: &Preset, device: &Device) -> anyhow::Result<LoadedModel> {
+    let context = || format!("loading the model in {}", args.model.display());
+    match args.algo {
+        Algo::Nuno => {
+            let (sde, metadata) = load_dynamics(&args.model, device).with_context(context)?;
+            let task = metadata.provenance.task.unwrap_or(TaskConfig {
+                name: preset.task,
+                layout: preset.layout,
+                ..TaskConfig::d4rl(preset.task)
+            });
+            let c = &sde.constants.spec;
+            Ok(LoadedModel {
+                rules: TaskRules::new(task, &c.split, c.dt),
+                task,
+                thresholds: metadata.provenance.thresholds.clone(),
+                weights_sha256: metadata.weights_sha256.clone(),
+                dataset_sha256: metadata
+                    .provenance
+                    .dataset
+                    .as_ref()
+                    .map(|d| d.sha256.clone()),
+                ensemble: None,
+                sde: Some(sde),
+            })
+        }
+        Algo::Mopo => {
+            let (fit, metadata) = load_ensemble(&args.model, device).with_context(context)?;
+            let task = metadata.task;
+            let probe = MujocoTask::new(task)?;
+            Ok(LoadedModel {
+                rules: TaskRules::new(task, &probe.state_split(), probe.dt()),
+                task,
+                thresholds: None,
+                weights_sha256: metadata.weights_sha256.clone(),
+                dataset_sha256: metadata.dataset.as_ref().map(|d| d.sha256.clone()),
+                ensemble: Some(EnsembleDynamics::new(
+                    &fit,
+                    metadata.obs_dim,
+                    metadata.act_dim,
+                    EnsembleUncertainty::MaxAleatoric,
+                )),
+                sde: None,
+            })
+        }
+    }
 }

@@ -147,3 +147,102 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
     let err = fails(&["evaluate", "--policy", dataset_s, "--episodes", "1"]);
     assert!(err.contains("loading policy"), "{err}");
 }
+
+#[test]
+fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dataset, model, run) = (
+        tmp.path().join("hopper.hdf5"),
+        tmp.path().join("ensemble"),
+        tmp.path().join("run"),
+    );
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    generate_hopper(&s(&dataset), 1500, 0);
+    ok(&[
+        "fit-ensemble",
+        "--dataset",
+        &s(&dataset),
+        "--task",
+        "hopper",
+        "--out",
+        &s(&model),
+        "--members",
+        "3",
+        "--elites",
+        "2",
+        "--hidden",
+        "16,16",
+        "--weight-decay",
+        "2.5e-5,5e-5,1e-4",
+        "--max-epochs",
+        "2",
+    ]);
+    ok(&[
+        "fit-policy",
+        "--algo",
+        "mopo",
+        "--model",
+        &s(&model),
+        "--dataset",
+        &s(&dataset),
+        "--preset",
+        "hopper-medium",
+        "--steps",
+        "20",
+        "--steps-per-epoch",
+        "10",
+        "--rollout-freq",
+        "10",
+        "--rollout-batch",
+        "32",
+        "--batch-size",
+        "32",
+        "--hidden",
+        "16,16",
+        "--eval-episodes",
+        "1",
+        "--out",
+        &s(&run),
+    ]);
+    // MOPO's hopper-medium row: h = 5, λ = 5; never truncated; r̃ = r − λ·max‖σ‖.
+    let records: Vec<serde_json::Value> = std::fs::read_to_string(run.join("metrics.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(records.len(), 2);
+    for r in &records {
+        let rollout = &r["rollout"];
+        assert_eq!(rollout["truncated"], 0);
+        let f = |k: &str| rollout[k].as_f64().unwrap();
+        assert!(f("mean_length") <= 5.0, "{rollout}");
+        let expected = f("mean_reward") - 5.0 * f("mean_eta");
+        assert!(
+            (f("mean_penalized_reward") - expected).abs() < 1e-3 * expected.abs().max(1.0),
+            "{rollout}"
+        );
+        assert!(f("mean_eta") > 0.0);
+    }
+    let policy: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(model.join("policy.json")).unwrap()).unwrap();
+    let ensemble: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(model.join("ensemble.json")).unwrap()).unwrap();
+    assert_eq!(policy["dynamics_sha256"], ensemble["weights_sha256"]);
+    assert_eq!(policy["training"]["penalty"], 5.0);
+    assert_eq!(policy["training"]["truncate"], false);
+    // The neural SDE's run needs its own model.
+    let error = fails(&[
+        "fit-policy",
+        "--model",
+        &s(&model),
+        "--dataset",
+        &s(&dataset),
+        "--preset",
+        "hopper-medium",
+        "--steps",
+        "10",
+        "--out",
+        &s(&tmp.path().join("other")),
+    ]);
+    assert!(error.contains("model.json"), "{error}");
+}
