@@ -23,6 +23,12 @@ start)
   runuser -u munge -- munged --key-file "$dir/munge/munge.key" \
     --socket "$dir/munge/munge.socket" --pid-file "$dir/munge/munged.pid" \
     --log-file "$dir/munge/munged.log" --seed-file "$dir/munge/munged.seed" --force
+  # Two free ports, so that clusters of concurrent test runs do not meet.
+  in_use() { (exec 3<>"/dev/tcp/127.0.0.1/$1") 2>/dev/null; }
+  while :; do
+    ctld_port=$(( 20000 + RANDOM % 20000 )); slurmd_port=$(( ctld_port + 1 ))
+    in_use "$ctld_port" || in_use "$slurmd_port" || break
+  done
   cpus=$(nproc)
   memory=$(( $(awk '/MemTotal/ {print $2}' /proc/meminfo) / 1024 - 1024 ))
   host=$(hostname -s)
@@ -42,8 +48,8 @@ SlurmctldPidFile=$dir/slurmctld.pid
 SlurmdPidFile=$dir/slurmd.pid
 SlurmctldLogFile=$dir/log/slurmctld.log
 SlurmdLogFile=$dir/log/slurmd.log
-SlurmctldPort=6917
-SlurmdPort=6918
+SlurmctldPort=$ctld_port
+SlurmdPort=$slurmd_port
 ReturnToService=2
 SchedulerType=sched/backfill
 SelectType=select/cons_tres

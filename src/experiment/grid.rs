@@ -5,6 +5,7 @@
 //! ```toml
 //! [budget]
 //! model_steps = 5000        # fit-model's --max-steps
+//! ensemble_max_epochs = 100 # fit-ensemble's --max-epochs (optional)
 //! policy_steps = 100000     # fit-policy's --steps (the same for every method)
 //! steps_per_epoch = 1000
 //! eval_episodes = 10
@@ -36,15 +37,18 @@ pub enum Method {
     Nuno,
     /// NUNO^R: the neural SDE learning the reward too.
     NunoR,
+    /// MOPO: the Gaussian ensemble, its max-‖σ‖ penalty, no truncation.
+    Mopo,
 }
 
 impl Method {
-    pub const ALL: [Method; 2] = [Method::Nuno, Method::NunoR];
+    pub const ALL: [Method; 3] = [Method::Nuno, Method::NunoR, Method::Mopo];
 
     pub fn as_str(self) -> &'static str {
         match self {
             Method::Nuno => "nuno",
             Method::NunoR => "nuno-r",
+            Method::Mopo => "mopo",
         }
     }
 }
@@ -73,7 +77,11 @@ impl FromStr for Method {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Budget {
+    /// fit-model's gradient steps (NUNO's SDE).
     pub model_steps: usize,
+    /// A cap on fit-ensemble's epochs (MOPO; default: until its early stop).
+    #[serde(default)]
+    pub ensemble_max_epochs: Option<usize>,
     pub policy_steps: usize,
     #[serde(default = "default_steps_per_epoch")]
     pub steps_per_epoch: usize,
@@ -206,6 +214,13 @@ impl Grid {
                 return Err(format!(
                     "dataset `{}` is {} data, its preset `{}` is for {}",
                     d.name, d.task, d.preset, preset.task
+                ));
+            }
+            let methods_named: Vec<&str> = d.methods.iter().map(String::as_str).collect();
+            if methods_named.contains(&"mopo") && crate::agent::mopo_preset(&d.preset).is_err() {
+                return Err(format!(
+                    "dataset `{}`: MOPO has no hyperparameters for `{}` (its rows are D4RL's)",
+                    d.name, d.preset
                 ));
             }
             if d.methods.is_empty() || d.seeds.is_empty() {

@@ -273,8 +273,29 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         Ok(())
     };
     let path = |p: &Path| p.display().to_string();
-    // fit-model writes model.json last: without it the fit did not finish.
-    if !model.join("model.json").is_file() {
+    // Each fit writes its JSON last: without it the fit did not finish.
+    if cell.method == Method::Mopo {
+        if !model.join("ensemble.json").is_file() {
+            let mut fit = vec![
+                "fit-ensemble".into(),
+                "--dataset".into(),
+                path(&cell.file),
+                "--task".into(),
+                cell.task.to_string(),
+                "--out".into(),
+                path(&model),
+                "--seed".into(),
+                cell.seed.to_string(),
+            ];
+            if let Some(epochs) = b.ensemble_max_epochs {
+                fit.extend(["--max-epochs".into(), epochs.to_string()]);
+            }
+            if cell.layout == ObservationLayout::Neorl {
+                fit.push("--neorl".into());
+            }
+            trainer(fit)?;
+        }
+    } else if !model.join("model.json").is_file() {
         let mut fit = vec![
             "fit-model".into(),
             "--dataset".into(),
@@ -319,6 +340,13 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         cell.seed.to_string(),
         "--out".into(),
         path(&policy),
+        "--algo".into(),
+        if cell.method == Method::Mopo {
+            "mopo"
+        } else {
+            "nuno"
+        }
+        .into(),
         "--resume".into(),
     ])?;
     let result = summarize_run(cell, &policy.join("metrics.jsonl"))?;

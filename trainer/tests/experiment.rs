@@ -14,7 +14,7 @@ use common::{fails, generate_hopper, ok};
 /// A budget of `policy_steps` gradient steps in epochs of 10, tiny networks.
 fn budget(policy_steps: usize) -> String {
     format!(
-        "[budget]\nmodel_steps = 20\npolicy_steps = {policy_steps}\nsteps_per_epoch = 10\n\
+        "[budget]\nmodel_steps = 20\nensemble_max_epochs = 2\npolicy_steps = {policy_steps}\nsteps_per_epoch = 10\n\
          eval_episodes = 1\nrollout_batch = 32\nhidden = [16, 16]\n"
     )
 }
@@ -133,6 +133,17 @@ fn bad_grids_are_refused_before_anything_runs() {
                 "[0]",
             ),
             "does not fit walker2d",
+        ),
+        (
+            dataset_row(
+                "h",
+                "hopper.hdf5",
+                "hopper",
+                "neorl-hopper-low",
+                "[\"mopo\"]",
+                "[0]",
+            ),
+            "MOPO has no hyperparameters",
         ),
         (
             dataset_row(
@@ -313,7 +324,7 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
     let _stop = Stop(&script, cluster.clone());
     let conf = cluster.join("slurm.conf");
 
-    let grid = hopper_grid(dir, "[\"nuno\", \"nuno-r\"]", "[0]");
+    let grid = hopper_grid(dir, "[\"nuno\", \"nuno-r\", \"mopo\"]", "[0]");
     let out = dir.join("out");
     let submitted = Command::new(env!("CARGO_BIN_EXE_nuno-trainer"))
         .args([
@@ -338,7 +349,10 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
     );
     assert!(stdout.contains("submitted Slurm job"), "{stdout}");
     let script_text = std::fs::read_to_string(out.join("slurm/cells.sh")).unwrap();
-    assert!(script_text.contains("#SBATCH --array=0,1"), "{script_text}");
+    assert!(
+        script_text.contains("#SBATCH --array=0,1,2"),
+        "{script_text}"
+    );
 
     // Wait for the queue to empty (event polling, no fixed sleep budget).
     loop {
@@ -359,14 +373,18 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
     }
     let status = ok(&["experiment", "status", "--grid", &grid, "--out", &s(&out)]);
     assert!(
-        status.contains("2/2 cells done"),
+        status.contains("3/3 cells done"),
         "{status}\n{}",
         logs(&out.join("slurm"))
     );
     let report = ok(&["experiment", "report", "--grid", &grid, "--out", &s(&out)]);
     assert!(
-        report.contains("| hopper-random |") && report.contains("nuno-r"),
+        report.contains("| dataset | nuno | nuno-r | mopo |"),
         "{report}"
+    );
+    assert!(
+        out.join("hopper-random/mopo/seed-0/model/ensemble.json")
+            .is_file()
     );
 }
 
