@@ -70,9 +70,21 @@ CONF
   exit 1
   ;;
 stop)
+  pids=""
   for pidfile in "$dir/slurmd.pid" "$dir/slurmctld.pid" "$dir/munge/munged.pid"; do
-    [ -f "$pidfile" ] && kill "$(cat "$pidfile")" 2>/dev/null || true
+    [ -f "$pidfile" ] || continue
+    pid=$(cat "$pidfile")
+    kill "$pid" 2>/dev/null && pids="$pids $pid"
   done
+  # Wait until they are gone (slurmctld takes a moment to save its state).
+  for _ in $(seq 100); do
+    alive=""
+    for pid in $pids; do kill -0 "$pid" 2>/dev/null && alive=1; done
+    [ -z "$alive" ] && exit 0
+    sleep 0.1
+  done
+  echo "slurm daemons still running after 10 s:$pids" >&2
+  exit 1
   ;;
 *)
   echo "usage: local-cluster.sh start|stop DIR" >&2
