@@ -298,6 +298,8 @@ fn read_interval(
     let path = dir.join(&interval.file);
     let mut tensors = read_checked_weights(&path, &interval.sha256)?;
     let n = interval.to - interval.from;
+    // Runs record them whenever the policy has a density; present, they must fit.
+    let has_log_probs = tensors.contains_key("action_log_probs");
     let mut take = |name: &str, width: Option<usize>| -> Result<Vec<f32>, ArtifactError> {
         let (dims, values) = tensors
             .remove(name)
@@ -313,7 +315,11 @@ fn read_interval(
         Ok(values)
     };
     let flags = |v: Vec<f32>| v.into_iter().map(|x| x != 0.0).collect();
-    let log_probs = take("action_log_probs", None).ok();
+    let log_probs = if has_log_probs {
+        Some(take("action_log_probs", None)?)
+    } else {
+        None
+    };
     Ok(Recording {
         observations: take("observations", Some(like.obs_dim))?,
         actions: take("actions", Some(like.act_dim))?,

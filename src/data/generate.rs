@@ -40,6 +40,12 @@ pub struct GenerateConfig {
 }
 
 impl GenerateConfig {
+    /// Leading observation columns the policy does not see: root x, when a
+    /// D4RL-layout policy acts in a NeoRL-layout task.
+    fn root_x_dropped(&self) -> usize {
+        usize::from(self.task.layout != self.policy_layout)
+    }
+
     pub fn new(task: TaskConfig, kind: &str, transitions: usize, seed: u64) -> Self {
         Self {
             task,
@@ -61,7 +67,7 @@ pub fn generate(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Dataset, DataError> {
     let probe = MujocoTask::new(config.task)?;
-    let root_x = usize::from(config.task.layout != config.policy_layout);
+    let root_x = config.root_x_dropped();
     let expected = (probe.obs_dim() - root_x, probe.act_dim());
     if config.task.layout == ObservationLayout::D4rl && root_x == 1 {
         return Err(DataError::Behaviour(
@@ -149,8 +155,7 @@ fn run_episode(
         .collect();
     let mut out = Recording::for_task(&task);
     loop {
-        let root_x = usize::from(config.task.layout != config.policy_layout);
-        let logged = policy.act_logged(&obs[root_x..], &mut rng);
+        let logged = policy.act_logged(&obs[config.root_x_dropped()..], &mut rng);
         let action: Vec<f64> = logged.actions.iter().map(|&a| f64::from(a)).collect();
         let state = (task.qpos().to_vec(), task.qvel().to_vec());
         let step = task.step(&action)?;

@@ -10,13 +10,13 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{OnlineRecord, OnlineSac, OnlineSacConfig, SacConfig};
 use nuno::artifact::{
     load_online_checkpoint, run_policies, save_behaviour, save_online_checkpoint, start_online_run,
-    write_atomically,
 };
 use nuno::data::{BehaviourLevel, LEVEL_TOLERANCE, select_behaviour};
 use nuno::envs::TaskName;
 use nuno::sde::ComputeDevice;
 
 use crate::data_source::task_config;
+use crate::output::write_text;
 use crate::plot::{Series, line_chart};
 
 #[derive(Debug, Subcommand)]
@@ -226,8 +226,7 @@ fn write_metrics(out: &Path, history: &[OnlineRecord]) -> anyhow::Result<()> {
         ));
     }
     let path = out.join("metrics.csv");
-    write_atomically(&path, |tmp| std::fs::write(tmp, &csv), |e| e)
-        .with_context(|| format!("writing {}", path.display()))?;
+    write_text(&path, &csv)?;
     let series = |name, f: fn(&OnlineRecord) -> f64| Series {
         name,
         points: history.iter().map(|r| (r.step as f64, f(r))).collect(),

@@ -4,14 +4,13 @@
 //! cell is `fit-model`, then `fit-policy --resume`, then its `result.json`: a
 //! finished cell is never rerun and a killed one resumes at its last epoch.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fs::OpenOptions;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command as Process, Stdio};
 
 use anyhow::Context;
 use clap::{Subcommand, ValueEnum};
-use nuno::artifact::write_atomically;
 use nuno::data::read_dataset;
 use nuno::envs::{ObservationLayout, TaskConfig};
 use nuno::experiment::{
@@ -19,6 +18,7 @@ use nuno::experiment::{
     summarize, summarize_run, write_result,
 };
 
+use crate::output::write_text;
 use crate::plot::{Series, line_chart};
 
 #[derive(Debug, Subcommand)]
@@ -88,9 +88,9 @@ pub fn run(command: Command) -> anyhow::Result<()> {
 /// and checked against its task.
 fn checked_cells(grid: &Path) -> anyhow::Result<Vec<Cell>> {
     let (_, cells) = Grid::read(grid)?;
-    let mut seen = BTreeMap::new();
+    let mut seen = BTreeSet::new();
     for cell in &cells {
-        if seen.insert(cell.dataset.clone(), ()).is_none() {
+        if seen.insert(cell.dataset.clone()) {
             let task = task_config(cell);
             read_dataset(&cell.file, None)
                 .and_then(|d| d.check_task(&task, &cell.file))
@@ -208,8 +208,7 @@ fn submit_slurm(grid: &GridArgs, cells: &[Cell], extra: &[String]) -> anyhow::Re
         shell_quote(&out)
     );
     let path = slurm.join("cells.sh");
-    write_atomically(&path, |tmp| std::fs::write(tmp, &script), |e| e)
-        .with_context(|| format!("writing {}", path.display()))?;
+    write_text(&path, &script)?;
     let output = Process::new(sbatch)
         .arg("--parsable")
         .args(extra)
@@ -274,46 +273,37 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
     };
     let path = |p: &Path| p.display().to_string();
     // Each fit writes its JSON last: without it the fit did not finish.
-    if cell.method == Method::Mopo {
-        if !model.join("ensemble.json").is_file() {
-            let mut fit = vec![
-                "fit-ensemble".into(),
-                "--dataset".into(),
-                path(&cell.file),
-                "--task".into(),
-                cell.task.to_string(),
-                "--out".into(),
-                path(&model),
-                "--seed".into(),
-                cell.seed.to_string(),
-            ];
-            if let Some(epochs) = b.ensemble_max_epochs {
-                fit.extend(["--max-epochs".into(), epochs.to_string()]);
-            }
-            if cell.layout == ObservationLayout::Neorl {
-                fit.push("--neorl".into());
-            }
-            trainer(fit)?;
-        }
-    } else if !model.join("model.json").is_file() {
-        let mut fit = vec![
-            "fit-model".into(),
+    let (subcommand, finished) = match cell.method {
+        Method::Mopo => ("fit-ensemble", "ensemble.json"),
+        Method::Nuno | Method::NunoR => ("fit-model", "model.json"),
+    };
+    if !model.join(finished).is_file() {
+        let mut fit: Vec<String> = vec![
+            subcommand.into(),
             "--dataset".into(),
             path(&cell.file),
             "--task".into(),
             cell.task.to_string(),
             "--out".into(),
             path(&model),
-            "--max-steps".into(),
-            b.model_steps.to_string(),
             "--seed".into(),
             cell.seed.to_string(),
         ];
         if cell.layout == ObservationLayout::Neorl {
             fit.push("--neorl".into());
         }
-        if cell.method == Method::NunoR {
-            fit.push("--reward-model".into());
+        match cell.method {
+            Method::Mopo => {
+                if let Some(epochs) = b.ensemble_max_epochs {
+                    fit.extend(["--max-epochs".into(), epochs.to_string()]);
+                }
+            }
+            Method::Nuno | Method::NunoR => {
+                fit.extend(["--max-steps".into(), b.model_steps.to_string()]);
+                if cell.method == Method::NunoR {
+                    fit.push("--reward-model".into());
+                }
+            }
         }
         trainer(fit)?;
     }
@@ -408,8 +398,7 @@ fn report(args: GridArgs) -> anyhow::Result<()> {
         ("results.md", table.clone()),
     ] {
         let path = args.out.join(name);
-        write_atomically(&path, |tmp| std::fs::write(tmp, &text), |e| e)
-            .with_context(|| format!("writing {}", path.display()))?;
+        write_text(&path, &text)?;
     }
     learning_curves(&args.out, &results)?;
     print!("{table}");

@@ -5,13 +5,13 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
-use nuno::artifact::{save_ensemble, write_atomically};
+use nuno::artifact::save_ensemble;
 use nuno::ensemble::{EnsembleConfig, fit_ensemble};
 use nuno::sde::ComputeDevice;
 
 use crate::data_source::DataSource;
 
+use crate::output::write_text;
 use crate::plot::{Series, line_chart};
 
 #[derive(Debug, clap::Args)]
@@ -94,8 +94,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         csv.push('\n');
     }
     let path = args.out.join("ensemble_metrics.csv");
-    write_atomically(&path, |tmp| std::fs::write(tmp, &csv), |e| e)
-        .with_context(|| format!("writing {}", path.display()))?;
+    write_text(&path, &csv)?;
     let names: Vec<String> = (0..config.members).map(|m| format!("member {m}")).collect();
     let series: Vec<Series> = names
         .iter()

@@ -13,7 +13,7 @@ use nuno::agent::{
 };
 use nuno::artifact::{
     BEST_POLICY, LAST_POLICY, PolicyProvenance, latest_checkpoint, load_checkpoint, load_dynamics,
-    load_ensemble, save_checkpoint, save_policy, write_atomically,
+    load_ensemble, save_checkpoint, save_policy,
 };
 use nuno::data::{DatasetFormat, read_dataset};
 use nuno::ensemble::{EnsembleDynamics, EnsembleUncertainty};
@@ -22,6 +22,7 @@ use nuno::infer::Kernel;
 use nuno::sde::{ComputeDevice, NeuralSde, ThresholdTable};
 use nuno::shared::BatchDynamics;
 
+use crate::output::write_text;
 use crate::plot::{Series, line_chart};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -325,8 +326,7 @@ fn write_metrics(out: &Path, history: &[EpochRecord]) -> anyhow::Result<()> {
     }
     for (name, text) in [("metrics.csv", csv), ("metrics.jsonl", jsonl)] {
         let path = out.join(name);
-        write_atomically(&path, |tmp| std::fs::write(tmp, &text), |e| e)
-            .with_context(|| format!("writing {}", path.display()))?;
+        write_text(&path, &text)?;
     }
     let series = |name, f: fn(&EpochRecord) -> f64| Series {
         name,

@@ -11,6 +11,7 @@ mod experiment;
 mod fit_ensemble;
 mod fit_model;
 mod fit_policy;
+mod output;
 mod plot;
 
 use std::process::ExitCode;
