@@ -211,6 +211,7 @@ impl BatchDynamics for ConstantEta {
             sigma: vec![0.0; n * o],
             h_eta: vec![0.0; n * o],
             eta: vec![0.3; n],
+            truncation_signal: None,
         }
     }
 }
@@ -524,13 +525,10 @@ fn batches_mix_real_and_model_data_at_beta() {
     config.sac.batch_size = 256;
     config.real_ratio = 0.05;
     let device = Device::flex();
-    let mut training = PolicyTraining::new(
-        config,
-        &ctx,
-        metadata.provenance.thresholds.as_ref(),
-        &device,
-    )
-    .unwrap();
+    let threshold = config
+        .threshold_from(metadata.provenance.thresholds.as_ref())
+        .unwrap();
+    let mut training = PolicyTraining::new(config, &ctx, threshold, &device).unwrap();
     // Empty model buffer: all real.
     let batch = training.mixed_batch(&dataset);
     assert_eq!(batch.len(), 256);
@@ -575,12 +573,13 @@ fn runs_checkpoints_and_resumes_bit_exactly(kernel: Kernel) {
         ..hopper_context(&model, &dataset)
     };
     let thresholds = metadata.provenance.thresholds.as_ref();
+    let threshold = tiny_config(0).threshold_from(thresholds).unwrap();
     let device = Device::flex();
 
     // Two epochs straight through. Its initial state is saved too: burn draws
     // initial weights from a process-wide generator that tests running in
     // parallel share, so a second `new` would not start from the same weights.
-    let mut straight = PolicyTraining::new(tiny_config(9), &ctx, thresholds, &device).unwrap();
+    let mut straight = PolicyTraining::new(tiny_config(9), &ctx, threshold, &device).unwrap();
     assert_eq!(straight.threshold, thresholds.unwrap().get(5, 1.0));
     let initial = tempfile::tempdir().unwrap();
     save_checkpoint(initial.path(), &straight).unwrap();
@@ -595,14 +594,14 @@ fn runs_checkpoints_and_resumes_bit_exactly(kernel: Kernel) {
 
     // One epoch, a checkpoint, a fresh process state, the second epoch.
     let dir = tempfile::tempdir().unwrap();
-    let mut first = PolicyTraining::new(tiny_config(9), &ctx, thresholds, &device).unwrap();
+    let mut first = PolicyTraining::new(tiny_config(9), &ctx, threshold, &device).unwrap();
     let start = latest_checkpoint(initial.path()).unwrap().unwrap();
     load_checkpoint(&start, &mut first).unwrap();
     assert_eq!((first.epoch, first.step), (0, 0));
     first.run_epoch(&ctx).unwrap();
     save_checkpoint(dir.path(), &first).unwrap();
     drop(first);
-    let mut resumed = PolicyTraining::new(tiny_config(9), &ctx, thresholds, &device).unwrap();
+    let mut resumed = PolicyTraining::new(tiny_config(9), &ctx, threshold, &device).unwrap();
     let checkpoint = latest_checkpoint(dir.path()).unwrap().unwrap();
     load_checkpoint(&checkpoint, &mut resumed).unwrap();
     assert_eq!((resumed.epoch, resumed.step), (1, 15));
@@ -626,7 +625,7 @@ fn runs_checkpoints_and_resumes_bit_exactly(kernel: Kernel) {
     assert_eq!(strip(&resumed.history), strip(&straight.history));
 
     // A checkpoint from other settings is refused by name.
-    let mut other = PolicyTraining::new(tiny_config(10), &ctx, thresholds, &device).unwrap();
+    let mut other = PolicyTraining::new(tiny_config(10), &ctx, threshold, &device).unwrap();
     let err = load_checkpoint(&checkpoint, &mut other)
         .unwrap_err()
         .to_string();
@@ -685,6 +684,7 @@ fn either_kernel_resumes_the_others_checkpoint() {
     let (model, metadata) = shipped_model();
     let dataset = small_dataset();
     let thresholds = metadata.provenance.thresholds.as_ref();
+    let threshold = tiny_config(0).threshold_from(thresholds).unwrap();
     let device = Device::flex();
     let context = |kernel| LoopContext {
         kernel,
@@ -694,14 +694,14 @@ fn either_kernel_resumes_the_others_checkpoint() {
         // One epoch with `first`, checkpointed.
         let dir = tempfile::tempdir().unwrap();
         let mut training =
-            PolicyTraining::new(tiny_config(11), &context(first), thresholds, &device).unwrap();
+            PolicyTraining::new(tiny_config(11), &context(first), threshold, &device).unwrap();
         training.run_epoch(&context(first)).unwrap();
         save_checkpoint(dir.path(), &training).unwrap();
         let checkpoint = latest_checkpoint(dir.path()).unwrap().unwrap();
         // The second epoch by both kernels from the same files.
         let resume = |kernel| {
-            let mut t = PolicyTraining::new(tiny_config(11), &context(kernel), thresholds, &device)
-                .unwrap();
+            let mut t =
+                PolicyTraining::new(tiny_config(11), &context(kernel), threshold, &device).unwrap();
             load_checkpoint(&checkpoint, &mut t).unwrap();
             t.run_epoch(&context(kernel)).unwrap();
             t
@@ -931,4 +931,151 @@ fn cancelled_rollouts_and_evaluations_stop_at_the_next_step() {
     let err = evaluate_or_cancel(&policy, &evaluation, &policy.cancel).unwrap_err();
     assert!(matches!(err, EnvError::Cancelled(Cancelled)), "{err}");
     assert_eq!(policy.calls.load(std::sync::atomic::Ordering::SeqCst), 5);
+}
+
+/// [`ConstantEta`] with a known σ (3, 4, 0, …: ‖σ‖ = 5) and a truncation
+/// signal of 1.0 per step beside its η of 0.3 (TATU+MOPO's shape).
+struct TwoSignals {
+    inner: ConstantEta,
+}
+
+impl BatchDynamics for TwoSignals {
+    fn shape(&self) -> BatchShape {
+        self.inner.shape()
+    }
+    fn step(&self, states: &[f32], actions: &[f32], noise: &[f32]) -> ModelStep {
+        let mut step = self.inner.step(states, actions, noise);
+        let o = self.inner.spec.obs_dim;
+        for sigma in step.sigma.chunks_exact_mut(o) {
+            (sigma[0], sigma[1]) = (3.0, 4.0);
+        }
+        step.truncation_signal = Some(vec![1.0; step.eta.len()]);
+        step
+    }
+}
+
+#[test]
+fn rollouts_penalise_eta_but_truncate_on_the_models_own_signal() {
+    let (task, spec) = hopper();
+    let rules = TaskRules::new(task, &spec.split, spec.dt);
+    let dynamics = TwoSignals {
+        inner: ConstantEta { spec: spec.clone() },
+    };
+    let policy = Constant(vec![0.5, -0.5, 0.25], spec.obs_dim);
+    let mut start = vec![0.0f32; spec.obs_dim];
+    start[0] = 1.25;
+    let config = RolloutConfig {
+        horizon: 10,
+        particles: 1,
+        penalty: 2.0,
+        threshold: Some(2.5),
+        noise_scale: 1.0,
+    };
+    let out = rollout_model(
+        &dynamics,
+        RolloutActions::Policy(&policy),
+        &rules,
+        &start.repeat(3),
+        &config,
+        &mut ChaCha8Rng::seed_from_u64(0),
+    );
+    // The signal adds 1.0 a step: 1, 2 kept, 3 > 2.5 truncates (η's 0.3s would allow 8).
+    assert_eq!(out.trace.kept, vec![2; 3]);
+    assert_eq!(out.stats.truncated, 3);
+    assert_eq!(out.trace.accumulated_eta[0], vec![1.0, 2.0, 3.0]);
+    // ... while the penalty is still λ·η = 2·0.3.
+    for i in 0..out.transitions.len() {
+        let at = i * spec.obs_dim..(i + 1) * spec.obs_dim;
+        let reward = rules.reward(
+            &out.transitions.observations[at.clone()],
+            &[0.5, -0.5, 0.25],
+            &out.transitions.next_observations[at],
+        );
+        assert!((out.transitions.rewards[i] - (reward - 0.6)).abs() < 1e-5);
+    }
+
+    // NUNO^al: the same model reporting ‖σ‖ = 5 as η penalises by λ·5.
+    let aleatoric = nuno::agent::AleatoricAsEta::new(&dynamics.inner);
+    let step = aleatoric.step(&start, &[0.5, -0.5, 0.25], &vec![0.0; spec.obs_dim]);
+    assert_eq!(step.eta, vec![0.0], "ConstantEta's σ is zero");
+    let aleatoric = nuno::agent::AleatoricAsEta::new(&dynamics);
+    let step = aleatoric.step(
+        &start.repeat(2),
+        &[0.5, -0.5, 0.25].repeat(2),
+        &vec![0.0; 2 * spec.obs_dim],
+    );
+    assert_eq!(step.eta, vec![5.0, 5.0]);
+}
+
+/// η = the first observation coordinate (a known function for thresholds).
+struct EtaIsFirstCoordinate {
+    inner: ConstantEta,
+}
+
+impl BatchDynamics for EtaIsFirstCoordinate {
+    fn shape(&self) -> BatchShape {
+        self.inner.shape()
+    }
+    fn step(&self, states: &[f32], actions: &[f32], noise: &[f32]) -> ModelStep {
+        let mut step = self.inner.step(states, actions, noise);
+        let o = self.inner.spec.obs_dim;
+        step.eta = states.chunks_exact(o).map(|s| s[0]).collect();
+        step
+    }
+}
+
+#[test]
+fn tatus_threshold_is_the_datasets_largest_signal_over_the_pessimism() {
+    let (_, spec) = hopper();
+    let dataset = small_dataset();
+    let dynamics = EtaIsFirstCoordinate {
+        inner: ConstantEta { spec },
+    };
+    let largest = dataset
+        .observations
+        .column(0)
+        .iter()
+        .copied()
+        .fold(f32::NEG_INFINITY, f32::max);
+    // Chunks that do not divide the dataset reach its last rows too.
+    for chunk in [7, 1000, 10_000] {
+        let threshold =
+            nuno::agent::dataset_max_threshold(&dynamics, &dataset, 2.0, chunk).unwrap();
+        assert!((threshold - largest / 2.0).abs() < 1e-6, "chunk {chunk}");
+    }
+    let error = nuno::agent::dataset_max_threshold(&dynamics, &dataset, 0.0, 7).unwrap_err();
+    assert!(error.to_string().contains("pessimism"), "{error}");
+}
+
+#[test]
+fn a_threshold_computed_through_rollouts_agrees_with_the_models_own_table() {
+    // Two implementations of ε(h, α) (sde::compute_thresholds on OpenLoop,
+    // agent::rollout_threshold on rollout_model) on the same windows' recipe:
+    // the same statistic of independently drawn noise.
+    let (model, _) = shipped_model();
+    let dataset = small_dataset();
+    let (task, spec) = hopper();
+    let rules = TaskRules::new(task, &spec.split, spec.dt);
+    let config = nuno::sde::ThresholdConfig::new()
+        .with_horizons(vec![5])
+        .with_alphas(vec![0.5, 0.9])
+        .with_max_windows(400)
+        .with_seed(3);
+    let table = nuno::sde::compute_thresholds(&model, &dataset, &config, &Device::flex()).unwrap();
+    for alpha in [0.5, 0.9] {
+        let reference = table.get(5, alpha).unwrap();
+        let ours = nuno::agent::rollout_threshold(
+            &model,
+            &rules,
+            &dataset,
+            5,
+            alpha,
+            &config.clone().with_seed(4),
+        )
+        .unwrap();
+        assert!(
+            (ours / reference - 1.0).abs() < 0.15,
+            "α = {alpha}: {ours} through rollouts, {reference} in the table"
+        );
+    }
 }

@@ -356,3 +356,68 @@ fn a_saved_ensemble_loads_to_the_same_steps_and_refuses_damage() {
         .to_string();
     assert!(error.contains("elites"), "{error}");
 }
+
+#[test]
+fn tatu_truncates_on_the_members_disagreement_over_the_observation_only() {
+    let fit = fitted();
+    let dynamics = EnsembleDynamics::new(&fit, 2, 1, EnsembleUncertainty::MaxAleatoric)
+        .with_truncation_signal(EnsembleUncertainty::MaxDisagreement);
+    // Points on and off the data (far actions make the members disagree).
+    let points = [
+        ([0.4f32, -0.3], 0.5f32),
+        ([0.1, 0.2], -0.2),
+        ([3.0, -2.5], 6.0),
+    ];
+    let states: Vec<f32> = points.iter().flat_map(|(s, _)| [s[0], s[1], 0.0]).collect();
+    let actions: Vec<f32> = points.iter().map(|&(_, a)| a).collect();
+    let step = dynamics.step(&states, &actions, &[0.0; 12]);
+    let signal = step.truncation_signal.as_ref().expect("a TATU signal");
+
+    // By hand from every member's own prediction: means of (Δs₀, Δs₁, r).
+    let device = Device::flex();
+    for (r, (s, a)) in points.iter().enumerate() {
+        let x: Vec<f32> = [s[0], s[1], *a]
+            .iter()
+            .zip(fit.scaler.mean.iter().zip(&fit.scaler.std))
+            .map(|(v, (m, d))| (v - m) / d)
+            .collect();
+        let x = Tensor::<2>::from_data(TensorData::new(x, [1, 3]), &device);
+        let members: Vec<(Vec<f32>, Vec<f32>)> = (0..fit.model.members.len())
+            .map(|m| {
+                let (mean, logvar) = fit.model.member(m, x.clone());
+                (to_f32_vec(mean), to_f32_vec((logvar * 0.5).exp()))
+            })
+            .collect();
+        let n = members.len() as f64;
+        let centre: Vec<f64> = (0..2)
+            .map(|d| members.iter().map(|(m, _)| f64::from(m[d])).sum::<f64>() / n)
+            .collect();
+        let disagreement = members
+            .iter()
+            .map(|(m, _)| {
+                (0..2)
+                    .map(|d| (f64::from(m[d]) - centre[d]).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            })
+            .fold(0.0, f64::max);
+        let aleatoric = members
+            .iter()
+            .map(|(_, std)| std.iter().map(|v| f64::from(v * v)).sum::<f64>().sqrt())
+            .fold(0.0, f64::max);
+        assert!(
+            (f64::from(signal[r]) - disagreement).abs() < 1e-4 * disagreement.max(1e-3),
+            "point {r}: signal {} vs disagreement {disagreement}",
+            signal[r]
+        );
+        assert!(
+            (f64::from(step.eta[r]) - aleatoric).abs() < 1e-4 * aleatoric,
+            "point {r}: η {} vs MOPO's {aleatoric}",
+            step.eta[r]
+        );
+    }
+    assert!(
+        signal[2] > 5.0 * signal[0],
+        "far off the data the members disagree more: {signal:?}"
+    );
+}

@@ -16,6 +16,7 @@ mod policy_loop;
 mod presets;
 mod random_network;
 mod sac;
+mod uncertainty;
 
 /// The policy interface, re-exported where it was first defined.
 pub use crate::shared::BatchPolicy;
@@ -35,9 +36,13 @@ pub use policy::RandomPolicy;
 pub use policy_loop::{
     EpochRecord, EtaProbe, EvalSummary, LoopContext, PhaseSeconds, PolicyLoopConfig, PolicyTraining,
 };
-pub use presets::{MOPO_PRESETS, PRESETS, Preset, mopo_preset, preset};
+pub use presets::{
+    MOPO_PRESETS, PRESETS, Preset, TATU_DEFAULT_PESSIMISM, TATU_PESSIMISM, mopo_preset, preset,
+    tatu_pessimism,
+};
 pub use random_network::RandomNetworkPolicy;
 pub use sac::{Sac, SacAdam, SacConfig, SacLosses};
+pub use uncertainty::{AleatoricAsEta, dataset_max_threshold, rollout_threshold};
 
 /// Everything that can go wrong setting up or running policy optimisation.
 #[derive(Debug, thiserror::Error)]

@@ -27,7 +27,7 @@ pub struct RolloutConfig {
     /// λ_pen, the weight of η in the penalised reward (Table 3).
     pub penalty: f64,
     /// ε(h, α): a rollout stops before the step that takes its accumulated η
-    /// above this; `None` never truncates.
+    /// (or the model's truncation signal) above this; `None` never truncates.
     pub threshold: Option<f32>,
     /// Multiplies ε: 1 samples the SDE, 0 follows the drift.
     pub noise_scale: f32,
@@ -70,7 +70,8 @@ pub struct RolloutTrace {
     pub actions: Vec<Vec<f32>>,
     /// η at each step taken (including a truncating one): `[rows][..]`.
     pub eta: Vec<Vec<f32>>,
-    /// Accumulated η after each step taken.
+    /// Accumulated truncation signal (η, or the model's own signal, see
+    /// [`ModelStep::truncation_signal`](crate::shared::ModelStep)) after each step taken.
     pub accumulated_eta: Vec<Vec<f32>>,
     /// The reward before the penalty, per step taken.
     pub rewards: Vec<Vec<f32>>,
@@ -196,13 +197,18 @@ pub fn rollout_model_or_cancel(
                 rules.reward(&obs[i * obs_dim..(i + 1) * obs_dim], action, next_obs)
             };
             let eta = step.eta[i];
-            if !(eta.is_finite() && reward.is_finite() && next_state.iter().all(|x| x.is_finite()))
+            let signal = step.truncation_at(i);
+            if !(eta.is_finite()
+                && signal.is_finite()
+                && reward.is_finite()
+                && next_state.iter().all(|x| x.is_finite()))
             {
                 trace.actions[r].extend_from_slice(action);
                 trace.outcome[r] = StepOutcome::Diverged;
                 continue;
             }
-            accumulated[r] += eta;
+            // TATU+MOPO accumulates the ensemble's disagreement, the others η.
+            accumulated[r] += signal;
             trace.actions[r].extend_from_slice(action);
             trace.eta[r].push(eta);
             trace.accumulated_eta[r].push(accumulated[r]);

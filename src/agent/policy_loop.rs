@@ -80,6 +80,26 @@ impl PolicyLoopConfig {
         Self::new(sac, preset.horizon, preset.cvar_alpha, preset.penalty)
     }
 
+    /// ε(h, α) from a model's table when truncating, `None` otherwise.
+    pub fn threshold_from(
+        &self,
+        table: Option<&ThresholdTable>,
+    ) -> Result<Option<f32>, AgentError> {
+        if !self.truncate {
+            return Ok(None);
+        }
+        let table = table.ok_or_else(|| {
+            AgentError::Threshold("the dynamics artifact has no threshold table".into())
+        })?;
+        let threshold = table.get(self.horizon, self.cvar_alpha).ok_or_else(|| {
+            AgentError::Threshold(format!(
+                "ε(h = {}, α = {}) is not in the model's table (h ∈ {:?}, α ∈ {:?})",
+                self.horizon, self.cvar_alpha, table.horizons, table.alphas
+            ))
+        })?;
+        Ok(Some(threshold))
+    }
+
     fn rollout(&self, threshold: Option<f32>) -> RolloutConfig {
         RolloutConfig {
             horizon: self.horizon,
@@ -178,13 +198,21 @@ pub struct PolicyTraining {
 }
 
 impl PolicyTraining {
-    /// A fresh run: checks the dataset, dynamics and task agree, and looks up ε(h, α).
+    /// A fresh run: checks the dataset, dynamics and task agree. `threshold`
+    /// is ε, what rollouts truncate at (`None`: never); NUNO's comes from the
+    /// model's table ([`PolicyLoopConfig::threshold_from`]), the baselines'
+    /// from [`crate::agent::uncertainty`].
     pub fn new(
         config: PolicyLoopConfig,
         ctx: &LoopContext,
-        thresholds: Option<&ThresholdTable>,
+        threshold: Option<f32>,
         device: &Device,
     ) -> Result<Self, AgentError> {
+        if config.truncate && threshold.is_none() {
+            return Err(AgentError::Threshold(
+                "the loop truncates but was given no threshold".into(),
+            ));
+        }
         let (obs_dim, act_dim) = (ctx.dynamics.obs_dim(), ctx.dynamics.act_dim());
         if ctx.dataset.obs_dim() != obs_dim || ctx.dataset.act_dim() != act_dim {
             return Err(AgentError::Mismatch(format!(
@@ -196,20 +224,6 @@ impl PolicyTraining {
                 act_dim
             )));
         }
-        let threshold =
-            if config.truncate {
-                let table = thresholds.ok_or_else(|| {
-                    AgentError::Threshold("the dynamics artifact has no threshold table".into())
-                })?;
-                Some(table.get(config.horizon, config.cvar_alpha).ok_or_else(|| {
-                AgentError::Threshold(format!(
-                    "ε(h = {}, α = {}) is not in the model's table (h ∈ {:?}, α ∈ {:?})",
-                    config.horizon, config.cvar_alpha, table.horizons, table.alphas
-                ))
-            })?)
-            } else {
-                None
-            };
         let task = crate::envs::MujocoTask::new(ctx.task)?;
         let (low, high) = task.action_bounds();
         let actor = ActorConfig::new(

@@ -130,3 +130,21 @@ pub fn mopo_preset(name: &str) -> Result<(usize, f64), AgentError> {
                 .join(", "),
         })
 }
+
+/// TATU's pessimism coefficient where TATU's own scripts give one for a
+/// dataset (TATU+MOPO: `run_tatu_modelbased.sh`); TATU+MOPO's h and λ are
+/// MOPO's for the same dataset ([`MOPO_PRESETS`]).
+pub const TATU_PESSIMISM: [(&str, f64); 2] =
+    [("hopper-medium-replay", 2.0), ("hopper-medium-expert", 3.5)];
+
+/// The pessimism coefficient for a dataset TATU's scripts do not name: the
+/// medium-replay script's 2 (the TATU paper's table is not in our references).
+pub const TATU_DEFAULT_PESSIMISM: f64 = 2.0;
+
+/// TATU's pessimism coefficient for the dataset `name` names.
+pub fn tatu_pessimism(name: &str) -> f64 {
+    TATU_PESSIMISM
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map_or(TATU_DEFAULT_PESSIMISM, |&(_, p)| p)
+}

@@ -42,6 +42,12 @@ pub struct PolicyProvenance {
     /// The online SAC run that trained it (a behaviour policy), if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub online_training: Option<OnlineSacConfig>,
+    /// The offline method (`fit-policy --algo`: nuno, nuno-r, nuno-al, mopo, tatu-mopo).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub algorithm: Option<String>,
+    /// The threshold its model rollouts truncated at, if they did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub truncation_threshold: Option<f32>,
 }
 
 /// The contents of `{stem}.json`.

@@ -20,7 +20,8 @@ pub enum EnsembleUncertainty {
     /// MOPO's penalty: max over members of ‖σᵢ(s, a)‖₂.
     #[default]
     MaxAleatoric,
-    /// TATU's disagreement: max over members of ‖μᵢ(s, a) − μ̄(s, a)‖₂.
+    /// TATU's disagreement: max over members of ‖μᵢ(s, a) − μ̄(s, a)‖₂ over
+    /// the observation's dimensions (TATU's `compute_disc` leaves the reward out).
     MaxDisagreement,
 }
 
@@ -33,6 +34,8 @@ pub struct EnsembleDynamics {
     obs_dim: usize,
     act_dim: usize,
     uncertainty: EnsembleUncertainty,
+    /// Reported as the step's truncation signal when set (TATU+MOPO).
+    truncation: Option<EnsembleUncertainty>,
     device: Device,
 }
 
@@ -50,6 +53,7 @@ impl EnsembleDynamics {
             obs_dim,
             act_dim,
             uncertainty,
+            truncation: None,
             device: Device::flex(),
         }
     }
@@ -59,6 +63,45 @@ impl EnsembleDynamics {
         Self {
             uncertainty,
             ..self.clone()
+        }
+    }
+
+    /// The same model also reporting `signal` as each step's truncation signal
+    /// (TATU+MOPO: η = MOPO's penalty, truncation on the disagreement).
+    pub fn with_truncation_signal(&self, signal: EnsembleUncertainty) -> Self {
+        Self {
+            truncation: Some(signal),
+            ..self.clone()
+        }
+    }
+
+    /// `kind` of the members' predictions at row `r` (`means`, `stds`: `[members][batch · state_dim]`).
+    fn uncertainty(
+        &self,
+        kind: EnsembleUncertainty,
+        means: &[Vec<f32>],
+        stds: &[Vec<f32>],
+        r: usize,
+    ) -> f32 {
+        let s = self.state_dim();
+        let norm = |v: &mut dyn Iterator<Item = f32>| v.map(|x| x * x).sum::<f32>().sqrt();
+        match kind {
+            EnsembleUncertainty::MaxAleatoric => stds
+                .iter()
+                .map(|std| norm(&mut std[r * s..(r + 1) * s].iter().copied()))
+                .fold(0.0, f32::max),
+            EnsembleUncertainty::MaxDisagreement => {
+                let obs = r * s..r * s + self.obs_dim;
+                let members = means.len() as f32;
+                let centre: Vec<f32> = obs
+                    .clone()
+                    .map(|i| means.iter().map(|m| m[i]).sum::<f32>() / members)
+                    .collect();
+                means
+                    .iter()
+                    .map(|m| norm(&mut obs.clone().zip(&centre).map(|(i, c)| m[i] - c)))
+                    .fold(0.0, f32::max)
+            }
         }
     }
 
@@ -110,13 +153,13 @@ impl BatchDynamics for EnsembleDynamics {
         let batch = step_batch(self, states, actions, noise);
         let (s, k) = (self.state_dim(), self.noise_dim());
         let (means, stds) = self.predict(states, actions, batch);
-        let members = means.len();
         let mut out = ModelStep {
             next_states: Vec::with_capacity(batch * s),
             means: Vec::with_capacity(batch * s),
             sigma: Vec::with_capacity(batch * s),
             h_eta: vec![0.0; batch * s],
             eta: Vec::with_capacity(batch),
+            truncation_signal: None,
         };
         for r in 0..batch {
             let row = r * s..(r + 1) * s;
@@ -130,22 +173,15 @@ impl BatchDynamics for EnsembleDynamics {
                 out.sigma.push(std);
                 out.next_states.push(mean + std * eps[d]);
             }
-            let norm = |v: &mut dyn Iterator<Item = f32>| v.map(|x| x * x).sum::<f32>().sqrt();
-            let eta = match self.uncertainty {
-                EnsembleUncertainty::MaxAleatoric => (0..members)
-                    .map(|m| norm(&mut stds[m][row.clone()].iter().copied()))
-                    .fold(0.0, f32::max),
-                EnsembleUncertainty::MaxDisagreement => {
-                    let centre: Vec<f32> = row
-                        .clone()
-                        .map(|i| means.iter().map(|m| m[i]).sum::<f32>() / members as f32)
-                        .collect();
-                    (0..members)
-                        .map(|m| norm(&mut row.clone().zip(&centre).map(|(i, c)| means[m][i] - c)))
-                        .fold(0.0, f32::max)
-                }
-            };
-            out.eta.push(eta);
+            out.eta
+                .push(self.uncertainty(self.uncertainty, &means, &stds, r));
+        }
+        if let Some(signal) = self.truncation {
+            out.truncation_signal = Some(
+                (0..batch)
+                    .map(|r| self.uncertainty(signal, &means, &stds, r))
+                    .collect(),
+            );
         }
         out
     }

@@ -15,7 +15,7 @@
 //! file = "data/hopper-random.hdf5"   # relative to the grid file
 //! task = "hopper"
 //! preset = "hopper-random"           # Table 3 row: h, α, λ_pen
-//! methods = ["nuno", "nuno-r"]
+//! methods = ["nuno", "nuno-r", "nuno-al", "mopo", "tatu-mopo"]
 //! seeds = [0, 1, 2]
 //! ```
 
@@ -37,19 +37,37 @@ pub enum Method {
     Nuno,
     /// NUNO^R: the neural SDE learning the reward too.
     NunoR,
+    /// NUNO^al (Appendix D): NUNO penalising and truncating on the aleatoric ‖σ‖.
+    NunoAl,
     /// MOPO: the Gaussian ensemble, its max-‖σ‖ penalty, no truncation.
     Mopo,
+    /// TATU+MOPO: MOPO truncated on the ensemble's accumulated disagreement.
+    TatuMopo,
 }
 
 impl Method {
-    pub const ALL: [Method; 3] = [Method::Nuno, Method::NunoR, Method::Mopo];
+    pub const ALL: [Method; 5] = [
+        Method::Nuno,
+        Method::NunoR,
+        Method::NunoAl,
+        Method::Mopo,
+        Method::TatuMopo,
+    ];
 
+    /// The name in grid files, and `fit-policy --algo`'s.
     pub fn as_str(self) -> &'static str {
         match self {
             Method::Nuno => "nuno",
             Method::NunoR => "nuno-r",
+            Method::NunoAl => "nuno-al",
             Method::Mopo => "mopo",
+            Method::TatuMopo => "tatu-mopo",
         }
+    }
+
+    /// Whether the method trains in the Gaussian ensemble (else the neural SDE).
+    pub fn uses_ensemble(self) -> bool {
+        matches!(self, Method::Mopo | Method::TatuMopo)
     }
 }
 
@@ -216,13 +234,6 @@ impl Grid {
                     d.name, d.task, d.preset, preset.task
                 ));
             }
-            let methods_named: Vec<&str> = d.methods.iter().map(String::as_str).collect();
-            if methods_named.contains(&"mopo") && crate::agent::mopo_preset(&d.preset).is_err() {
-                return Err(format!(
-                    "dataset `{}`: MOPO has no hyperparameters for `{}` (its rows are D4RL's)",
-                    d.name, d.preset
-                ));
-            }
             if d.methods.is_empty() || d.seeds.is_empty() {
                 return Err(format!(
                     "dataset `{}` needs at least one method and one seed",
@@ -237,6 +248,14 @@ impl Grid {
                         .map_err(|e| format!("dataset `{}`: {e}", d.name))
                 })
                 .collect::<Result<Vec<_>, _>>()?;
+            if let Some(m) = methods.iter().find(|m| m.uses_ensemble())
+                && crate::agent::mopo_preset(&d.preset).is_err()
+            {
+                return Err(format!(
+                    "dataset `{}`: {m} needs MOPO's hyperparameters, which `{}` has none of (its rows are D4RL's)",
+                    d.name, d.preset
+                ));
+            }
             for method in methods {
                 for &seed in &d.seeds {
                     cells.push(Cell {

@@ -32,6 +32,7 @@ impl BatchDynamics for NeuralSde {
             sigma: to_f32_vec(terms.sigma),
             h_eta: to_f32_vec(terms.h_eta),
             eta: to_f32_vec(terms.eta),
+            truncation_signal: None,
         }
     }
 }

@@ -298,6 +298,7 @@ impl BatchDynamics for FusedSde {
             sigma: zeros.clone(),
             h_eta: zeros,
             eta: vec![0.0; batch],
+            truncation_signal: None,
         };
         let rows = tile_rows(batch);
         let tiles: Vec<Tile> = states

@@ -21,6 +21,19 @@ pub struct ModelStep {
     pub h_eta: Vec<f32>,
     /// η_ϕ(s, a): `[batch]`
     pub eta: Vec<f32>,
+    /// What a rollout accumulates against its truncation threshold when that
+    /// is not η: `[batch]`. TATU+MOPO penalises MOPO's max ‖σᵢ‖ (η) but
+    /// truncates on the ensemble's disagreement; `None` truncates on η.
+    pub truncation_signal: Option<Vec<f32>>,
+}
+
+impl ModelStep {
+    /// Row `row`'s truncation signal: [`truncation_signal`](Self::truncation_signal), else η.
+    pub fn truncation_at(&self, row: usize) -> f32 {
+        self.truncation_signal
+            .as_ref()
+            .map_or(self.eta[row], |signal| signal[row])
+    }
 }
 
 /// s' = mean + (σ + h(η))·ε·sqrt(dt) for one state dimension: the EM step's

@@ -273,9 +273,10 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
     };
     let path = |p: &Path| p.display().to_string();
     // Each fit writes its JSON last: without it the fit did not finish.
-    let (subcommand, finished) = match cell.method {
-        Method::Mopo => ("fit-ensemble", "ensemble.json"),
-        Method::Nuno | Method::NunoR => ("fit-model", "model.json"),
+    let (subcommand, finished) = if cell.method.uses_ensemble() {
+        ("fit-ensemble", "ensemble.json")
+    } else {
+        ("fit-model", "model.json")
     };
     if !model.join(finished).is_file() {
         let mut fit: Vec<String> = vec![
@@ -292,17 +293,14 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         if cell.layout == ObservationLayout::Neorl {
             fit.push("--neorl".into());
         }
-        match cell.method {
-            Method::Mopo => {
-                if let Some(epochs) = b.ensemble_max_epochs {
-                    fit.extend(["--max-epochs".into(), epochs.to_string()]);
-                }
+        if cell.method.uses_ensemble() {
+            if let Some(epochs) = b.ensemble_max_epochs {
+                fit.extend(["--max-epochs".into(), epochs.to_string()]);
             }
-            Method::Nuno | Method::NunoR => {
-                fit.extend(["--max-steps".into(), b.model_steps.to_string()]);
-                if cell.method == Method::NunoR {
-                    fit.push("--reward-model".into());
-                }
+        } else {
+            fit.extend(["--max-steps".into(), b.model_steps.to_string()]);
+            if cell.method == Method::NunoR {
+                fit.push("--reward-model".into());
             }
         }
         trainer(fit)?;
@@ -331,12 +329,7 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         "--out".into(),
         path(&policy),
         "--algo".into(),
-        if cell.method == Method::Mopo {
-            "mopo"
-        } else {
-            "nuno"
-        }
-        .into(),
+        cell.method.as_str().into(),
         "--resume".into(),
     ])?;
     let result = summarize_run(cell, &policy.join("metrics.jsonl"))?;

@@ -8,8 +8,8 @@ use anyhow::Context;
 use burn::tensor::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{
-    EpochRecord, LoopContext, PolicyLoopConfig, PolicyTraining, Preset, SacConfig, mopo_preset,
-    preset,
+    AleatoricAsEta, EpochRecord, LoopContext, PolicyLoopConfig, PolicyTraining, Preset, SacConfig,
+    dataset_max_threshold, mopo_preset, preset, rollout_threshold, tatu_pessimism,
 };
 use nuno::artifact::{
     BEST_POLICY, LAST_POLICY, PolicyProvenance, latest_checkpoint, load_checkpoint, load_dynamics,
@@ -19,16 +19,43 @@ use nuno::data::{DatasetFormat, read_dataset};
 use nuno::ensemble::{EnsembleDynamics, EnsembleUncertainty};
 use nuno::envs::{MujocoTask, TaskConfig, TaskRules};
 use nuno::infer::Kernel;
-use nuno::sde::{ComputeDevice, NeuralSde, ThresholdTable};
+use nuno::sde::{ComputeDevice, NeuralSde, ThresholdConfig, ThresholdTable};
 use nuno::shared::BatchDynamics;
 
 use crate::output::write_text;
 use crate::plot::{Series, line_chart};
 
+/// The offline method: which model kind, penalty and truncation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Algo {
+    /// NUNO: the neural SDE, η-penalised rollouts truncated at ε(h, α) from the model's table.
     Nuno,
+    /// NUNO^R: NUNO on a neural SDE that learned the reward (fit-model --reward-model).
+    NunoR,
+    /// NUNO^al (Appendix D): NUNO with the aleatoric ‖σ‖ in place of η, ε(h, α) computed on it.
+    NunoAl,
+    /// MOPO: the Gaussian ensemble (fit-ensemble), max-‖σᵢ‖ penalty, no truncation.
     Mopo,
+    /// TATU+MOPO: MOPO, truncated once the accumulated ensemble disagreement
+    /// passes its largest value on the dataset divided by --pessimism.
+    TatuMopo,
+}
+
+impl Algo {
+    fn name(self) -> &'static str {
+        match self {
+            Algo::Nuno => "nuno",
+            Algo::NunoR => "nuno-r",
+            Algo::NunoAl => "nuno-al",
+            Algo::Mopo => "mopo",
+            Algo::TatuMopo => "tatu-mopo",
+        }
+    }
+
+    /// Whether the method trains in the Gaussian ensemble (else the neural SDE).
+    fn uses_ensemble(self) -> bool {
+        matches!(self, Algo::Mopo | Algo::TatuMopo)
+    }
 }
 
 #[derive(Debug, clap::Args)]
@@ -43,14 +70,16 @@ pub struct Args {
     #[arg(long)]
     format: Option<DatasetFormat>,
     /// Table 3 row giving h, α and λ_pen, e.g. hopper-random or neorl-hopper-low
-    /// (with --algo mopo: the same dataset's row of MOPO's h and λ).
+    /// (with --algo mopo or tatu-mopo: the same dataset's row of MOPO's h and λ).
     #[arg(long)]
     preset: String,
-    /// nuno: the neural SDE in --model (NUNO^R when it learned the reward), η-penalised
-    /// and truncated rollouts; mopo: the Gaussian ensemble in --model (fit-ensemble),
-    /// MOPO's max-‖σ‖ penalty, no truncation.
+    /// The method: nuno, nuno-r and nuno-al train in the neural SDE of fit-model,
+    /// mopo and tatu-mopo in the Gaussian ensemble of fit-ensemble.
     #[arg(long, value_enum, default_value = "nuno")]
     algo: Algo,
+    /// TATU's pessimism coefficient (tatu-mopo; default: TATU's for the dataset, else 2).
+    #[arg(long)]
+    pessimism: Option<f64>,
     /// Total gradient steps (rounded up to whole epochs).
     #[arg(long, default_value_t = 1_000_000)]
     steps: usize,
@@ -126,6 +155,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         !args.hidden.is_empty() && args.hidden.iter().all(|&h| h > 0),
         "--hidden needs positive layer sizes"
     );
+    anyhow::ensure!(
+        args.pessimism.is_none() || args.algo == Algo::TatuMopo,
+        "--pessimism is TATU's coefficient: it needs --algo tatu-mopo"
+    );
+    if let Some(p) = args.pessimism {
+        anyhow::ensure!(
+            p.is_finite() && p > 0.0,
+            "--pessimism must be positive, got {p}"
+        );
+    }
     let preset = preset(&args.preset)?;
     let device = args.device.device().map_err(anyhow::Error::msg)?;
     let model = load_model(&args, preset, &device)?;
@@ -147,10 +186,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_actor_hidden(args.hidden.clone())
         .with_critic_hidden(args.hidden.clone());
     let mut config = PolicyLoopConfig::from_preset(preset, sac);
-    if args.algo == Algo::Mopo {
-        // MOPO: its own h and λ, the ensemble's max ‖σ‖ as the penalty, no truncation.
+    if args.algo.uses_ensemble() {
+        // MOPO's own h and λ with the ensemble's max ‖σ‖ as the penalty; TATU
+        // adds its truncation to MOPO's, MOPO alone has none.
         (config.horizon, config.penalty) = mopo_preset(&args.preset)?;
-        config.truncate = false;
+        config.truncate = args.algo == Algo::TatuMopo;
     }
     config.horizon = args.horizon.unwrap_or(config.horizon);
     config.cvar_alpha = args.cvar_alpha.unwrap_or(config.cvar_alpha);
@@ -169,16 +209,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ComputeDevice::Cpu => Kernel::Fused,
         ComputeDevice::Wgpu => Kernel::Burn,
     });
-    let batch_dynamics = model.dynamics(kernel);
+    let base = model.dynamics(kernel);
+    let aleatoric;
+    let dynamics: &dyn BatchDynamics = if args.algo == Algo::NunoAl {
+        aleatoric = AleatoricAsEta::new(base.as_ref());
+        &aleatoric
+    } else {
+        base.as_ref()
+    };
     let ctx = LoopContext {
         dataset: &dataset,
-        dynamics: batch_dynamics.as_ref(),
+        dynamics,
         task,
         rules: model.rules,
         kernel,
     };
-    let thresholds = model.thresholds.as_ref();
-    let mut training = PolicyTraining::new(config, &ctx, thresholds, &device)?;
+    let checkpoints = args.out.join("checkpoints");
+    let resuming = args.resume && latest_checkpoint(&checkpoints)?.is_some();
+    let threshold = truncation_threshold(&args, &config, &model, &ctx, resuming)?;
+    let mut training = PolicyTraining::new(config, &ctx, threshold, &device)?;
     let checkpoints = args.out.join("checkpoints");
     match (latest_checkpoint(&checkpoints)?, args.resume) {
         (Some(checkpoint), true) => {
@@ -203,8 +252,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(threshold) = training.threshold {
         println!(
-            "{}: h = {}, α = {}, λ_pen = {}, ε(h, α) = {threshold:.4}",
+            "{} ({}): h = {}, α = {}, λ_pen = {}, truncation threshold {threshold:.4}",
             preset.name,
+            args.algo.name(),
             training.config.horizon,
             training.config.cvar_alpha,
             training.config.penalty
@@ -226,6 +276,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         normalized_score: Some(record.eval.normalized_score),
         mean_return: Some(record.eval.mean_return),
         online_training: None,
+        algorithm: Some(args.algo.name().to_string()),
+        truncation_threshold: training.threshold,
     };
     while training.epoch < epochs {
         let record = training.run_epoch(&ctx)?;
@@ -379,47 +431,135 @@ impl LoadedModel {
 
 fn load_model(args: &Args, preset: &Preset, device: &Device) -> anyhow::Result<LoadedModel> {
     let context = || format!("loading the model in {}", args.model.display());
-    match args.algo {
-        Algo::Nuno => {
-            let (sde, metadata) = load_dynamics(&args.model, device).with_context(context)?;
-            let task = metadata.provenance.task.unwrap_or(TaskConfig {
-                name: preset.task,
-                layout: preset.layout,
-                ..TaskConfig::d4rl(preset.task)
-            });
-            let c = &sde.constants.spec;
-            Ok(LoadedModel {
-                rules: TaskRules::new(task, &c.split, c.dt),
-                task,
-                thresholds: metadata.provenance.thresholds.clone(),
-                weights_sha256: metadata.weights_sha256.clone(),
-                dataset_sha256: metadata
-                    .provenance
-                    .dataset
-                    .as_ref()
-                    .map(|d| d.sha256.clone()),
-                ensemble: None,
-                sde: Some(sde),
-            })
-        }
-        Algo::Mopo => {
-            let (fit, metadata) = load_ensemble(&args.model, device).with_context(context)?;
-            let task = metadata.task;
-            let probe = MujocoTask::new(task)?;
-            Ok(LoadedModel {
-                rules: TaskRules::new(task, &probe.state_split(), probe.dt()),
-                task,
-                thresholds: None,
-                weights_sha256: metadata.weights_sha256.clone(),
-                dataset_sha256: metadata.dataset.as_ref().map(|d| d.sha256.clone()),
-                ensemble: Some(EnsembleDynamics::new(
-                    &fit,
-                    metadata.obs_dim,
-                    metadata.act_dim,
-                    EnsembleUncertainty::MaxAleatoric,
-                )),
-                sde: None,
-            })
-        }
+    if !args.algo.uses_ensemble() {
+        let (sde, metadata) = load_dynamics(&args.model, device).with_context(context)?;
+        let learns_reward = sde.constants.config.reward_model;
+        anyhow::ensure!(
+            args.algo != Algo::NunoR || learns_reward,
+            "--algo nuno-r needs a model that learned the reward (fit-model --reward-model); \
+                 the one in {} did not",
+            args.model.display()
+        );
+        let task = metadata.provenance.task.unwrap_or(TaskConfig {
+            name: preset.task,
+            layout: preset.layout,
+            ..TaskConfig::d4rl(preset.task)
+        });
+        let c = &sde.constants.spec;
+        Ok(LoadedModel {
+            rules: TaskRules::new(task, &c.split, c.dt),
+            task,
+            thresholds: metadata.provenance.thresholds.clone(),
+            weights_sha256: metadata.weights_sha256.clone(),
+            dataset_sha256: metadata
+                .provenance
+                .dataset
+                .as_ref()
+                .map(|d| d.sha256.clone()),
+            ensemble: None,
+            sde: Some(sde),
+        })
+    } else {
+        let (fit, metadata) = load_ensemble(&args.model, device).with_context(context)?;
+        let task = metadata.task;
+        let probe = MujocoTask::new(task)?;
+        let ensemble = EnsembleDynamics::new(
+            &fit,
+            metadata.obs_dim,
+            metadata.act_dim,
+            EnsembleUncertainty::MaxAleatoric,
+        );
+        let ensemble = if args.algo == Algo::TatuMopo {
+            ensemble.with_truncation_signal(EnsembleUncertainty::MaxDisagreement)
+        } else {
+            ensemble
+        };
+        Ok(LoadedModel {
+            rules: TaskRules::new(task, &probe.state_split(), probe.dt()),
+            task,
+            thresholds: None,
+            weights_sha256: metadata.weights_sha256.clone(),
+            dataset_sha256: metadata.dataset.as_ref().map(|d| d.sha256.clone()),
+            ensemble: Some(ensemble),
+            sde: None,
+        })
     }
+}
+
+/// What the run's rollouts truncate at: NUNO's ε(h, α) from the model's table;
+/// NUNO^al's computed on ‖σ‖ the same way; TATU's from the ensemble's
+/// disagreement over the dataset. The computed ones are kept in
+/// `threshold.json` in --out, which a resumed run reads instead of recomputing.
+fn truncation_threshold(
+    args: &Args,
+    config: &PolicyLoopConfig,
+    model: &LoadedModel,
+    ctx: &LoopContext,
+    resuming: bool,
+) -> anyhow::Result<Option<f32>> {
+    if !config.truncate {
+        return Ok(None);
+    }
+    if matches!(args.algo, Algo::Nuno | Algo::NunoR) {
+        return Ok(config.threshold_from(model.thresholds.as_ref())?);
+    }
+    let path = args.out.join("threshold.json");
+    if resuming && path.is_file() {
+        let saved: SavedThreshold = serde_json::from_str(&std::fs::read_to_string(&path)?)
+            .with_context(|| format!("reading {}", path.display()))?;
+        anyhow::ensure!(
+            saved.algorithm == args.algo.name(),
+            "{} was computed for {}, this run is {}",
+            path.display(),
+            saved.algorithm,
+            args.algo.name()
+        );
+        return Ok(Some(saved.threshold));
+    }
+    let (threshold, how) = match args.algo {
+        Algo::NunoAl => {
+            let thresholds = ThresholdConfig::new().with_seed(config.seed);
+            let value = rollout_threshold(
+                ctx.dynamics,
+                &ctx.rules,
+                ctx.dataset,
+                config.horizon,
+                config.cvar_alpha,
+                &thresholds,
+            )?;
+            let how = format!(
+                "CVaR at α = {} of ‖σ‖ accumulated over h = {} along {} particles of up to {} dataset windows",
+                config.cvar_alpha, config.horizon, thresholds.particles, thresholds.max_windows
+            );
+            (value, how)
+        }
+        Algo::TatuMopo => {
+            let pessimism = args
+                .pessimism
+                .unwrap_or_else(|| tatu_pessimism(&args.preset));
+            let value = dataset_max_threshold(ctx.dynamics, ctx.dataset, pessimism, 10_000)?;
+            let how = format!(
+                "the ensemble's largest disagreement over the dataset's {} transitions / pessimism {pessimism}",
+                ctx.dataset.len()
+            );
+            (value, how)
+        }
+        Algo::Nuno | Algo::NunoR | Algo::Mopo => unreachable!("handled above"),
+    };
+    std::fs::create_dir_all(&args.out)?;
+    let saved = SavedThreshold {
+        algorithm: args.algo.name().to_string(),
+        threshold,
+        how,
+    };
+    write_text(&path, &serde_json::to_string_pretty(&saved)?)?;
+    Ok(Some(threshold))
+}
+
+/// `threshold.json`: a baseline's computed truncation threshold.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct SavedThreshold {
+    algorithm: String,
+    threshold: f32,
+    how: String,
 }

@@ -143,7 +143,18 @@ fn bad_grids_are_refused_before_anything_runs() {
                 "[\"mopo\"]",
                 "[0]",
             ),
-            "MOPO has no hyperparameters",
+            "mopo needs MOPO's hyperparameters",
+        ),
+        (
+            dataset_row(
+                "h",
+                "hopper.hdf5",
+                "hopper",
+                "neorl-hopper-low",
+                "[\"nuno\", \"tatu-mopo\"]",
+                "[0]",
+            ),
+            "tatu-mopo needs MOPO's hyperparameters",
         ),
         (
             dataset_row(

@@ -65,7 +65,7 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
         args.into_iter().map(String::from).collect()
     };
     let stdout = ok(&fit("20", &[]));
-    assert!(stdout.contains("ε(h, α)"), "{stdout}");
+    assert!(stdout.contains("truncation threshold"), "{stdout}");
     for file in [
         "metrics.csv",
         "metrics.jsonl",
@@ -230,6 +230,99 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
     assert_eq!(policy["dynamics_sha256"], ensemble["weights_sha256"]);
     assert_eq!(policy["training"]["penalty"], 5.0);
     assert_eq!(policy["training"]["truncate"], false);
+    // TATU+MOPO on the same ensemble: MOPO's penalty, truncation at the
+    // largest disagreement on the dataset / pessimism, kept for a resume.
+    let tatu = |out: &Path, steps: &str, extra: &[&str]| {
+        let mut args: Vec<String> = [
+            "fit-policy",
+            "--algo",
+            "tatu-mopo",
+            "--model",
+            &s(&model),
+            "--dataset",
+            &s(&dataset),
+            "--preset",
+            "hopper-medium",
+            "--steps",
+            steps,
+            "--steps-per-epoch",
+            "10",
+            "--rollout-freq",
+            "10",
+            "--rollout-batch",
+            "32",
+            "--batch-size",
+            "32",
+            "--hidden",
+            "16,16",
+            "--eval-episodes",
+            "1",
+            "--out",
+            &s(out),
+        ]
+        .map(String::from)
+        .to_vec();
+        args.extend(extra.iter().map(|e| e.to_string()));
+        ok(&args.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let saved = |out: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(out.join("threshold.json")).unwrap()).unwrap()
+    };
+    let (lax, strict) = (tmp.path().join("tatu-1"), tmp.path().join("tatu-50"));
+    tatu(&lax, "20", &["--pessimism", "1"]);
+    tatu(&strict, "20", &["--pessimism", "50"]);
+    let threshold = |out: &Path| saved(out)["threshold"].as_f64().unwrap();
+    assert_eq!(saved(&lax)["algorithm"], "tatu-mopo");
+    assert!(threshold(&lax) > 0.0);
+    assert!((threshold(&strict) * 50.0 / threshold(&lax) - 1.0).abs() < 1e-5);
+    let policy: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(model.join("policy.json")).unwrap()).unwrap();
+    assert_eq!(policy["algorithm"], "tatu-mopo");
+    assert!((policy["truncation_threshold"].as_f64().unwrap() - threshold(&strict)).abs() < 1e-6);
+    assert_eq!(policy["training"]["penalty"], 5.0);
+    assert_eq!(policy["training"]["truncate"], true);
+    let rollouts = |out: &Path| -> Vec<serde_json::Value> {
+        std::fs::read_to_string(out.join("metrics.jsonl"))
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["rollout"].clone())
+            .collect()
+    };
+    // A fiftieth of the largest one-step disagreement is passed within h = 5
+    // by nearly every rollout; the whole of it by fewer.
+    let truncated = |out: &Path| -> u64 {
+        rollouts(out)
+            .iter()
+            .map(|r| r["truncated"].as_u64().unwrap())
+            .sum()
+    };
+    assert!(
+        truncated(&strict) > truncated(&lax),
+        "{} vs {}",
+        truncated(&strict),
+        truncated(&lax)
+    );
+    // A resumed run truncates where it did (its checkpoint holds ε; the
+    // dataset pass is not repeated).
+    let stdout = tatu(&strict, "30", &["--pessimism", "50", "--resume"]);
+    let printed = format!("truncation threshold {:.4}", threshold(&strict));
+    assert!(stdout.contains(&printed), "{stdout}");
+    let error = fails(&[
+        "fit-policy",
+        "--algo",
+        "mopo",
+        "--pessimism",
+        "2",
+        "--model",
+        &s(&model),
+        "--dataset",
+        &s(&dataset),
+        "--preset",
+        "hopper-medium",
+        "--out",
+        &s(&tmp.path().join("x")),
+    ]);
+    assert!(error.contains("--pessimism"), "{error}");
     // The neural SDE's run needs its own model.
     let error = fails(&[
         "fit-policy",
@@ -245,4 +338,123 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
         &s(&tmp.path().join("other")),
     ]);
     assert!(error.contains("model.json"), "{error}");
+}
+
+#[test]
+fn nuno_al_penalises_and_truncates_on_the_aleatoric_sigma() {
+    let tmp = tempfile::tempdir().unwrap();
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/hopper-random");
+    let (model, dataset, run) = (
+        tmp.path().join("model"),
+        tmp.path().join("hopper.hdf5"),
+        tmp.path().join("run"),
+    );
+    copy_dir(&shipped, &model);
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    generate_hopper(&s(&dataset), 2000, 0);
+    let args = |algo: &str, out: &Path| -> Vec<String> {
+        [
+            "fit-policy",
+            "--algo",
+            algo,
+            "--model",
+            &s(&model),
+            "--dataset",
+            &s(&dataset),
+            "--preset",
+            "hopper-medium",
+            "--steps",
+            "10",
+            "--steps-per-epoch",
+            "10",
+            "--rollout-freq",
+            "10",
+            "--rollout-batch",
+            "64",
+            "--batch-size",
+            "32",
+            "--hidden",
+            "16,16",
+            "--eval-episodes",
+            "1",
+            "--out",
+            &s(out),
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let run_args = args("nuno-al", &run);
+    ok(&run_args.iter().map(String::as_str).collect::<Vec<_>>());
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("threshold.json")).unwrap())
+            .unwrap();
+    assert_eq!(saved["algorithm"], "nuno-al");
+    assert!(saved["how"].as_str().unwrap().contains("‖σ‖"), "{saved}");
+    // The uncertainty the run penalised is ‖σ‖, not η: compared with NUNO's
+    // run on the same model, its rollouts' mean uncertainty is the SDE's σ
+    // scale (Appendix D: σ is bounded below on the data, η is ≈ 0 there).
+    let nuno_run = tmp.path().join("nuno");
+    let nuno_args = args("nuno", &nuno_run);
+    ok(&nuno_args.iter().map(String::as_str).collect::<Vec<_>>());
+    let mean_eta = |out: &Path| -> f64 {
+        let text = std::fs::read_to_string(out.join("metrics.jsonl")).unwrap();
+        let record: serde_json::Value = serde_json::from_str(text.lines().next().unwrap()).unwrap();
+        record["rollout"]["mean_eta"].as_f64().unwrap()
+    };
+    let sigma = model_sigma_norm(&model, &dataset);
+    assert!(
+        (mean_eta(&run) / sigma - 1.0).abs() < 0.5,
+        "NUNO^al's uncertainty {} vs the model's ‖σ‖ on the data {sigma}",
+        mean_eta(&run)
+    );
+    assert!(
+        (mean_eta(&nuno_run) - mean_eta(&run)).abs() > 0.1 * sigma,
+        "NUNO's η {} should differ from ‖σ‖ {}",
+        mean_eta(&nuno_run),
+        mean_eta(&run)
+    );
+    let policy: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(model.join("policy.json")).unwrap()).unwrap();
+    assert_eq!(policy["algorithm"], "nuno");
+    // nuno-r needs a model that learned the reward; the shipped one did not.
+    let error = fails(
+        &args("nuno-r", &tmp.path().join("r"))
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+    );
+    assert!(error.contains("--reward-model"), "{error}");
+}
+
+/// Mean ‖σ(s, a)‖₂ of the model in `dir` over the first 500 of the dataset's
+/// transitions, through the library's burn path.
+fn model_sigma_norm(dir: &Path, dataset: &Path) -> f64 {
+    use nuno::shared::BatchDynamics;
+    let device = burn::tensor::Device::flex();
+    let (sde, _) = nuno::artifact::load_dynamics(dir, &device).unwrap();
+    let data = nuno::data::read_dataset(dataset, None).unwrap();
+    let n = 500;
+    let states: Vec<f32> = data
+        .observations
+        .rows()
+        .into_iter()
+        .take(n)
+        .flatten()
+        .copied()
+        .collect();
+    let actions: Vec<f32> = data
+        .actions
+        .rows()
+        .into_iter()
+        .take(n)
+        .flatten()
+        .copied()
+        .collect();
+    let step = BatchDynamics::step(&sde, &states, &actions, &vec![0.0; states.len()]);
+    let d = data.obs_dim();
+    step.sigma
+        .chunks_exact(d)
+        .map(|s| f64::from(s.iter().map(|x| x * x).sum::<f32>()).sqrt())
+        .sum::<f64>()
+        / n as f64
 }
