@@ -69,6 +69,17 @@ impl Method {
     pub fn uses_ensemble(self) -> bool {
         matches!(self, Method::Mopo | Method::TatuMopo)
     }
+
+    /// The model the method trains in; methods naming the same one share its
+    /// fit per dataset and seed (NUNO and NUNO^al one SDE, MOPO and TATU+MOPO
+    /// one ensemble), so their comparison is of the policy step alone.
+    pub fn model_kind(self) -> &'static str {
+        match self {
+            Method::Nuno | Method::NunoAl => "sde",
+            Method::NunoR => "sde-reward",
+            Method::Mopo | Method::TatuMopo => "ensemble",
+        }
+    }
 }
 
 impl fmt::Display for Method {
@@ -165,6 +176,17 @@ impl Cell {
     /// `dataset/method/seed-N`: the cell's folder under the experiment.
     pub fn id(&self) -> String {
         format!("{}/{}/seed-{}", self.dataset, self.method, self.seed)
+    }
+
+    /// `models/dataset/kind/seed-N`: the model's folder under the experiment,
+    /// shared by the cells whose methods train in the same kind of model.
+    pub fn model_id(&self) -> String {
+        format!(
+            "models/{}/{}/seed-{}",
+            self.dataset,
+            self.method.model_kind(),
+            self.seed
+        )
     }
 }
 

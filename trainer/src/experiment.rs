@@ -256,7 +256,7 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     let dir = cell_dir(root, cell);
-    let (model, policy) = (dir.join("model"), dir.join("policy"));
+    let (model, policy) = (root.join(cell.model_id()), dir.join("policy"));
     let b = &grid.budget;
     let exe = std::env::current_exe().context("locating nuno-trainer")?;
     let trainer = |args: Vec<String>| -> anyhow::Result<()> {
@@ -278,6 +278,15 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
     } else {
         ("fit-model", "model.json")
     };
+    // Cells sharing the model fit it once: the first to hold the lock fits,
+    // the others wait on it and find the model there. The operating system
+    // drops the lock of a killed cell, whose successor fits afresh.
+    std::fs::create_dir_all(&model).with_context(|| format!("creating {}", model.display()))?;
+    let lock_path = model.with_extension("lock");
+    let lock = std::fs::File::create(&lock_path)
+        .with_context(|| format!("creating {}", lock_path.display()))?;
+    lock.lock()
+        .with_context(|| format!("locking {}", lock_path.display()))?;
     if !model.join(finished).is_file() {
         let mut fit: Vec<String> = vec![
             subcommand.into(),
@@ -305,6 +314,7 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         }
         trainer(fit)?;
     }
+    drop(lock);
     let hidden: Vec<String> = b.hidden.iter().map(usize::to_string).collect();
     trainer(vec![
         "fit-policy".into(),
@@ -328,6 +338,8 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         cell.seed.to_string(),
         "--out".into(),
         path(&policy),
+        "--policies".into(),
+        path(&dir),
         "--algo".into(),
         cell.method.as_str().into(),
         "--resume".into(),

@@ -124,6 +124,10 @@ pub struct Args {
     /// Run directory: checkpoints, metrics.csv, metrics.jsonl, plots.
     #[arg(long)]
     out: PathBuf,
+    /// Where the best and last policies are written (default: --model, next to
+    /// the dynamics, where the server finds them).
+    #[arg(long)]
+    policies: Option<PathBuf>,
     /// Continue from the last checkpoint in --out.
     #[arg(long)]
     resume: bool,
@@ -279,6 +283,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         algorithm: Some(args.algo.name().to_string()),
         truncation_threshold: training.threshold,
     };
+    let policies = args.policies.as_ref().unwrap_or(&args.model);
+    std::fs::create_dir_all(policies)
+        .with_context(|| format!("creating {}", policies.display()))?;
     while training.epoch < epochs {
         let record = training.run_epoch(&ctx)?;
         bar.set_position(training.step as u64);
@@ -294,7 +301,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .policy(nuno::agent::ActionMode::Deterministic)
             .actor;
         save_policy(
-            &args.model,
+            policies,
             LAST_POLICY,
             &actor,
             task,
@@ -307,7 +314,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .fold(f64::NEG_INFINITY, f64::max);
         if record.eval.normalized_score >= best {
             save_policy(
-                &args.model,
+                policies,
                 BEST_POLICY,
                 &actor,
                 task,
@@ -324,7 +331,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             last.epoch,
             last.step,
             last.eval.normalized_score,
-            args.model.display()
+            policies.display()
         );
     }
     Ok(())

@@ -309,6 +309,50 @@ fn a_local_grid_runs_once_resumes_and_reports() {
 }
 
 #[test]
+fn methods_in_the_same_kind_of_model_share_one_fit_per_seed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let grid = hopper_grid(dir, "[\"nuno\", \"nuno-al\"]", "[0]");
+    let out = dir.join("out");
+    // Both cells start together; one fits the SDE, the other waits for it.
+    let run = ok(&[
+        "experiment",
+        "run",
+        "--grid",
+        &grid,
+        "--out",
+        &s(&out),
+        "--jobs",
+        "2",
+    ]);
+    assert!(run.contains("2 to run"), "{run}");
+    let model = out.join("models/hopper-random/sde/seed-0");
+    assert!(model.join("model.json").is_file());
+    let fitted = ["nuno", "nuno-al"]
+        .iter()
+        .filter(|m| {
+            let log = out.join(format!("hopper-random/{m}/seed-0/log.txt"));
+            std::fs::read_to_string(log)
+                .unwrap()
+                .contains(&format!("wrote {}", model.display()))
+        })
+        .count();
+    assert_eq!(fitted, 1, "the shared SDE is fitted once");
+    // Each cell's policies are its own, trained in the same model.
+    let policy = |m: &str| -> serde_json::Value {
+        let file = out.join(format!("hopper-random/{m}/seed-0/policy.json"));
+        serde_json::from_slice(&std::fs::read(file).unwrap()).unwrap()
+    };
+    assert_eq!(policy("nuno")["algorithm"], "nuno");
+    assert_eq!(policy("nuno-al")["algorithm"], "nuno-al");
+    assert_eq!(
+        policy("nuno")["dynamics_sha256"],
+        policy("nuno-al")["dynamics_sha256"]
+    );
+    assert!(!model.join("policy.json").exists());
+}
+
+#[test]
 fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let script = root.join("deploy/slurm/local-cluster.sh");
@@ -335,7 +379,7 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
     let _stop = Stop(&script, cluster.clone());
     let conf = cluster.join("slurm.conf");
 
-    let grid = hopper_grid(dir, "[\"nuno\", \"nuno-r\", \"mopo\"]", "[0]");
+    let grid = hopper_grid(dir, "[\"nuno\", \"nuno-r\", \"mopo\", \"tatu-mopo\"]", "[0]");
     let out = dir.join("out");
     let submitted = Command::new(env!("CARGO_BIN_EXE_nuno-trainer"))
         .args([
@@ -384,17 +428,17 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
     }
     let status = ok(&["experiment", "status", "--grid", &grid, "--out", &s(&out)]);
     assert!(
-        status.contains("3/3 cells done"),
+        status.contains("4/4 cells done"),
         "{status}\n{}",
         logs(&out.join("slurm"))
     );
     let report = ok(&["experiment", "report", "--grid", &grid, "--out", &s(&out)]);
     assert!(
-        report.contains("| dataset | nuno | nuno-r | mopo |"),
+        report.contains("| dataset | nuno | nuno-r | mopo | tatu-mopo |"),
         "{report}"
     );
     assert!(
-        out.join("hopper-random/mopo/seed-0/model/ensemble.json")
+        out.join("models/hopper-random/ensemble/seed-0/ensemble.json")
             .is_file()
     );
 }
