@@ -278,8 +278,9 @@ impl Grid {
                     d.name, d.preset
                 ));
             }
-            for method in methods {
-                for &seed in &d.seeds {
+            // Seed-major: a run cut short has every method at its first seeds.
+            for &seed in &d.seeds {
+                for &method in &methods {
                     cells.push(Cell {
                         index: cells.len(),
                         dataset: d.name.clone(),
