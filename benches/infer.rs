@@ -4,6 +4,7 @@
 //! - one 256×256 layer (the bulk of the work) through each candidate kernel:
 //!   burn's matmul, the `gemm` crate, `matrixmultiply`, and the fused layer;
 //! - the Euler–Maruyama step at batch 1, 256, 4096, 50000 (drift, σ, η, h(η));
+//! - MOPO's ensemble step at rollout batches, burn and fused;
 //! - a 10-step rollout with the policy (sampled actions) at batch 50000, through
 //!   `agent::rollout_model`, the loop SAC and the server use.
 //!
@@ -19,6 +20,9 @@ use common::{ACT, Hopper, OBS, seconds_per_call};
 use nuno::agent::FusedActor;
 use nuno::agent::{
     ActionMode, ActorConfig, ActorPolicy, BatchPolicy, RolloutActions, RolloutConfig, rollout_model,
+};
+use nuno::ensemble::{
+    EnsembleDynamics, EnsembleFit, EnsembleUncertainty, GaussianEnsemble, Scaler,
 };
 use nuno::envs::{TaskConfig, TaskName, TaskRules};
 use nuno::infer::{Dense, Rows};
@@ -111,6 +115,61 @@ fn layer_kernels(rng: &mut ChaCha8Rng) {
     }
 }
 
+/// MOPO's ensemble step (7 members of 4×200 swish, hopper sizes) at rollout
+/// batches, burn against the fused path, with the GFLOP/s of the members' layers.
+fn ensemble_steps(hopper: &Hopper, rng: &mut ChaCha8Rng) {
+    let device = Device::flex();
+    device.seed(0);
+    let d_in = OBS + ACT;
+    let hidden = [200usize; 4];
+    let model = GaussianEnsemble::init(d_in, OBS + 1, &hidden, 7, (0.5, -10.0), &device);
+    let fit = EnsembleFit {
+        model,
+        scaler: Scaler {
+            mean: vec![0.0; d_in],
+            std: vec![1.0; d_in],
+        },
+        elites: (0..5).collect(),
+        holdout_mse: vec![0.0; 7],
+        history: Vec::new(),
+    };
+    let burn = EnsembleDynamics::new(&fit, OBS, ACT, EnsembleUncertainty::MaxAleatoric);
+    let fused = burn.on_fused_path();
+    let widths = [d_in, 200, 200, 200, 200, 2 * (OBS + 1)];
+    let flops_per_row: f64 = 7.0
+        * widths
+            .windows(2)
+            .map(|w| 2.0 * (w[0] * w[1]) as f64)
+            .sum::<f64>();
+    println!();
+    println!(
+        "| ensemble step (7 × 4×200, hopper) | batch | burn flex: transitions/s | fused: transitions/s | fused GFLOP/s | fused / burn |"
+    );
+    println!("|---|---|---|---|---|---|");
+    for batch in [256usize, 5000, 50_000] {
+        let states: Vec<f32> = hopper
+            .states(batch)
+            .chunks_exact(OBS)
+            .flat_map(|s| s.iter().copied().chain([0.0]))
+            .collect();
+        let actions = hopper.actions(batch);
+        let noise = random(batch * (OBS + 2), rng);
+        let time = |model: &EnsembleDynamics| {
+            seconds_per_call(|| {
+                let _ = model.step(&states, &actions, &noise);
+            })
+        };
+        let (b, f) = (time(&burn), time(&fused));
+        println!(
+            "| | {batch} | {:.0} | {:.0} | {:.1} | {:.2}× |",
+            batch as f64 / b,
+            batch as f64 / f,
+            flops_per_row * batch as f64 / f / 1e9,
+            b / f
+        );
+    }
+}
+
 fn main() {
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     layer_kernels(&mut rng);
@@ -124,6 +183,7 @@ fn main() {
         SdeConfig::new(),
         &device,
     );
+    ensemble_steps(&hopper, &mut rng);
     let fused_model = FusedSde::new(&burn_model);
     let kernels: [(&str, &dyn BatchDynamics); 2] =
         [("burn flex", &burn_model), ("fused", &fused_model)];

@@ -421,3 +421,47 @@ fn tatu_truncates_on_the_members_disagreement_over_the_observation_only() {
         "far off the data the members disagree more: {signal:?}"
     );
 }
+
+#[test]
+fn the_fused_path_steps_the_ensemble_as_burn_does() {
+    let fit = fitted();
+    let burn = EnsembleDynamics::new(&fit, 2, 1, EnsembleUncertainty::MaxAleatoric)
+        .with_truncation_signal(EnsembleUncertainty::MaxDisagreement);
+    let fused = burn.on_fused_path();
+    // Enough rows for several tiles per member, on and off the data.
+    let rows = 700;
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let states: Vec<f32> = (0..rows)
+        .flat_map(|_| {
+            [
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-3.0..3.0),
+                0.0,
+            ]
+        })
+        .collect();
+    let actions: Vec<f32> = (0..rows).map(|_| rng.random_range(-4.0..4.0)).collect();
+    let noise: Vec<f32> = (0..rows * 4).map(|_| rng.sample(StandardNormal)).collect();
+    let (a, b) = (
+        burn.step(&states, &actions, &noise),
+        fused.step(&states, &actions, &noise),
+    );
+    let close = |name: &str, x: &[f32], y: &[f32]| {
+        assert_eq!(x.len(), y.len(), "{name}");
+        for (i, (u, v)) in x.iter().zip(y).enumerate() {
+            assert!(
+                (u - v).abs() <= 1e-4 * u.abs().max(1.0),
+                "{name}[{i}]: burn {u}, fused {v}"
+            );
+        }
+    };
+    close("next_states", &a.next_states, &b.next_states);
+    close("means", &a.means, &b.means);
+    close("sigma", &a.sigma, &b.sigma);
+    close("eta", &a.eta, &b.eta);
+    close(
+        "truncation_signal",
+        a.truncation_signal.as_ref().unwrap(),
+        b.truncation_signal.as_ref().unwrap(),
+    );
+}

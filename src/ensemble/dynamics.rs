@@ -5,13 +5,21 @@
 //! TATU's form. The state carries the reward like NUNO^R's (r_c), so rewards
 //! come from the model; dt is one step.
 
+use std::cell::RefCell;
+
 use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
 use super::fit::{EnsembleFit, Scaler};
 use super::model::GaussianEnsemble;
+use crate::infer::{DenseMlp, MlpScratch, Rows, row_chunks, run_tiles, tile_rows, with_buffers};
 use crate::nn::to_f32_vec;
 use crate::shared::{BatchDynamics, BatchShape, ModelStep, step_batch};
+
+thread_local! {
+    static MLP_SCRATCH: RefCell<MlpScratch> = RefCell::new(MlpScratch::default());
+    static OUTPUT: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
+}
 
 /// What a step reports as its uncertainty (the rollout's η).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -25,10 +33,21 @@ pub enum EnsembleUncertainty {
     MaxDisagreement,
 }
 
+/// The members' weights on the fused CPU path (`crate::infer`), with the
+/// shared log-variance limits.
+#[derive(Debug, Clone)]
+struct FusedMembers {
+    members: Vec<DenseMlp>,
+    max_logvar: Vec<f32>,
+    min_logvar: Vec<f32>,
+}
+
 /// A fitted ensemble ready to step.
 #[derive(Debug, Clone)]
 pub struct EnsembleDynamics {
     model: GaussianEnsemble,
+    /// When set, predictions run here instead of through burn.
+    fused: Option<FusedMembers>,
     scaler: Scaler,
     elites: Vec<usize>,
     obs_dim: usize,
@@ -54,7 +73,21 @@ impl EnsembleDynamics {
             act_dim,
             uncertainty,
             truncation: None,
+            fused: None,
             device: Device::flex(),
+        }
+    }
+
+    /// The same model predicting on the fused CPU path (the same weights;
+    /// values equal burn's to float rounding).
+    pub fn on_fused_path(&self) -> Self {
+        Self {
+            fused: Some(FusedMembers {
+                members: self.model.members.iter().map(DenseMlp::from_burn).collect(),
+                max_logvar: to_f32_vec(self.model.max_logvar.val()),
+                min_logvar: to_f32_vec(self.model.min_logvar.val()),
+            }),
+            ..self.clone()
         }
     }
 
@@ -124,6 +157,9 @@ impl EnsembleDynamics {
                     .map(|((v, m), d)| (v - m) / d),
             );
         }
+        if let Some(fused) = &self.fused {
+            return fused.predict(&x, o + a, batch);
+        }
         let x = Tensor::<2>::from_data(TensorData::new(x, [batch, o + a]), &self.device);
         (0..self.model.members.len())
             .map(|m| {
@@ -132,6 +168,54 @@ impl EnsembleDynamics {
             })
             .unzip()
     }
+}
+
+impl FusedMembers {
+    /// [`EnsembleDynamics::predict`] on normalised inputs `x` (`[batch, width]`),
+    /// in tiles of rows per member over the cores.
+    fn predict(&self, x: &[f32], width: usize, batch: usize) -> (Vec<Vec<f32>>, Vec<Vec<f32>>) {
+        let d = self.max_logvar.len();
+        let members = self.members.len();
+        let mut means = vec![vec![0.0f32; batch * d]; members];
+        let mut stds = vec![vec![0.0f32; batch * d]; members];
+        let rows = tile_rows(batch);
+        let mut tiles = Vec::new();
+        for ((member, mean), std) in self.members.iter().zip(&mut means).zip(&mut stds) {
+            for ((x, mean), std) in x
+                .chunks(rows * width)
+                .zip(row_chunks(mean, rows, d))
+                .zip(row_chunks(std, rows, d))
+            {
+                tiles.push((member, x, mean, std));
+            }
+        }
+        run_tiles(tiles, |(member, x, mean, std)| {
+            let n = x.len() / width;
+            with_buffers(&OUTPUT, |out| {
+                out.resize(n * 2 * d, 0.0);
+                with_buffers(&MLP_SCRATCH, |scratch| {
+                    member.forward(Rows::dense(x, width), out, scratch);
+                });
+                for r in 0..n {
+                    let row = &out[r * 2 * d..(r + 1) * 2 * d];
+                    mean[r * d..(r + 1) * d].copy_from_slice(&row[..d]);
+                    for j in 0..d {
+                        // GaussianEnsemble::member's soft bounds, then σ = exp(½ log σ²).
+                        let (max, min) = (self.max_logvar[j], self.min_logvar[j]);
+                        let logvar = max - softplus(max - row[d + j]);
+                        let logvar = min + softplus(logvar - min);
+                        std[r * d + j] = (0.5 * logvar).exp();
+                    }
+                }
+            });
+        });
+        (means, stds)
+    }
+}
+
+/// ln(1 + eˣ), without overflow for large x.
+fn softplus(x: f32) -> f32 {
+    if x > 20.0 { x } else { x.exp().ln_1p() }
 }
 
 impl BatchDynamics for EnsembleDynamics {

@@ -426,11 +426,14 @@ struct LoadedModel {
 }
 
 impl LoadedModel {
-    /// The model behind the batch interface (the SDE on `kernel`; the ensemble on burn).
+    /// The model behind the batch interface, its networks run by `kernel`.
     fn dynamics(&self, kernel: Kernel) -> Box<dyn BatchDynamics + '_> {
         match (&self.sde, &self.ensemble) {
             (Some(sde), _) => kernel.dynamics(sde),
-            (None, Some(ensemble)) => Box::new(ensemble),
+            (None, Some(ensemble)) => match kernel {
+                Kernel::Fused => Box::new(ensemble.on_fused_path()),
+                Kernel::Burn => Box::new(ensemble),
+            },
             (None, None) => unreachable!("a loaded model has one kind"),
         }
     }

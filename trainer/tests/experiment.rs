@@ -379,7 +379,11 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
     let _stop = Stop(&script, cluster.clone());
     let conf = cluster.join("slurm.conf");
 
-    let grid = hopper_grid(dir, "[\"nuno\", \"nuno-r\", \"mopo\", \"tatu-mopo\"]", "[0]");
+    let grid = hopper_grid(
+        dir,
+        "[\"nuno\", \"nuno-r\", \"mopo\", \"tatu-mopo\"]",
+        "[0]",
+    );
     let out = dir.join("out");
     let submitted = Command::new(env!("CARGO_BIN_EXE_nuno-trainer"))
         .args([
