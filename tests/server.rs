@@ -83,7 +83,17 @@ impl Server {
 
     /// A server on `limits`, with whatever else `adjust` sets.
     async fn start_with_config(limits: Limits, adjust: impl FnOnce(&mut ServerConfig)) -> Self {
-        let models = models_dir();
+        let (server, loaded) = Self::start_on(models_dir(), limits, adjust).await;
+        assert_eq!(loaded, vec![MODEL.to_string(), "no-policy".to_string()]);
+        server
+    }
+
+    /// A server on the models in `models`, and the ids it loaded.
+    async fn start_on(
+        models: tempfile::TempDir,
+        limits: Limits,
+        adjust: impl FnOnce(&mut ServerConfig),
+    ) -> (Self, Vec<String>) {
         let mut config = ServerConfig {
             models_dir: models.path().to_path_buf(),
             limits,
@@ -93,14 +103,10 @@ impl Server {
         };
         adjust(&mut config);
         let (state, report) = AppState::new(config);
-        assert_eq!(
-            report.loaded,
-            vec![MODEL.to_string(), "no-policy".to_string()]
-        );
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let base = format!("http://{}", listener.local_addr().unwrap());
         tokio::spawn(serve(state, listener));
-        Self {
+        let server = Self {
             base,
             // A fresh connection per request: the server may close one after an
             // error answer (a refused body it never read), and a pooled connection
@@ -111,7 +117,8 @@ impl Server {
                 .unwrap(),
             models_path: models.path().to_path_buf(),
             _models: models,
-        }
+        };
+        (server, report.loaded)
     }
 
     async fn post(&self, path: &str, body: &Value) -> (StatusCode, Value) {
@@ -1393,5 +1400,100 @@ async fn the_burn_kernel_answers_with_burns_numbers() {
     assert_eq!(
         r.actions.concat(),
         burn.act(&states.concat(), &mut rand::rng())
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_gaussian_ensemble_is_served_by_the_same_routes() {
+    use nuno::ensemble::{EnsembleConfig, EnsembleDynamics, EnsembleUncertainty, fit_ensemble};
+    let task = TaskConfig::d4rl(TaskName::Hopper);
+    let policy = nuno::agent::RandomNetworkPolicy::new(11, 3, &[32, 32], 0);
+    let data = nuno::data::generate(
+        &nuno::data::GenerateConfig::new(task, "random", 1000, 0),
+        &policy,
+        "test",
+        &|_| {},
+    )
+    .unwrap();
+    let config = EnsembleConfig::new()
+        .with_members(3)
+        .with_elites(2)
+        .with_hidden(vec![16, 16])
+        .with_weight_decay(vec![2.5e-5, 5e-5, 1e-4])
+        .with_max_epochs(Some(2));
+    let fit = fit_ensemble(&data, &config, &Device::flex(), &mut |_| {}).unwrap();
+    let models = tempfile::tempdir().unwrap();
+    copy_model(&models.path().join(MODEL));
+    nuno::artifact::save_ensemble(&models.path().join("mopo"), &fit, &config, task, None).unwrap();
+    let (server, loaded) = Server::start_on(models, limits(), |_| {}).await;
+    assert_eq!(loaded, vec![MODEL.to_string(), "mopo".to_string()]);
+
+    let (_, list) = server.get("/v1/models").await;
+    let list: ModelList = serde_json::from_value(list).unwrap();
+    let kinds: Vec<Value> = list.models.iter().map(|m| json!(m.kind)).collect();
+    assert_eq!(kinds, vec![json!("neural-sde"), json!("gaussian-ensemble")]);
+    let ensemble = &list.models[1];
+    assert!(ensemble.reward_model && !ensemble.has_policy);
+    assert_eq!((ensemble.obs_dim, ensemble.act_dim), (11, 3));
+    assert!(
+        (ensemble.dt - 0.008).abs() < 1e-12,
+        "one step is one task step"
+    );
+    let (status, detail) = server.get("/v1/models/mopo").await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(detail["kind"], "gaussian-ensemble");
+    assert_eq!(detail["hyperparameters"]["members"], 3);
+    assert_eq!(detail["training"]["elites"].as_array().unwrap().len(), 2);
+    assert!(detail["thresholds"].is_null());
+
+    // step: without noise the middle elite's mean; η is MOPO's max ‖σᵢ‖;
+    // rewards are the model's, penalised by λ·η.
+    let (states, acts) = (upright(3), actions(3));
+    let request = json!({"states": states, "actions": acts, "noise_scale": 0.0, "penalty": 2.0});
+    let (status, body) = server.post("/v1/models/mopo/step", &request).await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    let r: StepResponse = serde_json::from_value(body).unwrap();
+    let library = EnsembleDynamics::new(&fit, 11, 3, EnsembleUncertainty::MaxAleatoric);
+    let flat: Vec<f32> = states
+        .iter()
+        .flat_map(|s| s.iter().copied().chain([0.0]))
+        .collect();
+    let direct = library.step(&flat, &acts.concat(), &[0.0; 3 * 13]);
+    for b in 0..3 {
+        for i in 0..11 {
+            let expected = direct.means[b * 12 + i];
+            assert!((r.mean[b][i] - expected).abs() < 1e-4 * expected.abs().max(1.0));
+            assert_eq!(r.next_states[b][0], r.mean[b]);
+        }
+        assert!((r.eta[b] - direct.eta[b]).abs() < 1e-4 * direct.eta[b]);
+        let reward = direct.means[b * 12 + 11];
+        assert!((r.rewards[b][0] - reward).abs() < 1e-4 * reward.abs().max(1.0));
+        assert!((r.penalized_rewards[b][0] - (r.rewards[b][0] - 2.0 * r.eta[b])).abs() < 1e-4);
+    }
+    // rollout on given actions: h steps, η at each, no ε table to look up.
+    let sequences: Vec<Vec<Vec<f32>>> = acts.iter().map(|a| vec![a.clone(); 4]).collect();
+    let request = json!({"states": states, "actions": sequences, "horizon": 4, "seed": 1});
+    let (status, body) = server.post("/v1/models/mopo/rollout", &request).await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    let r: RolloutResponse = serde_json::from_value(body).unwrap();
+    assert_eq!(r.trajectories.len(), 3);
+    for t in &r.trajectories {
+        assert!(!t.eta.is_empty() && t.eta.len() <= 4);
+        assert!(
+            t.eta.iter().all(|&e| e > 0.0),
+            "MOPO's η is a std: {:?}",
+            t.eta
+        );
+    }
+    let (status, body) = server
+        .post(
+            "/v1/models/mopo/rollout",
+            &json!({"states": states, "actions": sequences, "horizon": 4, "alpha": 0.9}),
+        )
+        .await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{body}");
+    assert!(
+        body["error"]["message"].as_str().unwrap().contains("no ε"),
+        "{body}"
     );
 }

@@ -38,7 +38,10 @@ pub use body::{BINARY, TensorBytes};
 pub use error::{ApiError, ErrorBody, ErrorDetail, V2ErrorBody};
 pub use metrics::Metrics;
 pub use openapi::{document as openapi_document, openapi_json};
-pub use registry::{LoadFailure, LoadedModel, ModelRegistry, ReloadReport, valid_model_id};
+pub use registry::{
+    LoadFailure, LoadedModel, ModelKind, ModelRegistry, ReloadReport, ServedDynamics,
+    valid_model_id,
+};
 pub use routes::*;
 
 /// What a client may ask for at most, and how long the server waits.

@@ -1,8 +1,11 @@
 //! The models the server answers for: every subdirectory of the models
-//! directory holding a valid `model.json` + `dynamics.safetensors` (and, when
-//! present, `policy.json` + `policy.safetensors`). Reloading builds a complete
-//! new set and swaps it in atomically; a model that fails to load keeps its
-//! previous version, so a half-written artifact is never served.
+//! directory holding a valid neural SDE (`model.json` + `dynamics.safetensors`)
+//! or, failing that, a Gaussian ensemble (`ensemble.json` +
+//! `ensemble.safetensors`), and, when present, `policy.json` +
+//! `policy.safetensors`. Both kinds answer the same routes through
+//! [`BatchDynamics`]. Reloading builds a complete new set and swaps it in
+//! atomically; a model that fails to load keeps its previous version, so a
+//! half-written artifact is never served.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -15,37 +18,107 @@ use utoipa::ToSchema;
 use crate::agent::FusedActor;
 use crate::agent::{ActionMode, Actor, ActorPolicy, BatchPolicy};
 use crate::artifact::{
-    BEST_POLICY, DynamicsMetadata, PolicyMetadata, has_policy, load_dynamics, load_policy,
+    BEST_POLICY, DynamicsMetadata, ENSEMBLE_METADATA, EnsembleMetadata, PolicyMetadata, has_policy,
+    load_dynamics, load_ensemble, load_policy,
 };
-use crate::envs::{TaskConfig, TaskRules};
+use crate::ensemble::{EnsembleDynamics, EnsembleUncertainty};
+use crate::envs::{MujocoTask, TaskConfig, TaskRules};
 use crate::infer::Kernel;
-use crate::sde::FusedSde;
-use crate::sde::{BatchDynamics, NeuralSde};
+use crate::sde::{BatchDynamics, FusedSde, NeuralSde, ThresholdTable};
+
+/// Which kind of dynamics model is served (`kind` in `/v1/models/{id}`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize, ToSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModelKind {
+    /// NUNO's neural SDE (`fit-model`): η is the distance-aware uncertainty.
+    NeuralSde,
+    /// MOPO's Gaussian ensemble (`fit-ensemble`): η is MOPO's max ‖σᵢ‖, the
+    /// state carries the reward (as NUNO^R's), one step per environment step.
+    GaussianEnsemble,
+}
+
+/// A served model's dynamics, by kind.
+pub enum ServedDynamics {
+    NeuralSde {
+        model: NeuralSde,
+        metadata: Box<DynamicsMetadata>,
+        /// The same weights on the fused CPU path, when the server uses it.
+        fused: Option<Box<FusedSde>>,
+    },
+    GaussianEnsemble {
+        /// On the fused CPU path when the server uses it.
+        model: EnsembleDynamics,
+        metadata: EnsembleMetadata,
+    },
+}
 
 /// One servable model.
 pub struct LoadedModel {
     pub id: String,
-    pub dynamics: NeuralSde,
-    pub metadata: DynamicsMetadata,
+    pub dynamics: ServedDynamics,
     pub task: TaskConfig,
     pub rules: TaskRules,
     pub policy: Option<(Actor, PolicyMetadata)>,
-    /// The same weights on the fused CPU path, when the server uses it.
-    fused: Option<(FusedSde, Option<FusedActor>)>,
+    /// Seconds of the task one model step covers.
+    pub step_seconds: f64,
+    /// The policy on the fused CPU path, when the server uses it.
+    fused_actor: Option<FusedActor>,
 }
 
 impl LoadedModel {
+    pub fn kind(&self) -> ModelKind {
+        match self.dynamics {
+            ServedDynamics::NeuralSde { .. } => ModelKind::NeuralSde,
+            ServedDynamics::GaussianEnsemble { .. } => ModelKind::GaussianEnsemble,
+        }
+    }
+
     /// The dynamics as requests step them (the server's [`Kernel`]).
     pub fn batch_dynamics(&self) -> &dyn BatchDynamics {
-        match &self.fused {
-            Some((fused, _)) => fused,
-            None => &self.dynamics,
+        match &self.dynamics {
+            ServedDynamics::NeuralSde {
+                fused: Some(fused), ..
+            } => fused.as_ref(),
+            ServedDynamics::NeuralSde { model, .. } => model,
+            ServedDynamics::GaussianEnsemble { model, .. } => model,
+        }
+    }
+
+    pub fn obs_dim(&self) -> usize {
+        self.batch_dynamics().obs_dim()
+    }
+
+    pub fn act_dim(&self) -> usize {
+        self.batch_dynamics().act_dim()
+    }
+
+    /// Whether rewards come from the model (NUNO^R, the ensemble).
+    pub fn reward_model(&self) -> bool {
+        self.batch_dynamics().learns_reward()
+    }
+
+    /// ε(h, α) of the neural SDE; an ensemble has none.
+    pub fn thresholds(&self) -> Option<&ThresholdTable> {
+        match &self.dynamics {
+            ServedDynamics::NeuralSde { metadata, .. } => metadata.provenance.thresholds.as_ref(),
+            ServedDynamics::GaussianEnsemble { .. } => None,
+        }
+    }
+
+    /// Each observation dimension's spread in the training data (what errors
+    /// against the task are measured in).
+    pub fn observation_std(&self) -> &[f32] {
+        match &self.dynamics {
+            ServedDynamics::NeuralSde { metadata, .. } => &metadata.scales.normalizer.state.std,
+            ServedDynamics::GaussianEnsemble { metadata, .. } => {
+                &metadata.scaler.std[..metadata.obs_dim]
+            }
         }
     }
 
     /// The policy as requests run it, choosing actions by `mode`.
     pub fn batch_policy(&self, mode: ActionMode) -> Option<Box<dyn BatchPolicy>> {
-        if let Some((_, Some(actor))) = &self.fused {
+        if let Some(actor) = &self.fused_actor {
             return Some(Box::new(actor.with_mode(mode)));
         }
         let (actor, _) = self.policy.as_ref()?;
@@ -141,7 +214,10 @@ impl ModelRegistry {
             let Some(id) = dir.file_name().and_then(|n| n.to_str()).map(String::from) else {
                 continue;
             };
-            if !dir.is_dir() || !valid_model_id(&id) || !dir.join("model.json").is_file() {
+            let holds_model = ["model.json", ENSEMBLE_METADATA]
+                .iter()
+                .any(|f| dir.join(f).is_file());
+            if !dir.is_dir() || !valid_model_id(&id) || !holds_model {
                 continue;
             }
             match load_model(&id, &dir, self.kernel) {
@@ -169,43 +245,77 @@ impl ModelRegistry {
     }
 }
 
+/// The model in `dir`: its neural SDE when it holds one, else its ensemble.
 fn load_model(id: &str, dir: &Path, kernel: Kernel) -> Result<LoadedModel, String> {
     let device = Device::flex();
-    let (dynamics, metadata) = load_dynamics(dir, &device).map_err(|e| e.to_string())?;
-    let task = metadata
-        .provenance
-        .task
-        .ok_or("model.json names no task, so rewards and terminals are unknown")?;
+    let fused = kernel == Kernel::Fused;
+    let (dynamics, task, rules, step_seconds) = if dir.join("model.json").is_file() {
+        let (model, metadata) = load_dynamics(dir, &device).map_err(|e| e.to_string())?;
+        let task = metadata
+            .provenance
+            .task
+            .ok_or("model.json names no task, so rewards and terminals are unknown")?;
+        let spec = &metadata.spec;
+        let rules = TaskRules::new(task, &spec.split, spec.dt);
+        let dt = spec.dt;
+        let fused = fused.then(|| Box::new(FusedSde::new(&model)));
+        let dynamics = ServedDynamics::NeuralSde {
+            model,
+            metadata: Box::new(metadata),
+            fused,
+        };
+        (dynamics, task, rules, dt)
+    } else {
+        let (fit, metadata) = load_ensemble(dir, &device).map_err(|e| e.to_string())?;
+        let task = metadata.task;
+        let probe = MujocoTask::new(task).map_err(|e| e.to_string())?;
+        let rules = TaskRules::new(task, &probe.state_split(), probe.dt());
+        let model = EnsembleDynamics::new(
+            &fit,
+            metadata.obs_dim,
+            metadata.act_dim,
+            EnsembleUncertainty::MaxAleatoric,
+        );
+        let model = if fused { model.on_fused_path() } else { model };
+        let dynamics = ServedDynamics::GaussianEnsemble { model, metadata };
+        (dynamics, task, rules, probe.dt())
+    };
+    let (obs_dim, act_dim) = dynamics_dims(&dynamics);
     let policy = if has_policy(dir, BEST_POLICY) {
         let (actor, policy_metadata) =
             load_policy(dir, BEST_POLICY, &device).map_err(|e| format!("policy: {e}"))?;
-        let spec = &metadata.spec;
-        if actor.config.obs_dim != spec.obs_dim || actor.config.act_dim != spec.act_dim {
+        if actor.config.obs_dim != obs_dim || actor.config.act_dim != act_dim {
             return Err(format!(
-                "policy: acts on {}→{}, the dynamics on {}→{}",
-                actor.config.obs_dim, actor.config.act_dim, spec.obs_dim, spec.act_dim
+                "policy: acts on {}→{}, the dynamics on {obs_dim}→{act_dim}",
+                actor.config.obs_dim, actor.config.act_dim
             ));
         }
         Some((actor, policy_metadata))
     } else {
         None
     };
-    let fused = (kernel == Kernel::Fused).then(|| {
-        let actor = policy.as_ref().map(|(actor, _)| {
-            FusedActor::new(&ActorPolicy {
-                actor: actor.clone(),
-                mode: ActionMode::default(),
-            })
-        });
-        (FusedSde::new(&dynamics), actor)
+    let fused_actor = policy.as_ref().filter(|_| fused).map(|(actor, _)| {
+        FusedActor::new(&ActorPolicy {
+            actor: actor.clone(),
+            mode: ActionMode::default(),
+        })
     });
     Ok(LoadedModel {
         id: id.to_string(),
-        rules: TaskRules::new(task, &metadata.spec.split, metadata.spec.dt),
-        task,
         dynamics,
-        metadata,
+        task,
+        rules,
         policy,
-        fused,
+        step_seconds,
+        fused_actor,
     })
+}
+
+fn dynamics_dims(dynamics: &ServedDynamics) -> (usize, usize) {
+    match dynamics {
+        ServedDynamics::NeuralSde { metadata, .. } => {
+            (metadata.spec.obs_dim, metadata.spec.act_dim)
+        }
+        ServedDynamics::GaussianEnsemble { metadata, .. } => (metadata.obs_dim, metadata.act_dim),
+    }
 }

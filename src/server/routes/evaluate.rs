@@ -139,8 +139,7 @@ pub async fn validate(
 ) -> Result<Json<ValidateResponse>, ApiError> {
     let r: ValidateRequest = body.json().await?;
     let model = state.model(&id)?;
-    let spec = &model.metadata.spec;
-    let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
+    let (obs_dim, act_dim) = (model.obs_dim(), model.act_dim());
     let limits = &state.config.limits;
     let horizon = r.actions.len();
     within("horizon (rows of actions)", horizon, limits.max_horizon)?;
@@ -160,7 +159,7 @@ pub async fn validate(
     let worker = model.clone();
     let comparison = state
         .compute(move |cancel| {
-            let std = &worker.metadata.scales.normalizer.state.std;
+            let std = worker.observation_std();
             compare_with_task(
                 worker.batch_dynamics(),
                 worker.task,

@@ -112,10 +112,7 @@ pub async fn v2_model_metadata(
     Path(id): Path<String>,
 ) -> Result<Json<V2ModelMetadata>, V2Error> {
     let model = state.model(&id)?;
-    let (d, a) = (
-        model.metadata.spec.obs_dim as i64,
-        model.metadata.spec.act_dim as i64,
-    );
+    let (d, a) = (model.obs_dim() as i64, model.act_dim() as i64);
     Ok(Json(V2ModelMetadata {
         name: model.id.clone(),
         versions: vec!["1".into()],
@@ -275,7 +272,7 @@ pub async fn infer(
     };
     let mut r: InferRequest = body.json_prefix(header_length).await?;
     let model = state.model(&id)?;
-    let spec = &model.metadata.spec;
+    let (obs_dim, act_dim) = (model.obs_dim(), model.act_dim());
     // Each input's values: inline JSON, or its slice of the binary tail, in order.
     let mut tail = &body.bytes[header_length..];
     let mut inputs = Vec::with_capacity(r.inputs.len());
@@ -342,10 +339,10 @@ pub async fn infer(
         }
         Ok(values)
     };
-    let states = input("states", spec.obs_dim)?;
-    let actions = input("actions", spec.act_dim)?;
-    let batch = states.len() / spec.obs_dim;
-    if actions.len() / spec.act_dim != batch {
+    let states = input("states", obs_dim)?;
+    let actions = input("actions", act_dim)?;
+    let batch = states.len() / obs_dim;
+    if actions.len() / act_dim != batch {
         return Err(ApiError::Invalid("`states` and `actions` differ in rows".into()).into());
     }
     let number = |key: &str, default: f64| -> Result<f64, ApiError> {

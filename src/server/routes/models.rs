@@ -5,21 +5,23 @@ use axum::extract::{Path, State};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use crate::server::{ApiError, AppState, LoadedModel};
+use crate::server::{ApiError, AppState, LoadedModel, ModelKind, ServedDynamics};
 
 /// One loaded model in brief.
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 pub struct ModelSummary {
     pub id: String,
+    /// neural-sde (NUNO's, `fit-model`) or gaussian-ensemble (MOPO's, `fit-ensemble`).
+    pub kind: ModelKind,
     /// hopper, halfcheetah or walker2d.
     pub task: String,
     /// d4rl or neorl observations.
     pub layout: String,
     pub obs_dim: usize,
     pub act_dim: usize,
-    /// Integration step (s).
+    /// Seconds of the task one model step covers.
     pub dt: f64,
-    /// NUNO^R: rewards come from the model.
+    /// Rewards come from the model (NUNO^R, the ensemble).
     pub reward_model: bool,
     pub has_policy: bool,
 }
@@ -34,16 +36,18 @@ pub struct ModelList {
 pub struct ModelDetail {
     #[serde(flatten)]
     pub summary: ModelSummary,
-    /// Observation indices of positions and velocities, and each position's velocity.
+    /// Observation indices of positions and velocities, and each position's
+    /// velocity (the neural SDE's; null for an ensemble).
     #[schema(value_type = Object)]
     pub state_split: serde_json::Value,
-    /// The neural SDE's hyperparameters (sizes, diffusion bounds).
+    /// The model's hyperparameters (the SDE's sizes and diffusion bounds; the
+    /// ensemble's members, elites, layers, weight decay).
     #[schema(value_type = Object)]
     pub hyperparameters: serde_json::Value,
-    /// ε(h, α): `values[i][j]` for `horizons[i]`, `alphas[j]`.
+    /// ε(h, α): `values[i][j]` for `horizons[i]`, `alphas[j]` (null for an ensemble).
     #[schema(value_type = Object)]
     pub thresholds: serde_json::Value,
-    /// Fit summary and configuration.
+    /// Fit summary and configuration (an ensemble's: elites, holdout MSE, epochs).
     #[schema(value_type = Object)]
     pub training: serde_json::Value,
     #[schema(value_type = Object)]
@@ -54,18 +58,18 @@ pub struct ModelDetail {
 }
 
 pub(crate) fn summary(model: &LoadedModel) -> ModelSummary {
-    let spec = &model.metadata.spec;
     ModelSummary {
         id: model.id.clone(),
+        kind: model.kind(),
         task: model.task.name.to_string(),
         layout: serde_json::to_value(model.task.layout)
             .ok()
             .and_then(|v| v.as_str().map(String::from))
             .unwrap_or_default(),
-        obs_dim: spec.obs_dim,
-        act_dim: spec.act_dim,
-        dt: spec.dt,
-        reward_model: model.metadata.model.reward_model,
+        obs_dim: model.obs_dim(),
+        act_dim: model.act_dim(),
+        dt: model.step_seconds,
+        reward_model: model.reward_model(),
         has_policy: model.policy.is_some(),
     }
 }
@@ -92,18 +96,37 @@ pub async fn get_model(
     Path(id): Path<String>,
 ) -> Result<Json<ModelDetail>, ApiError> {
     let model = state.model(&id)?;
-    let m = &model.metadata;
     let value = |v: serde_json::Result<serde_json::Value>| v.unwrap_or_default();
+    let (state_split, hyperparameters, thresholds, training, dataset) = match &model.dynamics {
+        ServedDynamics::NeuralSde { metadata: m, .. } => (
+            value(serde_json::to_value(&m.spec.split)),
+            value(serde_json::to_value(&m.model)),
+            value(serde_json::to_value(&m.provenance.thresholds)),
+            serde_json::json!({
+                "summary": m.provenance.training,
+                "fit": m.provenance.fit,
+            }),
+            value(serde_json::to_value(&m.provenance.dataset)),
+        ),
+        ServedDynamics::GaussianEnsemble { metadata: m, .. } => (
+            serde_json::Value::Null,
+            value(serde_json::to_value(&m.config)),
+            serde_json::Value::Null,
+            serde_json::json!({
+                "elites": m.elites,
+                "holdout_mse": m.holdout_mse,
+                "epochs": m.epochs,
+            }),
+            value(serde_json::to_value(&m.dataset)),
+        ),
+    };
     Ok(Json(ModelDetail {
         summary: summary(&model),
-        state_split: value(serde_json::to_value(&m.spec.split)),
-        hyperparameters: value(serde_json::to_value(&m.model)),
-        thresholds: value(serde_json::to_value(&m.provenance.thresholds)),
-        training: serde_json::json!({
-            "summary": m.provenance.training,
-            "fit": m.provenance.fit,
-        }),
-        dataset: value(serde_json::to_value(&m.provenance.dataset)),
+        state_split,
+        hyperparameters,
+        thresholds,
+        training,
+        dataset,
         policy: model
             .policy
             .as_ref()

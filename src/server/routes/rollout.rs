@@ -137,8 +137,7 @@ pub async fn rollout(
     let answer = answer_format(&headers);
     let mut r: RolloutRequest = body.json().await?;
     let model = state.model(&id)?;
-    let spec = &model.metadata.spec;
-    let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
+    let (obs_dim, act_dim) = (model.obs_dim(), model.act_dim());
     let limits = &state.config.limits;
     let batch = r.states.len();
     within("batch (rows of states)", batch, limits.max_batch)?;
@@ -200,7 +199,7 @@ pub async fn rollout(
             )));
         }
         (None, Some(alpha)) => {
-            let table = model.metadata.provenance.thresholds.as_ref();
+            let table = model.thresholds();
             Some(table.and_then(|t| t.get(r.horizon, alpha)).ok_or_else(|| {
                 ApiError::Invalid(format!(
                     "the model has no ε(h = {}, α = {alpha}); its table covers h ∈ {:?}, α ∈ {:?}",

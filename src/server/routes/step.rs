@@ -98,8 +98,7 @@ pub async fn step(
     body: RawBody,
 ) -> Result<Response, ApiError> {
     let model = state.model(&id)?;
-    let spec = &model.metadata.spec;
-    let (obs_dim, act_dim) = (spec.obs_dim, spec.act_dim);
+    let (obs_dim, act_dim) = (model.obs_dim(), model.act_dim());
     let (observations, actions, request) = match body.format {
         Format::Json => {
             let mut r: StepRequest = body.json().await?;
