@@ -7,7 +7,8 @@
 //! observations omit it, so there the observed root x velocity after the step
 //! stands in (see docs/paper-map.md, deviations).
 
-use super::mujoco_task::TaskConfig;
+use super::EnvError;
+use super::mujoco_task::{MujocoTask, TaskConfig};
 use super::task::{ObservationLayout, StateSplit, TaskSpec};
 
 /// Reward and termination of one task variant, on observations.
@@ -25,6 +26,18 @@ pub struct TaskRules {
 }
 
 impl TaskRules {
+    /// Seconds between two observations the rules are applied to.
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+
+    /// The rules of `task` with its own observation split and step (what a
+    /// model that steps once per task step, like an ensemble, follows).
+    pub fn of_task(task: TaskConfig) -> Result<Self, EnvError> {
+        let probe = MujocoTask::new(task)?;
+        Ok(Self::new(task, &probe.state_split(), probe.dt()))
+    }
+
     /// The rules of `task`, whose observations split as `split`, `dt` apart.
     pub fn new(task: TaskConfig, split: &StateSplit, dt: f64) -> Self {
         let spec = task.name.spec();

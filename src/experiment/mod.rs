@@ -1,13 +1,18 @@
 //! Experiments: a grid of datasets × methods × seeds under one budget
 //! ([`grid`]), each cell's result and the Table 1/2-style aggregate
-//! ([`results`]). Running cells (locally or as a Slurm array) is the
+//! ([`results`]), and the paper's model analyses ([`analysis`]). Running cells (locally or as a Slurm array) is the
 //! trainer's `experiment` subcommand; it calls the other subcommands per cell.
 
+pub mod analysis;
 pub mod grid;
 pub mod results;
 
 use std::path::PathBuf;
 
+pub use analysis::{
+    ActionSource, Exploitation, ExploitationConfig, PredictionConfig, PredictionError,
+    exploitation, observation_scale, prediction_error, uncertainty_by_action,
+};
 pub use grid::{Budget, Cell, Grid, GridDataset, Method};
 pub use results::{
     CellResult, CellStatus, Summary, cell_dir, cell_status, markdown_table, results_csv, summarize,

@@ -22,7 +22,7 @@ use crate::artifact::{
     load_dynamics, load_ensemble, load_policy,
 };
 use crate::ensemble::{EnsembleDynamics, EnsembleUncertainty};
-use crate::envs::{MujocoTask, TaskConfig, TaskRules};
+use crate::envs::{TaskConfig, TaskRules};
 use crate::infer::Kernel;
 use crate::sde::{BatchDynamics, FusedSde, NeuralSde, ThresholdTable};
 
@@ -268,8 +268,7 @@ fn load_model(id: &str, dir: &Path, kernel: Kernel) -> Result<LoadedModel, Strin
     } else {
         let (fit, metadata) = load_ensemble(dir, &device).map_err(|e| e.to_string())?;
         let task = metadata.task;
-        let probe = MujocoTask::new(task).map_err(|e| e.to_string())?;
-        let rules = TaskRules::new(task, &probe.state_split(), probe.dt());
+        let rules = TaskRules::of_task(task).map_err(|e| e.to_string())?;
         let model = EnsembleDynamics::new(
             &fit,
             metadata.obs_dim,
@@ -278,7 +277,8 @@ fn load_model(id: &str, dir: &Path, kernel: Kernel) -> Result<LoadedModel, Strin
         );
         let model = if fused { model.on_fused_path() } else { model };
         let dynamics = ServedDynamics::GaussianEnsemble { model, metadata };
-        (dynamics, task, rules, probe.dt())
+        let dt = rules.dt();
+        (dynamics, task, rules, dt)
     };
     let (obs_dim, act_dim) = dynamics_dims(&dynamics);
     let policy = if has_policy(dir, BEST_POLICY) {

@@ -17,7 +17,7 @@ use nuno::artifact::{
 };
 use nuno::data::{DatasetFormat, read_dataset};
 use nuno::ensemble::{EnsembleDynamics, EnsembleUncertainty};
-use nuno::envs::{MujocoTask, TaskConfig, TaskRules};
+use nuno::envs::{TaskConfig, TaskRules};
 use nuno::infer::Kernel;
 use nuno::sde::{ComputeDevice, NeuralSde, ThresholdConfig, ThresholdTable};
 use nuno::shared::BatchDynamics;
@@ -472,7 +472,6 @@ fn load_model(args: &Args, preset: &Preset, device: &Device) -> anyhow::Result<L
     } else {
         let (fit, metadata) = load_ensemble(&args.model, device).with_context(context)?;
         let task = metadata.task;
-        let probe = MujocoTask::new(task)?;
         let ensemble = EnsembleDynamics::new(
             &fit,
             metadata.obs_dim,
@@ -485,7 +484,7 @@ fn load_model(args: &Args, preset: &Preset, device: &Device) -> anyhow::Result<L
             ensemble
         };
         Ok(LoadedModel {
-            rules: TaskRules::new(task, &probe.state_split(), probe.dt()),
+            rules: TaskRules::of_task(task)?,
             task,
             thresholds: None,
             weights_sha256: metadata.weights_sha256.clone(),

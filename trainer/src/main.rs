@@ -2,6 +2,7 @@
 //! thin layer that parses flags, calls the library and reports; no algorithm
 //! code lives here.
 
+mod analyze;
 mod collect;
 mod data_source;
 mod dataset;
@@ -27,6 +28,9 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Compare models (SDEs, ensembles): prediction error in and out of
+    /// distribution, uncertainty by action source, a policy's exploitation (Figures 3–5).
+    Analyze(analyze::Args),
     /// Train behaviour policies online in the MuJoCo tasks and pick their levels.
     #[command(subcommand)]
     Collect(collect::Command),
@@ -37,7 +41,8 @@ enum Command {
     FitEnsemble(fit_ensemble::Args),
     /// Fit the neural SDE on a dataset and write the model artifact.
     FitModel(fit_model::Args),
-    /// Train a NUNO policy with SAC on the model's penalised, truncated rollouts.
+    /// Train a policy with SAC on a model's penalised, truncated rollouts (NUNO, NUNO^R,
+    /// NUNO^al, MOPO, TATU+MOPO).
     FitPolicy(fit_policy::Args),
     /// Run, follow and report grids of datasets × methods × seeds, locally or on Slurm.
     #[command(subcommand)]
@@ -51,6 +56,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Analyze(args) => analyze::run(args),
         Command::Collect(command) => collect::run(command),
         Command::Dataset(command) => dataset::run(command),
         Command::Evaluate(args) => evaluate::run(args),

@@ -1,0 +1,331 @@
+//! The paper's model analyses (Section 5.2, Appendix E.1), for any model
+//! behind [`BatchDynamics`], so NUNO's SDE and MOPO's ensemble are measured
+//! by the same code:
+//! - Figure 5: open-loop multi-step prediction error per horizon step, on
+//!   trajectories of a dataset ([`prediction_error`]);
+//! - Figure 3: the model's uncertainty at dataset states for the dataset's,
+//!   uniformly random and a policy's actions ([`uncertainty_by_action`]);
+//! - Figure 4: model exploitation, a policy's return in the model with and
+//!   without the penalty against its return in the real task ([`exploitation`]).
+
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::ExperimentError;
+use crate::agent::{RolloutActions, RolloutConfig, rollout_model};
+use crate::data::{Dataset, WindowSampler};
+use crate::envs::{MujocoTask, TaskConfig, TaskRules};
+use crate::shared::{BatchDynamics, BatchPolicy};
+
+/// How the open-loop prediction error is measured.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PredictionConfig {
+    /// Steps predicted from each window's start.
+    pub horizon: usize,
+    /// At most this many windows (non-overlapping, drawn uniformly).
+    pub windows: usize,
+    /// Samples per window; their mean is the prediction.
+    pub particles: usize,
+    pub seed: u64,
+}
+
+/// Error of the mean prediction at each horizon step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PredictionError {
+    /// RMSE over windows and observation dimensions, each dimension divided by
+    /// its scale: entry k is step k + 1.
+    pub rmse: Vec<f64>,
+    /// Windows whose prediction reached each step (the model may end one
+    /// early: a terminal or diverged state).
+    pub windows: Vec<usize>,
+}
+
+/// Figure 5: rolls `dynamics` open-loop on each window's dataset actions and
+/// compares the mean of its particles with the dataset's observations, per
+/// step, in units of `scale` (one per observation dimension; use the same
+/// scale for every dataset compared).
+pub fn prediction_error(
+    dynamics: &dyn BatchDynamics,
+    rules: &TaskRules,
+    dataset: &Dataset,
+    scale: &[f32],
+    config: &PredictionConfig,
+) -> Result<PredictionError, ExperimentError> {
+    let obs_dim = dynamics.obs_dim();
+    if scale.len() != obs_dim || dataset.obs_dim() != obs_dim {
+        return Err(ExperimentError::Invalid(format!(
+            "the model observes {obs_dim} values, the dataset {} and the scale {}",
+            dataset.obs_dim(),
+            scale.len()
+        )));
+    }
+    if config.horizon == 0 || config.windows == 0 || config.particles == 0 {
+        return Err(ExperimentError::Invalid(
+            "horizon, windows and particles must each be at least 1".into(),
+        ));
+    }
+    let sampler = WindowSampler::non_overlapping(dataset, config.horizon).map_err(|e| {
+        ExperimentError::Invalid(format!("windows of {} steps: {e}", config.horizon))
+    })?;
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    let mut starts = sampler.starts().to_vec();
+    starts.shuffle(&mut rng);
+    starts.truncate(config.windows);
+    let initial: Vec<f32> = starts
+        .iter()
+        .flat_map(|&t| dataset.observations.row(t).to_vec())
+        .collect();
+    let actions: Vec<f32> = starts
+        .iter()
+        .flat_map(|&t| (t..t + config.horizon).flat_map(|k| dataset.actions.row(k).to_vec()))
+        .collect();
+    let rollout = rollout_model(
+        dynamics,
+        RolloutActions::Sequence(&actions),
+        rules,
+        &initial,
+        &RolloutConfig {
+            horizon: config.horizon,
+            particles: config.particles,
+            penalty: 0.0,
+            threshold: None,
+            noise_scale: 1.0,
+        },
+        &mut rng,
+    );
+    let trace = &rollout.trace;
+    let mut squared = vec![0.0f64; config.horizon];
+    let mut reached = vec![0usize; config.horizon];
+    for (w, &t) in starts.iter().enumerate() {
+        let rows = w * config.particles..(w + 1) * config.particles;
+        for k in 0..config.horizon {
+            // The mean over the particles that got this far.
+            let alive: Vec<usize> = rows.clone().filter(|&r| trace.kept[r] > k).collect();
+            if alive.is_empty() {
+                break;
+            }
+            let truth = dataset.next_observations.row(t + k);
+            let error: f64 = (0..obs_dim)
+                .map(|d| {
+                    let mean = alive
+                        .iter()
+                        .map(|&r| f64::from(trace.observations[r][(k + 1) * obs_dim + d]))
+                        .sum::<f64>()
+                        / alive.len() as f64;
+                    ((mean - f64::from(truth[d])) / f64::from(scale[d])).powi(2)
+                })
+                .sum();
+            squared[k] += error / obs_dim as f64;
+            reached[k] += 1;
+        }
+    }
+    Ok(PredictionError {
+        rmse: squared
+            .iter()
+            .zip(&reached)
+            .map(|(s, &n)| {
+                if n == 0 {
+                    f64::NAN
+                } else {
+                    (s / n as f64).sqrt()
+                }
+            })
+            .collect(),
+        windows: reached,
+    })
+}
+
+/// Whose actions the uncertainty is probed at.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ActionSource {
+    Dataset,
+    /// Uniform over the task's action box.
+    Random,
+    Policy,
+}
+
+impl ActionSource {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ActionSource::Dataset => "dataset",
+            ActionSource::Random => "random",
+            ActionSource::Policy => "policy",
+        }
+    }
+}
+
+/// Figure 3: the model's uncertainty (its η) at `states` dataset
+/// transitions' states for their own actions, uniformly random actions in
+/// `bounds` (one `(low, high)` per action dimension) and, given one, the
+/// policy's: each source's values sorted ascending.
+pub fn uncertainty_by_action(
+    dynamics: &dyn BatchDynamics,
+    dataset: &Dataset,
+    policy: Option<&dyn BatchPolicy>,
+    bounds: &[(f32, f32)],
+    states: usize,
+    seed: u64,
+) -> Vec<(ActionSource, Vec<f32>)> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let rows: Vec<usize> = (0..states.min(dataset.len()))
+        .map(|_| rng.random_range(0..dataset.len()))
+        .collect();
+    let observations: Vec<f32> = rows
+        .iter()
+        .flat_map(|&t| dataset.observations.row(t).to_vec())
+        .collect();
+    let mut sources = vec![
+        (
+            ActionSource::Dataset,
+            rows.iter()
+                .flat_map(|&t| dataset.actions.row(t).to_vec())
+                .collect::<Vec<f32>>(),
+        ),
+        (
+            ActionSource::Random,
+            (0..rows.len())
+                .flat_map(|_| {
+                    bounds
+                        .iter()
+                        .map(|&(low, high)| rng.random_range(low..=high))
+                        .collect::<Vec<f32>>()
+                })
+                .collect(),
+        ),
+    ];
+    if let Some(policy) = policy {
+        sources.push((ActionSource::Policy, policy.act(&observations, &mut rng)));
+    }
+    let state_rows = dynamics.states_from_observations(&observations);
+    let noise = vec![0.0; rows.len() * dynamics.noise_dim()];
+    sources
+        .into_iter()
+        .map(|(source, actions)| {
+            let mut eta = dynamics.step(&state_rows, &actions, &noise).eta;
+            eta.sort_by(f32::total_cmp);
+            (source, eta)
+        })
+        .collect()
+}
+
+/// Figure 4: one policy's mean cumulative return per step, in the real task
+/// and in the model (its reward, and penalised by λ·η), from the same starts.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Exploitation {
+    /// Entry k: mean over starts of the return of steps 1..=k + 1 (an ended
+    /// trajectory adds nothing after its end).
+    pub real: Vec<f64>,
+    pub model: Vec<f64>,
+    pub model_penalized: Vec<f64>,
+    pub penalty: f64,
+}
+
+/// How [`exploitation`] runs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ExploitationConfig {
+    /// Starts: the task's reset states for seeds `seed..seed + starts`.
+    pub starts: usize,
+    pub horizon: usize,
+    /// λ of the penalised return.
+    pub penalty: f64,
+    pub seed: u64,
+}
+
+/// Runs `policy` from the task's reset states in the real task and in
+/// `dynamics`, up to `horizon` steps or the end of each episode.
+pub fn exploitation(
+    dynamics: &dyn BatchDynamics,
+    rules: &TaskRules,
+    task: TaskConfig,
+    policy: &dyn BatchPolicy,
+    config: &ExploitationConfig,
+) -> Result<Exploitation, ExperimentError> {
+    let invalid = |e: crate::envs::EnvError| ExperimentError::Invalid(e.to_string());
+    let mut env = MujocoTask::new(task).map_err(invalid)?;
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    let mut real = vec![0.0f64; config.horizon];
+    let mut starts = Vec::with_capacity(config.starts * env.obs_dim());
+    for i in 0..config.starts as u64 {
+        let mut obs: Vec<f32> = env
+            .reset(Some(config.seed + i))
+            .iter()
+            .map(|&x| x as f32)
+            .collect();
+        starts.extend_from_slice(&obs);
+        for total in real.iter_mut() {
+            let action = policy.act(&obs, &mut rng);
+            let action: Vec<f64> = action.iter().map(|&a| f64::from(a)).collect();
+            let step = env.step(&action).map_err(invalid)?;
+            *total += step.reward;
+            obs = step.observation.iter().map(|&x| x as f32).collect();
+            if step.terminated || step.truncated {
+                break;
+            }
+        }
+    }
+    let rollout = rollout_model(
+        dynamics,
+        RolloutActions::Policy(policy),
+        rules,
+        &starts,
+        &RolloutConfig {
+            horizon: config.horizon,
+            particles: 1,
+            penalty: config.penalty,
+            threshold: None,
+            noise_scale: 1.0,
+        },
+        &mut rng,
+    );
+    let trace = &rollout.trace;
+    let mut model = vec![0.0f64; config.horizon];
+    let mut penalized = vec![0.0f64; config.horizon];
+    for row in 0..trace.rows {
+        for k in 0..trace.kept[row] {
+            let (r, eta) = (
+                f64::from(trace.rewards[row][k]),
+                f64::from(trace.eta[row][k]),
+            );
+            model[k] += r;
+            penalized[k] += r - config.penalty * eta;
+        }
+    }
+    let cumulative_mean = |per_step: Vec<f64>| -> Vec<f64> {
+        per_step
+            .iter()
+            .scan(0.0, |sum, x| {
+                *sum += x / config.starts.max(1) as f64;
+                Some(*sum)
+            })
+            .collect()
+    };
+    Ok(Exploitation {
+        real: cumulative_mean(real),
+        model: cumulative_mean(model),
+        model_penalized: cumulative_mean(penalized),
+        penalty: config.penalty,
+    })
+}
+
+/// Per-dimension standard deviations of `dataset`'s observations (the unit
+/// prediction errors are measured in).
+pub fn observation_scale(dataset: &Dataset) -> Vec<f32> {
+    dataset
+        .observations
+        .columns()
+        .into_iter()
+        .map(|column| {
+            let n = column.len().max(1) as f64;
+            let mean = column.iter().map(|&x| f64::from(x)).sum::<f64>() / n;
+            let var = column
+                .iter()
+                .map(|&x| (f64::from(x) - mean).powi(2))
+                .sum::<f64>()
+                / n;
+            (var.sqrt() as f32).max(1e-6)
+        })
+        .collect()
+}

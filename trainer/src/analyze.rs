@@ -1,0 +1,352 @@
+//! `nuno-trainer analyze`: the paper's model analyses (Figures 3–5) for one
+//! or more fitted models of one task, NUNO's SDEs and MOPO's ensembles alike,
+//! each written as CSV and SVG:
+//! - `prediction_error.csv|svg`: open-loop error per horizon step on the
+//!   in-distribution dataset and, given one, an out-of-distribution one (NaN,
+//!   with `windows` 0, at steps no prediction reached: the model ended them);
+//! - `uncertainty.csv|svg`: each model's η at dataset states for dataset,
+//!   random and (given --policy) the policy's actions;
+//! - `exploitation.csv|svg` (given --policy): the policy's return in each model,
+//!   with and without the penalty, against the real task.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use burn::tensor::Device;
+use nuno::agent::{ActionMode, ActorPolicy};
+use nuno::artifact::{BEST_POLICY, load_dynamics, load_ensemble, load_policy};
+use nuno::data::{DatasetFormat, read_dataset};
+use nuno::ensemble::{EnsembleDynamics, EnsembleUncertainty};
+use nuno::envs::{MujocoTask, TaskConfig, TaskRules};
+use nuno::experiment::{
+    ExploitationConfig, PredictionConfig, exploitation, observation_scale, prediction_error,
+    uncertainty_by_action,
+};
+use nuno::infer::Kernel;
+use nuno::sde::FusedSde;
+use nuno::shared::BatchDynamics;
+
+use crate::output::write_text;
+use crate::plot::{Series, line_chart};
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// A model directory (fit-model's or fit-ensemble's), as DIR or NAME=DIR;
+    /// repeat for each model to compare. All must be for one task.
+    #[arg(long = "model", required = true)]
+    models: Vec<String>,
+    /// In-distribution data: trajectories the models were not fitted on, or
+    /// their training data (say which when you report it).
+    #[arg(long)]
+    dataset: PathBuf,
+    /// Out-of-distribution data of the same task (another behaviour policy).
+    #[arg(long)]
+    ood_dataset: Option<PathBuf>,
+    /// Reader for both datasets (default: detected).
+    #[arg(long)]
+    format: Option<DatasetFormat>,
+    /// A directory holding a trained policy (policy.json): its actions are
+    /// probed (Figure 3) and its returns compared (Figure 4).
+    #[arg(long)]
+    policy: Option<PathBuf>,
+    /// Steps predicted open-loop from each window.
+    #[arg(long, default_value_t = 50)]
+    horizon: usize,
+    /// Windows per dataset (non-overlapping, drawn uniformly).
+    #[arg(long, default_value_t = 500)]
+    windows: usize,
+    /// Samples per window (their mean is the prediction).
+    #[arg(long, default_value_t = 5)]
+    particles: usize,
+    /// Dataset states the uncertainty is probed at.
+    #[arg(long, default_value_t = 2000)]
+    probe_states: usize,
+    /// Episodes (reset states) of the exploitation comparison.
+    #[arg(long, default_value_t = 10)]
+    episodes: usize,
+    /// Steps of each exploitation episode.
+    #[arg(long, default_value_t = 200)]
+    episode_steps: usize,
+    /// λ of the penalised model return.
+    #[arg(long, default_value_t = 1.0)]
+    penalty: f64,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Output folder for the CSV files and plots.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+/// One model to analyse, on the fused CPU path.
+struct Model {
+    name: String,
+    dynamics: Box<dyn BatchDynamics>,
+    task: TaskConfig,
+    rules: TaskRules,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    for (flag, value) in [
+        ("--horizon", args.horizon),
+        ("--windows", args.windows),
+        ("--particles", args.particles),
+        ("--probe-states", args.probe_states),
+        ("--episodes", args.episodes),
+        ("--episode-steps", args.episode_steps),
+    ] {
+        anyhow::ensure!(value > 0, "{flag} must be at least 1");
+    }
+    anyhow::ensure!(
+        args.penalty.is_finite() && args.penalty >= 0.0,
+        "--penalty must be a finite number ≥ 0, got {}",
+        args.penalty
+    );
+    let models = args
+        .models
+        .iter()
+        .map(|spec| load_model(spec))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let task = models[0].task;
+    if let Some(other) = models.iter().find(|m| m.task != task) {
+        anyhow::bail!(
+            "models of different tasks: {} is {} ({:?}), {} is {} ({:?})",
+            models[0].name,
+            task.name,
+            task.layout,
+            other.name,
+            other.task.name,
+            other.task.layout
+        );
+    }
+    let read = |path: &Path| -> anyhow::Result<nuno::data::Dataset> {
+        let dataset = read_dataset(path, args.format)?;
+        dataset.check_task(&task, path)?;
+        Ok(dataset)
+    };
+    let dataset = read(&args.dataset)?;
+    let ood = args.ood_dataset.as_deref().map(read).transpose()?;
+    let policy = args.policy.as_deref().map(load_actor).transpose()?;
+    let policy = policy.as_ref().map(|p| Kernel::Fused.policy(p.clone()));
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+
+    // Figure 5: both datasets in the in-distribution data's units.
+    let scale = observation_scale(&dataset);
+    let prediction = PredictionConfig {
+        horizon: args.horizon,
+        windows: args.windows,
+        particles: args.particles,
+        seed: args.seed,
+    };
+    let mut csv = String::from("model,data,step,rmse,windows\n");
+    let mut curves = Vec::new();
+    for model in &models {
+        let splits = [
+            ("in-distribution", Some(&dataset)),
+            ("out-of-distribution", ood.as_ref()),
+        ];
+        for (split, data) in splits {
+            let Some(data) = data else { continue };
+            let error = prediction_error(
+                model.dynamics.as_ref(),
+                &model.rules,
+                data,
+                &scale,
+                &prediction,
+            )
+            .with_context(|| format!("{} on the {split} data", model.name))?;
+            for (k, (rmse, n)) in error.rmse.iter().zip(&error.windows).enumerate() {
+                csv.push_str(&format!("{},{split},{},{rmse},{n}\n", model.name, k + 1));
+            }
+            curves.push((format!("{} ({split})", model.name), error.rmse));
+        }
+    }
+    write_text(&args.out.join("prediction_error.csv"), &csv)?;
+    let series: Vec<Series> = curves
+        .iter()
+        .map(|(name, rmse)| Series {
+            name,
+            points: rmse
+                .iter()
+                .enumerate()
+                .map(|(k, &e)| ((k + 1) as f64, e))
+                .collect(),
+        })
+        .collect();
+    line_chart(
+        &args.out.join("prediction_error.svg"),
+        "Open-loop prediction error (Figure 5)",
+        "horizon step",
+        "RMSE / dataset std",
+        &series,
+    )?;
+
+    // Figure 3: η by action source, as each source's sorted values.
+    let bounds: Vec<(f32, f32)> = {
+        let (low, high) = MujocoTask::new(task)?.action_bounds();
+        low.iter()
+            .zip(&high)
+            .map(|(&l, &h)| (l as f32, h as f32))
+            .collect()
+    };
+    let mut csv = String::from("model,actions,mean,p10,p50,p90,max\n");
+    let mut curves = Vec::new();
+    for model in &models {
+        let probes = uncertainty_by_action(
+            model.dynamics.as_ref(),
+            &dataset,
+            policy.as_deref(),
+            &bounds,
+            args.probe_states,
+            args.seed,
+        );
+        for (source, eta) in probes {
+            let at = |q: f64| eta[((eta.len() - 1) as f64 * q).round() as usize];
+            let mean = eta.iter().map(|&x| f64::from(x)).sum::<f64>() / eta.len() as f64;
+            csv.push_str(&format!(
+                "{},{},{mean},{},{},{},{}\n",
+                model.name,
+                source.as_str(),
+                at(0.1),
+                at(0.5),
+                at(0.9),
+                at(1.0)
+            ));
+            curves.push((format!("{} ({})", model.name, source.as_str()), eta));
+        }
+    }
+    write_text(&args.out.join("uncertainty.csv"), &csv)?;
+    let series: Vec<Series> = curves
+        .iter()
+        .map(|(name, eta)| Series {
+            name,
+            points: eta
+                .iter()
+                .enumerate()
+                .map(|(i, &e)| (i as f64 / (eta.len() - 1).max(1) as f64, f64::from(e)))
+                .collect(),
+        })
+        .collect();
+    line_chart(
+        &args.out.join("uncertainty.svg"),
+        "Uncertainty at dataset states by action source (Figure 3)",
+        "quantile",
+        "η",
+        &series,
+    )?;
+
+    // Figure 4: the policy in each model against the real task.
+    if let Some(policy) = &policy {
+        let config = ExploitationConfig {
+            starts: args.episodes,
+            horizon: args.episode_steps,
+            penalty: args.penalty,
+            seed: args.seed,
+        };
+        let mut csv = String::from("model,step,real,model,model_penalized\n");
+        let mut series_data = Vec::new();
+        for model in &models {
+            let result = exploitation(
+                model.dynamics.as_ref(),
+                &model.rules,
+                task,
+                policy.as_ref(),
+                &config,
+            )?;
+            for k in 0..args.episode_steps {
+                csv.push_str(&format!(
+                    "{},{},{},{},{}\n",
+                    model.name,
+                    k + 1,
+                    result.real[k],
+                    result.model[k],
+                    result.model_penalized[k]
+                ));
+            }
+            if series_data.is_empty() {
+                series_data.push(("real task".to_string(), result.real.clone()));
+            }
+            series_data.push((format!("{}: model", model.name), result.model));
+            series_data.push((
+                format!("{}: model, r − {}·η", model.name, args.penalty),
+                result.model_penalized,
+            ));
+        }
+        write_text(&args.out.join("exploitation.csv"), &csv)?;
+        let series: Vec<Series> = series_data
+            .iter()
+            .map(|(name, values)| Series {
+                name,
+                points: values
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &v)| ((k + 1) as f64, v))
+                    .collect(),
+            })
+            .collect();
+        line_chart(
+            &args.out.join("exploitation.svg"),
+            "The policy's return: models against the real task (Figure 4)",
+            "step",
+            "mean cumulative return",
+            &series,
+        )?;
+    }
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
+
+/// `DIR` or `NAME=DIR`: the neural SDE when the folder holds model.json, else its ensemble.
+fn load_model(spec: &str) -> anyhow::Result<Model> {
+    let (name, dir) = match spec.split_once('=') {
+        Some((name, dir)) => (name.to_string(), PathBuf::from(dir)),
+        None => {
+            let dir = PathBuf::from(spec);
+            let name = dir
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| spec.to_string());
+            (name, dir)
+        }
+    };
+    let device = Device::flex();
+    let context = || format!("loading the model {name} from {}", dir.display());
+    if dir.join("model.json").is_file() {
+        let (sde, metadata) = load_dynamics(&dir, &device).with_context(context)?;
+        let task = metadata
+            .provenance
+            .task
+            .with_context(|| format!("{}: model.json names no task", dir.display()))?;
+        let spec = &metadata.spec;
+        Ok(Model {
+            rules: TaskRules::new(task, &spec.split, spec.dt),
+            dynamics: Box::new(FusedSde::new(&sde)),
+            task,
+            name,
+        })
+    } else {
+        let (fit, metadata) = load_ensemble(&dir, &device).with_context(context)?;
+        let ensemble = EnsembleDynamics::new(
+            &fit,
+            metadata.obs_dim,
+            metadata.act_dim,
+            EnsembleUncertainty::MaxAleatoric,
+        );
+        Ok(Model {
+            rules: TaskRules::of_task(metadata.task)?,
+            dynamics: Box::new(ensemble.on_fused_path()),
+            task: metadata.task,
+            name,
+        })
+    }
+}
+
+/// The deterministic actor of the policy saved in `dir`.
+fn load_actor(dir: &Path) -> anyhow::Result<ActorPolicy> {
+    let (actor, _) = load_policy(dir, BEST_POLICY, &Device::flex())
+        .with_context(|| format!("loading the policy in {}", dir.display()))?;
+    Ok(ActorPolicy {
+        actor,
+        mode: ActionMode::Deterministic,
+    })
+}

@@ -1,0 +1,123 @@
+//! `nuno-trainer analyze` end to end: the shipped SDE and a small ensemble
+//! compared on in- and out-of-distribution data and with the shipped policy;
+//! every figure's CSV and SVG written; bad flags named.
+
+mod common;
+
+use std::path::Path;
+
+use common::{fails, generate_hopper, ok};
+
+#[test]
+fn analyze_writes_every_figure_for_both_model_kinds() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let (inside, outside, ensemble, out) = (
+        tmp.path().join("random.hdf5"),
+        tmp.path().join("other.hdf5"),
+        tmp.path().join("ensemble"),
+        tmp.path().join("analysis"),
+    );
+    generate_hopper(&s(&inside), 1500, 0);
+    // Another random network's data: out of the first one's distribution.
+    generate_hopper(&s(&outside), 1500, 7);
+    ok(&[
+        "fit-ensemble",
+        "--dataset",
+        &s(&inside),
+        "--task",
+        "hopper",
+        "--out",
+        &s(&ensemble),
+        "--members",
+        "3",
+        "--elites",
+        "2",
+        "--hidden",
+        "16,16",
+        "--weight-decay",
+        "2.5e-5,5e-5,1e-4",
+        "--max-epochs",
+        "2",
+    ]);
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/hopper-random");
+    let analyze = |extra: &[&str]| -> Vec<String> {
+        let mut args: Vec<String> = [
+            "analyze",
+            "--model",
+            &format!("nuno={}", s(&shipped)),
+            "--model",
+            &format!("mopo={}", s(&ensemble)),
+            "--dataset",
+            &s(&inside),
+            "--horizon",
+            "8",
+            "--windows",
+            "40",
+            "--particles",
+            "2",
+            "--probe-states",
+            "300",
+            "--episodes",
+            "2",
+            "--episode-steps",
+            "30",
+            "--out",
+            &s(&out),
+        ]
+        .map(String::from)
+        .to_vec();
+        args.extend(extra.iter().map(|e| e.to_string()));
+        args
+    };
+    ok(&analyze(&[
+        "--ood-dataset",
+        &s(&outside),
+        "--policy",
+        &s(&shipped),
+    ]));
+    let csv = |name: &str| std::fs::read_to_string(out.join(name)).unwrap();
+    // Two models × two datasets × 8 steps.
+    let prediction = csv("prediction_error.csv");
+    assert_eq!(prediction.lines().count(), 1 + 2 * 2 * 8, "{prediction}");
+    // Every window reaches step 1; a step no window reached (the tiny
+    // ensemble's hoppers fall) has no error to report.
+    for line in prediction.lines().skip(1) {
+        let fields: Vec<&str> = line.split(',').collect();
+        let (step, rmse, windows): (usize, f64, usize) = (
+            fields[2].parse().unwrap(),
+            fields[3].parse().unwrap(),
+            fields[4].parse().unwrap(),
+        );
+        if step == 1 {
+            assert_eq!(windows, 40, "{line}");
+        }
+        assert_eq!(windows > 0, rmse.is_finite() && rmse >= 0.0, "{line}");
+    }
+    // Two models × dataset, random, policy actions.
+    let uncertainty = csv("uncertainty.csv");
+    assert_eq!(uncertainty.lines().count(), 1 + 2 * 3, "{uncertainty}");
+    assert!(uncertainty.contains("mopo,random,") && uncertainty.contains("nuno,policy,"));
+    let exploitation = csv("exploitation.csv");
+    assert_eq!(exploitation.lines().count(), 1 + 2 * 30);
+    for figure in [
+        "prediction_error.svg",
+        "uncertainty.svg",
+        "exploitation.svg",
+    ] {
+        assert!(out.join(figure).is_file(), "{figure}");
+    }
+    // Bad input, named.
+    let error = fails(&analyze(&["--horizon", "0"]));
+    assert!(error.contains("--horizon"), "{error}");
+    let error = fails(&[
+        "analyze",
+        "--model",
+        &s(tmp.path()),
+        "--dataset",
+        &s(&inside),
+        "--out",
+        &s(&out),
+    ]);
+    assert!(error.contains("loading the model"), "{error}");
+}
