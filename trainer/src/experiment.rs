@@ -133,6 +133,9 @@ fn run_grid(args: RunArgs) -> anyhow::Result<()> {
     }
 }
 
+/// How often the local pool looks for a finished cell.
+const CELL_POLL: std::time::Duration = std::time::Duration::from_millis(200);
+
 /// Runs the cells as child processes, at most `jobs` at a time.
 fn run_local(grid: &GridArgs, cells: &[Cell], jobs: usize) -> anyhow::Result<()> {
     let exe = std::env::current_exe().context("locating nuno-trainer")?;
@@ -164,9 +167,20 @@ fn run_local(grid: &GridArgs, cells: &[Cell], jobs: usize) -> anyhow::Result<()>
         if running.is_empty() {
             break;
         }
-        // Wait for the oldest; the others keep running meanwhile.
-        let (cell, mut child) = running.remove(0);
-        let status = child.wait()?;
+        // Whichever cell ends first frees its slot for the next.
+        let (cell, status) = loop {
+            let mut ended = None;
+            for (i, (_, child)) in running.iter_mut().enumerate() {
+                if let Some(status) = child.try_wait()? {
+                    ended = Some((i, status));
+                    break;
+                }
+            }
+            match ended {
+                Some((i, status)) => break (running.remove(i).0, status),
+                None => std::thread::sleep(CELL_POLL),
+            }
+        };
         if status.success() {
             println!("finished {}", cell.id());
         } else {
