@@ -6,7 +6,6 @@
 //! `compute_max_disc`).
 
 use rand::SeedableRng;
-use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
 use super::AgentError;
@@ -70,9 +69,7 @@ pub fn rollout_threshold(
     let sampler = WindowSampler::non_overlapping(dataset, horizon)
         .map_err(|e| AgentError::Threshold(format!("windows of length {horizon}: {e}")))?;
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
-    let mut starts = sampler.starts().to_vec();
-    starts.shuffle(&mut rng);
-    starts.truncate(config.max_windows);
+    let starts = sampler.draw_distinct(config.max_windows, &mut rng);
     let rollout = RolloutConfig {
         horizon,
         particles: config.particles,
@@ -82,19 +79,12 @@ pub fn rollout_threshold(
     };
     let mut totals = Vec::with_capacity(starts.len() * config.particles);
     for chunk in starts.chunks(config.chunk) {
-        let initial: Vec<f32> = chunk
-            .iter()
-            .flat_map(|&t| dataset.observations.row(t).to_vec())
-            .collect();
-        let actions: Vec<f32> = chunk
-            .iter()
-            .flat_map(|&t| (t..t + horizon).flat_map(|k| dataset.actions.row(k).to_vec()))
-            .collect();
+        let windows = sampler.gather(chunk);
         let result = rollout_model(
             dynamics,
-            RolloutActions::Sequence(&actions),
+            RolloutActions::Sequence(&windows.actions),
             rules,
-            &initial,
+            &windows.first_states(),
             &rollout,
             &mut rng,
         );

@@ -3,6 +3,7 @@
 //! data), and start states (model rollouts).
 
 use rand::Rng;
+use rand::seq::SliceRandom;
 
 use super::{DataError, Dataset};
 use crate::shared::TransitionBatch;
@@ -18,6 +19,19 @@ pub struct WindowBatch {
     pub actions: Vec<f32>,
     /// `[batch, horizon]`
     pub rewards: Vec<f32>,
+}
+
+impl WindowBatch {
+    /// Each window's first state, `[batch, obs_dim]`.
+    pub fn first_states(&self) -> Vec<f32> {
+        let width = self.states.len() / self.batch.max(1);
+        let obs_dim = width / (self.horizon + 1);
+        self.states
+            .chunks_exact(width.max(1))
+            .flat_map(|window| &window[..obs_dim])
+            .copied()
+            .collect()
+    }
 }
 
 /// Windows of `horizon` transitions that never cross a trajectory boundary.
@@ -83,6 +97,14 @@ impl<'a> WindowSampler<'a> {
     /// The first transition of each window.
     pub fn starts(&self) -> &[usize] {
         &self.starts
+    }
+
+    /// Up to `max` distinct windows' starts, drawn uniformly without replacement.
+    pub fn draw_distinct(&self, max: usize, rng: &mut impl Rng) -> Vec<usize> {
+        let mut starts = self.starts.clone();
+        starts.shuffle(rng);
+        starts.truncate(max);
+        starts
     }
 
     /// `batch` windows drawn uniformly with replacement.

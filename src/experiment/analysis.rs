@@ -8,7 +8,6 @@
 //! - Figure 4: model exploitation, a policy's return in the model with and
 //!   without the penalty against its return in the real task ([`exploitation`]).
 
-use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -70,22 +69,13 @@ pub fn prediction_error(
         ExperimentError::Invalid(format!("windows of {} steps: {e}", config.horizon))
     })?;
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
-    let mut starts = sampler.starts().to_vec();
-    starts.shuffle(&mut rng);
-    starts.truncate(config.windows);
-    let initial: Vec<f32> = starts
-        .iter()
-        .flat_map(|&t| dataset.observations.row(t).to_vec())
-        .collect();
-    let actions: Vec<f32> = starts
-        .iter()
-        .flat_map(|&t| (t..t + config.horizon).flat_map(|k| dataset.actions.row(k).to_vec()))
-        .collect();
+    let starts = sampler.draw_distinct(config.windows, &mut rng);
+    let windows = sampler.gather(&starts);
     let rollout = rollout_model(
         dynamics,
-        RolloutActions::Sequence(&actions),
+        RolloutActions::Sequence(&windows.actions),
         rules,
-        &initial,
+        &windows.first_states(),
         &RolloutConfig {
             horizon: config.horizon,
             particles: config.particles,
@@ -98,7 +88,8 @@ pub fn prediction_error(
     let trace = &rollout.trace;
     let mut squared = vec![0.0f64; config.horizon];
     let mut reached = vec![0usize; config.horizon];
-    for (w, &t) in starts.iter().enumerate() {
+    let window_width = (config.horizon + 1) * obs_dim;
+    for w in 0..starts.len() {
         let rows = w * config.particles..(w + 1) * config.particles;
         for k in 0..config.horizon {
             // The mean over the particles that got this far.
@@ -106,7 +97,8 @@ pub fn prediction_error(
             if alive.is_empty() {
                 break;
             }
-            let truth = dataset.next_observations.row(t + k);
+            let at = w * window_width + (k + 1) * obs_dim;
+            let truth = &windows.states[at..at + obs_dim];
             let error: f64 = (0..obs_dim)
                 .map(|d| {
                     let mean = alive

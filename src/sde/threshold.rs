@@ -9,7 +9,6 @@
 use burn::config::Config;
 use burn::tensor::Device;
 use rand::SeedableRng;
-use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
@@ -199,9 +198,7 @@ pub fn compute_thresholds(
             windows.push(0);
             continue;
         };
-        let mut starts = sampler.starts().to_vec();
-        starts.shuffle(&mut rng);
-        starts.truncate(config.max_windows);
+        let starts = sampler.draw_distinct(config.max_windows, &mut rng);
         let totals = accumulated_eta(model, dataset, &starts, h, config, &mut rng, device);
         values.push(config.alphas.iter().map(|&a| cvar(&totals, a)).collect());
         windows.push(starts.len());
