@@ -6,8 +6,8 @@ use nuno::agent::RandomNetworkPolicy;
 use nuno::data::{Dataset, GenerateConfig, WindowSampler, generate};
 use nuno::envs::{MujocoTask, TaskConfig, TaskName, TaskRules};
 use nuno::experiment::{
-    ActionSource, ExploitationConfig, PredictionConfig, exploitation, observation_scale,
-    prediction_error, uncertainty_by_action,
+    ActionSource, ExploitationConfig, PredictionConfig, exploitation, prediction_error,
+    uncertainty_by_action,
 };
 use nuno::shared::{BatchDynamics, BatchPolicy, BatchShape, ModelStep};
 
@@ -72,7 +72,7 @@ fn data() -> Dataset {
 fn prediction_error_of_a_no_change_model_is_the_datas_own_drift() {
     let data = data();
     let rules = TaskRules::of_task(task()).unwrap();
-    let scale = observation_scale(&data);
+    let scale = nuno::data::Stats::fit(data.observations.view(), &Default::default()).std;
     let horizon = 5;
     let config = PredictionConfig {
         horizon,

@@ -301,23 +301,3 @@ pub fn exploitation(
         penalty: config.penalty,
     })
 }
-
-/// Per-dimension standard deviations of `dataset`'s observations (the unit
-/// prediction errors are measured in).
-pub fn observation_scale(dataset: &Dataset) -> Vec<f32> {
-    dataset
-        .observations
-        .columns()
-        .into_iter()
-        .map(|column| {
-            let n = column.len().max(1) as f64;
-            let mean = column.iter().map(|&x| f64::from(x)).sum::<f64>() / n;
-            let var = column
-                .iter()
-                .map(|&x| (f64::from(x) - mean).powi(2))
-                .sum::<f64>()
-                / n;
-            (var.sqrt() as f32).max(1e-6)
-        })
-        .collect()
-}

@@ -11,7 +11,7 @@ use std::path::PathBuf;
 
 pub use analysis::{
     ActionSource, Exploitation, ExploitationConfig, PredictionConfig, PredictionError,
-    exploitation, observation_scale, prediction_error, uncertainty_by_action,
+    exploitation, prediction_error, uncertainty_by_action,
 };
 pub use grid::{Budget, Cell, Grid, GridDataset, Method};
 pub use results::{

@@ -15,12 +15,11 @@ use anyhow::Context;
 use burn::tensor::Device;
 use nuno::agent::{ActionMode, ActorPolicy};
 use nuno::artifact::{BEST_POLICY, load_dynamics, load_ensemble, load_policy};
-use nuno::data::{DatasetFormat, read_dataset};
+use nuno::data::{DatasetFormat, NormalizerConfig, Stats, read_dataset};
 use nuno::ensemble::{EnsembleDynamics, EnsembleUncertainty};
 use nuno::envs::{MujocoTask, TaskConfig, TaskRules};
 use nuno::experiment::{
-    ExploitationConfig, PredictionConfig, exploitation, observation_scale, prediction_error,
-    uncertainty_by_action,
+    ExploitationConfig, PredictionConfig, exploitation, prediction_error, uncertainty_by_action,
 };
 use nuno::infer::Kernel;
 use nuno::sde::FusedSde;
@@ -131,7 +130,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("creating {}", args.out.display()))?;
 
     // Figure 5: both datasets in the in-distribution data's units.
-    let scale = observation_scale(&dataset);
+    let scale = Stats::fit(dataset.observations.view(), &NormalizerConfig::default()).std;
     let prediction = PredictionConfig {
         horizon: args.horizon,
         windows: args.windows,
@@ -162,23 +161,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     write_text(&args.out.join("prediction_error.csv"), &csv)?;
-    let series: Vec<Series> = curves
-        .iter()
-        .map(|(name, rmse)| Series {
-            name,
-            points: rmse
-                .iter()
-                .enumerate()
-                .map(|(k, &e)| ((k + 1) as f64, e))
-                .collect(),
-        })
-        .collect();
     line_chart(
         &args.out.join("prediction_error.svg"),
         "Open-loop prediction error (Figure 5)",
         "horizon step",
         "RMSE / dataset std",
-        &series,
+        &per_step(&curves),
     )?;
 
     // Figure 3: η by action source, as each source's sorted values.
@@ -273,27 +261,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ));
         }
         write_text(&args.out.join("exploitation.csv"), &csv)?;
-        let series: Vec<Series> = series_data
-            .iter()
-            .map(|(name, values)| Series {
-                name,
-                points: values
-                    .iter()
-                    .enumerate()
-                    .map(|(k, &v)| ((k + 1) as f64, v))
-                    .collect(),
-            })
-            .collect();
         line_chart(
             &args.out.join("exploitation.svg"),
             "The policy's return: models against the real task (Figure 4)",
             "step",
             "mean cumulative return",
-            &series,
+            &per_step(&series_data),
         )?;
     }
     println!("wrote {}", args.out.display());
     Ok(())
+}
+
+/// Named curves of per-step values as plot series, step k + 1 at index k.
+fn per_step(curves: &[(String, Vec<f64>)]) -> Vec<Series<'_>> {
+    curves
+        .iter()
+        .map(|(name, values)| Series {
+            name,
+            points: values
+                .iter()
+                .enumerate()
+                .map(|(k, &v)| ((k + 1) as f64, v))
+                .collect(),
+        })
+        .collect()
 }
 
 /// `DIR` or `NAME=DIR`: the neural SDE when the folder holds model.json, else its ensemble.

@@ -6,7 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{fails, generate_hopper, ok};
+use common::{fails, generate_hopper, ok, tiny_fit_ensemble};
 
 #[test]
 fn analyze_writes_every_figure_for_both_model_kinds() {
@@ -21,25 +21,7 @@ fn analyze_writes_every_figure_for_both_model_kinds() {
     generate_hopper(&s(&inside), 1500, 0);
     // Another random network's data: out of the first one's distribution.
     generate_hopper(&s(&outside), 1500, 7);
-    ok(&[
-        "fit-ensemble",
-        "--dataset",
-        &s(&inside),
-        "--task",
-        "hopper",
-        "--out",
-        &s(&ensemble),
-        "--members",
-        "3",
-        "--elites",
-        "2",
-        "--hidden",
-        "16,16",
-        "--weight-decay",
-        "2.5e-5,5e-5,1e-4",
-        "--max-epochs",
-        "2",
-    ]);
+    tiny_fit_ensemble(&inside, &ensemble);
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/hopper-random");
     let analyze = |extra: &[&str]| -> Vec<String> {
         let mut args: Vec<String> = [

@@ -2,6 +2,7 @@
 // Each test crate uses only some of these.
 #![allow(dead_code)]
 
+use std::path::Path;
 use std::process::{Command, Output};
 
 pub fn trainer<S: AsRef<str>>(args: &[S]) -> Output {
@@ -53,5 +54,76 @@ pub fn generate_hopper(out: &str, transitions: usize, seed: u64) {
         &seed.to_string(),
         "--out",
         out,
+    ]);
+}
+
+/// `fit-policy` arguments for a tiny run: `algo` in the model in `model` on
+/// `dataset` under `preset`, `steps` gradient steps in epochs of 10 (a model
+/// rollout of 32 starts each, 16×16 networks, one evaluation episode), into
+/// `out`, then `extra`.
+pub fn tiny_fit_policy(
+    algo: &str,
+    model: &Path,
+    dataset: &Path,
+    preset: &str,
+    steps: usize,
+    out: &Path,
+    extra: &[&str],
+) -> Vec<String> {
+    let path = |p: &Path| p.display().to_string();
+    let mut args: Vec<String> = [
+        "fit-policy",
+        "--algo",
+        algo,
+        "--model",
+        &path(model),
+        "--dataset",
+        &path(dataset),
+        "--preset",
+        preset,
+        "--steps",
+        &steps.to_string(),
+        "--steps-per-epoch",
+        "10",
+        "--rollout-freq",
+        "10",
+        "--rollout-batch",
+        "32",
+        "--batch-size",
+        "32",
+        "--hidden",
+        "16,16",
+        "--eval-episodes",
+        "1",
+        "--out",
+        &path(out),
+    ]
+    .map(String::from)
+    .to_vec();
+    args.extend(extra.iter().map(|e| e.to_string()));
+    args
+}
+
+/// `fit-ensemble`: a tiny ensemble (3 members, 2 elites, 16×16, 2 epochs) of `dataset` in `out`.
+pub fn tiny_fit_ensemble(dataset: &Path, out: &Path) {
+    let path = |p: &Path| p.display().to_string();
+    ok(&[
+        "fit-ensemble",
+        "--dataset",
+        &path(dataset),
+        "--task",
+        "hopper",
+        "--out",
+        &path(out),
+        "--members",
+        "3",
+        "--elites",
+        "2",
+        "--hidden",
+        "16,16",
+        "--weight-decay",
+        "2.5e-5,5e-5,1e-4",
+        "--max-epochs",
+        "2",
     ]);
 }
