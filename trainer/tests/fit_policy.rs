@@ -35,36 +35,18 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
         run.to_str().unwrap(),
     );
     generate_hopper(dataset_s, 2000, 0);
-    let fit = |steps: &str, extra: &[&str]| -> Vec<String> {
-        let mut args: Vec<&str> = vec![
-            "fit-policy",
-            "--model",
-            model_s,
-            "--dataset",
-            dataset_s,
-            "--preset",
+    let fit = |steps: usize, extra: &[&str]| -> Vec<String> {
+        tiny_fit_policy(
+            "nuno",
+            &model,
+            &dataset,
             "hopper-random",
-            "--steps",
             steps,
-            "--steps-per-epoch",
-            "10",
-            "--rollout-freq",
-            "10",
-            "--rollout-batch",
-            "32",
-            "--batch-size",
-            "32",
-            "--hidden",
-            "16,16",
-            "--eval-episodes",
-            "1",
-            "--out",
-            run_s,
-        ];
-        args.extend_from_slice(extra);
-        args.into_iter().map(String::from).collect()
+            &run,
+            extra,
+        )
     };
-    let stdout = ok(&fit("20", &[]));
+    let stdout = ok(&fit(20, &[]));
     assert!(stdout.contains("truncation threshold"), "{stdout}");
     for file in [
         "metrics.csv",
@@ -90,10 +72,10 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
     assert_eq!(rows(&run.join("metrics.csv")), 2);
 
     // A second run into the same directory must not clobber it.
-    let err = fails(&fit("20", &[]));
+    let err = fails(&fit(20, &[]));
     assert!(err.contains("--resume"), "{err}");
     // Resuming extends the run: two epochs kept, one more added.
-    let stdout = ok(&fit("30", &["--resume"]));
+    let stdout = ok(&fit(30, &["--resume"]));
     assert!(
         stdout.contains("resumed from") && stdout.contains("epoch 2"),
         "{stdout}"
@@ -142,7 +124,7 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
         err.contains("preset walker2d-random is for walker2d"),
         "{err}"
     );
-    let err = fails(&fit("20", &["--real-ratio", "1.5"]));
+    let err = fails(&fit(20, &["--real-ratio", "1.5"]));
     assert!(err.contains("--real-ratio"), "{err}");
     let err = fails(&["evaluate", "--policy", dataset_s, "--episodes", "1"]);
     assert!(err.contains("loading policy"), "{err}");
