@@ -186,7 +186,8 @@ pub fn results_csv(results: &[CellResult]) -> String {
 }
 
 /// A Table 1/2-style markdown table: datasets as rows, methods as columns,
-/// best score mean ± std (runs), then the same for the final score.
+/// best score mean ± std (runs; a single run's score alone), then the same
+/// for the final score.
 pub fn markdown_table(summaries: &[Summary]) -> String {
     let mut methods: Vec<Method> = summaries.iter().map(|s| s.method).collect();
     methods.sort();
@@ -220,6 +221,8 @@ pub fn markdown_table(summaries: &[Summary]) -> String {
             out.push_str(&format!("| {d} |"));
             for m in &methods {
                 match summaries.iter().find(|s| s.dataset == *d && s.method == *m) {
+                    // One run has no spread to state.
+                    Some(s) if s.runs == 1 => out.push_str(&format!(" {:.1} (1) |", pick(s).0)),
                     Some(s) => {
                         let (mean, std) = pick(s);
                         out.push_str(&format!(" {mean:.1} ± {std:.1} ({}) |", s.runs));

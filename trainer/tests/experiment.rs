@@ -441,6 +441,11 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
         report.contains("| dataset | nuno | nuno-r | mopo | tatu-mopo |"),
         "{report}"
     );
+    // One seed per method: a score without a spread.
+    assert!(
+        report.contains(" (1) |") && !report.contains("± 0.0 (1)"),
+        "{report}"
+    );
     assert!(
         out.join("models/hopper-random/ensemble/seed-0/ensemble.json")
             .is_file()
