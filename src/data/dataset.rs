@@ -275,34 +275,36 @@ impl Dataset {
                 shape(first)
             )));
         }
-        // The shapes agree, so an info the first part carries, every part does.
-        let stack =
-            |f: fn(&Dataset) -> Option<&Array2<f32>>| -> Result<Option<Array2<f32>>, DataError> {
-                let views: Vec<ArrayView2<f32>> = datasets
-                    .iter()
-                    .filter_map(|d| f(d))
-                    .map(|a| a.view())
-                    .collect();
-                if views.len() < datasets.len() {
-                    return Ok(None);
-                }
-                ndarray::concatenate(Axis(0), &views)
-                    .map(Some)
-                    .map_err(|e| invalid(e.to_string()))
-            };
+        let stack = |views: Vec<ArrayView2<f32>>| {
+            ndarray::concatenate(Axis(0), &views).map_err(|e| invalid(e.to_string()))
+        };
         let required =
-            |a: Option<Array2<f32>>| a.ok_or_else(|| invalid("a part lacks a column".into()));
+            |f: fn(&Dataset) -> &Array2<f32>| stack(datasets.iter().map(|d| f(d).view()).collect());
+        // The shapes agree, so an info the first part carries, every part does.
+        let optional = |f: fn(&Dataset) -> Option<&Array2<f32>>| {
+            f(first)
+                .map(|_| {
+                    stack(
+                        datasets
+                            .iter()
+                            .filter_map(|d| f(d))
+                            .map(|a| a.view())
+                            .collect(),
+                    )
+                })
+                .transpose()
+        };
         let flags =
             |f: fn(&Dataset) -> &[bool]| datasets.iter().flat_map(|d| f(d).to_vec()).collect();
         let parts = DatasetParts {
-            observations: required(stack(|d| Some(&d.observations))?)?,
-            actions: required(stack(|d| Some(&d.actions))?)?,
+            observations: required(|d| &d.observations)?,
+            actions: required(|d| &d.actions)?,
             rewards: datasets.iter().flat_map(|d| d.rewards.to_vec()).collect(),
-            next_observations: required(stack(|d| Some(&d.next_observations))?)?,
+            next_observations: required(|d| &d.next_observations)?,
             terminals: flags(|d| &d.terminals),
             timeouts: flags(|d| &d.timeouts),
-            qpos: stack(|d| d.qpos.as_ref())?,
-            qvel: stack(|d| d.qvel.as_ref())?,
+            qpos: optional(|d| d.qpos.as_ref())?,
+            qvel: optional(|d| d.qvel.as_ref())?,
             action_log_probs: first.action_log_probs.is_some().then(|| {
                 datasets
                     .iter()
