@@ -52,6 +52,19 @@ pub enum ServedDynamics {
     },
 }
 
+impl ServedDynamics {
+    /// The model behind the batch interface, on the fused path when loaded there.
+    fn batch_dynamics(&self) -> &dyn BatchDynamics {
+        match self {
+            ServedDynamics::NeuralSde {
+                fused: Some(fused), ..
+            } => fused.as_ref(),
+            ServedDynamics::NeuralSde { model, .. } => model,
+            ServedDynamics::GaussianEnsemble { model, .. } => model,
+        }
+    }
+}
+
 /// One servable model.
 pub struct LoadedModel {
     pub id: String,
@@ -75,13 +88,7 @@ impl LoadedModel {
 
     /// The dynamics as requests step them (the server's [`Kernel`]).
     pub fn batch_dynamics(&self) -> &dyn BatchDynamics {
-        match &self.dynamics {
-            ServedDynamics::NeuralSde {
-                fused: Some(fused), ..
-            } => fused.as_ref(),
-            ServedDynamics::NeuralSde { model, .. } => model,
-            ServedDynamics::GaussianEnsemble { model, .. } => model,
-        }
+        self.dynamics.batch_dynamics()
     }
 
     pub fn obs_dim(&self) -> usize {
@@ -280,7 +287,10 @@ fn load_model(id: &str, dir: &Path, kernel: Kernel) -> Result<LoadedModel, Strin
         let dt = rules.dt();
         (dynamics, task, rules, dt)
     };
-    let (obs_dim, act_dim) = dynamics_dims(&dynamics);
+    let (obs_dim, act_dim) = {
+        let batch = dynamics.batch_dynamics();
+        (batch.obs_dim(), batch.act_dim())
+    };
     let policy = if has_policy(dir, BEST_POLICY) {
         let (actor, policy_metadata) =
             load_policy(dir, BEST_POLICY, &device).map_err(|e| format!("policy: {e}"))?;
@@ -309,13 +319,4 @@ fn load_model(id: &str, dir: &Path, kernel: Kernel) -> Result<LoadedModel, Strin
         step_seconds,
         fused_actor,
     })
-}
-
-fn dynamics_dims(dynamics: &ServedDynamics) -> (usize, usize) {
-    match dynamics {
-        ServedDynamics::NeuralSde { metadata, .. } => {
-            (metadata.spec.obs_dim, metadata.spec.act_dim)
-        }
-        ServedDynamics::GaussianEnsemble { metadata, .. } => (metadata.obs_dim, metadata.act_dim),
-    }
 }

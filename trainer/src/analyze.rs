@@ -125,7 +125,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let dataset = read(&args.dataset)?;
     let ood = args.ood_dataset.as_deref().map(read).transpose()?;
     let policy = args.policy.as_deref().map(load_actor).transpose()?;
-    let policy = policy.as_ref().map(|p| Kernel::Fused.policy(p.clone()));
+    let policy = policy.map(|p| Kernel::Fused.policy(p));
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
 
