@@ -8,6 +8,7 @@ use nuno::data::{Dataset, DatasetMetadata, DatasetParts};
 use nuno::ensemble::{
     EnsembleConfig, EnsembleDynamics, EnsembleFit, EnsembleUncertainty, fit_ensemble,
 };
+use nuno::infer::Kernel;
 use nuno::nn::to_f32_vec;
 use nuno::shared::BatchDynamics;
 use rand::{Rng, SeedableRng};
@@ -66,10 +67,74 @@ fn fitted() -> EnsembleFit {
     fit_ensemble(
         &linear_gaussian(4000, 0),
         &small_config(),
+        Kernel::Fused,
         &Device::flex(),
         &mut |_| {},
     )
     .unwrap()
+}
+
+/// The fused trainer against burn's autodiff: from the same initial weights,
+/// on the same batches, with the same Adam, every epoch's training loss and
+/// holdout errors and the final weights agree to float rounding.
+#[test]
+fn the_fused_fit_follows_burns_autodiff() {
+    let data = linear_gaussian(1200, 3);
+    let config = small_config()
+        .with_members(3)
+        .with_hidden(vec![24, 24])
+        // A lower bound the smallest noise (log 0.02² ≈ −7.8) presses on, so
+        // that the data's gradient reaches it.
+        .with_min_logvar_init(-6.0)
+        .with_max_epochs(Some(3));
+    let fit = |kernel| fit_ensemble(&data, &config, kernel, &Device::flex(), &mut |_| {}).unwrap();
+    let (burn, fused) = (fit(Kernel::Burn), fit(Kernel::Fused));
+    let close = |a: f64, b: f64, what: &str| {
+        assert!(
+            (a - b).abs() <= 1e-4 * a.abs().max(b.abs()) + 1e-6,
+            "{what}: burn {a}, fused {b}"
+        );
+    };
+    assert_eq!(burn.history.len(), 3);
+    assert_eq!(fused.history.len(), 3);
+    for (b, f) in burn.history.iter().zip(&fused.history) {
+        close(
+            b.train_loss,
+            f.train_loss,
+            &format!("epoch {} loss", b.epoch),
+        );
+        for (m, (bm, fm)) in b.holdout_mse.iter().zip(&f.holdout_mse).enumerate() {
+            close(
+                f64::from(*bm),
+                f64::from(*fm),
+                &format!("epoch {} member {m}", b.epoch),
+            );
+        }
+    }
+    // 90 Adam steps in: every parameter within 1e-4 of burn's (weights are O(0.1);
+    // a wrong bound gradient moves them by 1e-2).
+    let params = |fit: &EnsembleFit| {
+        let mut all = to_f32_vec(fit.model.max_logvar.val());
+        all.extend(to_f32_vec(fit.model.min_logvar.val()));
+        for member in &fit.model.members {
+            for layer in &member.layers {
+                all.extend(to_f32_vec(layer.weight.val()));
+                all.extend(to_f32_vec(layer.bias.as_ref().unwrap().val()));
+            }
+        }
+        all
+    };
+    let (b, f) = (params(&burn), params(&fused));
+    assert_eq!(b.len(), f.len());
+    let worst = b
+        .iter()
+        .zip(&f)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max);
+    assert!(worst < 1e-4, "largest parameter difference {worst}");
+    // The bounds moved from their initial 0.5 / −10: their gradients are in.
+    assert!(b[..3].iter().all(|&v| v != 0.5), "{:?}", &b[..3]);
+    assert_eq!(burn.elites, fused.elites);
 }
 
 #[test]
@@ -78,7 +143,7 @@ fn the_ensemble_learns_a_linear_gaussian_system() {
     let data = linear_gaussian(4000, 0);
     let config = small_config();
     let mut epochs = 0;
-    let fit = fit_ensemble(&data, &config, &device, &mut |_| epochs += 1).unwrap();
+    let fit = fit_ensemble(&data, &config, Kernel::Fused, &device, &mut |_| epochs += 1).unwrap();
     assert_eq!(epochs, fit.history.len());
 
     // MOPO's stopping rule, replayed from the history: the fit ends after 5
@@ -173,7 +238,7 @@ fn bad_ensemble_settings_are_refused_by_name() {
         ),
     ];
     for (config, name) in cases {
-        let error = fit_ensemble(&data, &config, &device, &mut |_| {})
+        let error = fit_ensemble(&data, &config, Kernel::Fused, &device, &mut |_| {})
             .unwrap_err()
             .to_string();
         assert!(error.contains(name), "{error}");
@@ -296,7 +361,14 @@ fn a_saved_ensemble_loads_to_the_same_steps_and_refuses_damage() {
     )
     .unwrap();
     let config = small_config().with_max_epochs(Some(2));
-    let fit = fit_ensemble(&hopper, &config, &Device::flex(), &mut |_| {}).unwrap();
+    let fit = fit_ensemble(
+        &hopper,
+        &config,
+        Kernel::Fused,
+        &Device::flex(),
+        &mut |_| {},
+    )
+    .unwrap();
     let dir = tempfile::tempdir().unwrap();
     // The synthetic system's ensemble does not fit hopper's widths.
     let error = nuno::artifact::save_ensemble(dir.path(), &fitted(), &small_config(), task, None)

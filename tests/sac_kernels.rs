@@ -10,7 +10,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use nuno::agent::{ActorConfig, FusedSac, Sac, SacConfig, SacLosses};
 use nuno::artifact::collect_tensors;
 use nuno::data::TransitionBatch;
-use nuno::infer::ReluMlp;
+use nuno::infer::TrainableMlp;
 use nuno::nn::{normal, seeded_init, to_f32_vec};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -72,7 +72,7 @@ fn named_grads<M: Module>(module: &M, grads: &GradientsParams) -> BTreeMap<Strin
     named.out
 }
 
-fn fused_named(prefix: &str, net: &ReluMlp) -> BTreeMap<String, Vec<f32>> {
+fn fused_named(prefix: &str, net: &TrainableMlp) -> BTreeMap<String, Vec<f32>> {
     net.layers
         .iter()
         .enumerate()

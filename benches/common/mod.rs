@@ -1,5 +1,7 @@
 //! What the model benchmarks share: the hopper set-up at the peer's shapes
 //! (`../shared/bench/nuno_reference.py`) and the timing helpers.
+// Each bench compiles this module on its own and uses part of it.
+#![allow(dead_code)]
 
 use std::time::Instant;
 

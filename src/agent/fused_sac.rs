@@ -1,5 +1,5 @@
 //! SAC's update, the same as [`Sac::update`], on plain `f32` buffers: the actor
-//! and the twin critics as [`ReluMlp`]s (each product one `gemm` over the batch
+//! and the twin critics as [`TrainableMlp`]s (each product one `gemm` over the batch
 //! on all cores), the tanh-Gaussian's gradient written out, and Adam from
 //! [`crate::nn::Adam`], the one both kernels step with. A [`FusedSac`] starts
 //! from a burn [`Sac`] and writes back into it, so the policy loop, evaluation
@@ -10,7 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use super::actor::tanh_gaussian_log_density;
 use super::sac::{Sac, SacAdam, SacLosses};
 use crate::data::TransitionBatch;
-use crate::infer::{MlpTape, ReluMlp};
+use crate::infer::{MlpTape, TrainableMlp};
 use crate::nn::{Adam, AdamState, AdamStep, fill_standard_normal, to_f32_vec};
 use crate::shared::LoggedActions;
 
@@ -28,11 +28,11 @@ pub struct FusedSac {
     center: Vec<f32>,
     log_half_sum: f32,
     adam: Adam,
-    actor: ReluMlp,
-    q1: ReluMlp,
-    q2: ReluMlp,
-    target_q1: ReluMlp,
-    target_q2: ReluMlp,
+    actor: TrainableMlp,
+    q1: TrainableMlp,
+    q2: TrainableMlp,
+    target_q1: TrainableMlp,
+    target_q2: TrainableMlp,
     log_alpha: f32,
     state: SacAdam,
     work: Workspace,
@@ -43,9 +43,9 @@ struct Workspace {
     actor_tape: MlpTape,
     q1_tape: MlpTape,
     q2_tape: MlpTape,
-    actor_grads: ReluMlp,
-    q1_grads: ReluMlp,
-    q2_grads: ReluMlp,
+    actor_grads: TrainableMlp,
+    q1_grads: TrainableMlp,
+    q2_grads: TrainableMlp,
     noise: Vec<f32>,
     sample: Sample,
     critic_input: Vec<f32>,
@@ -74,9 +74,9 @@ struct Sample {
 /// Gradients of one loss, by network, as [`FusedSac::gradients`] returns them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FusedGradients {
-    pub q1: ReluMlp,
-    pub q2: ReluMlp,
-    pub actor: ReluMlp,
+    pub q1: TrainableMlp,
+    pub q2: TrainableMlp,
+    pub actor: TrainableMlp,
     pub log_alpha: f32,
 }
 
@@ -85,9 +85,9 @@ impl FusedSac {
     pub fn from_sac(sac: &Sac) -> Self {
         let c = &sac.actor.config;
         let (half, center) = c.box_half_center();
-        let actor = ReluMlp::from_burn(&sac.actor.net);
-        let q1 = ReluMlp::from_burn(&sac.critic.q1);
-        let q2 = ReluMlp::from_burn(&sac.critic.q2);
+        let actor = TrainableMlp::from_burn(&sac.actor.net);
+        let q1 = TrainableMlp::from_burn(&sac.critic.q1);
+        let q2 = TrainableMlp::from_burn(&sac.critic.q2);
         let cores = rayon::current_num_threads();
         let work = Workspace {
             // The actor runs alone, the twin critics side by side.
@@ -127,8 +127,8 @@ impl FusedSac {
             actor,
             q1,
             q2,
-            target_q1: ReluMlp::from_burn(&sac.target_critic.q1),
-            target_q2: ReluMlp::from_burn(&sac.target_critic.q2),
+            target_q1: TrainableMlp::from_burn(&sac.target_critic.q1),
+            target_q2: TrainableMlp::from_burn(&sac.target_critic.q2),
             log_alpha: to_f32_vec(sac.temperature.log_alpha.val())[0],
             state: sac.adam.clone(),
             work,
@@ -327,18 +327,20 @@ impl FusedSac {
         );
         // Each critic on its own core: forward, (Q − y)², backward.
         let (input, y) = (&w.critic_input, &w.y);
-        let step =
-            |net: &ReluMlp, tape: &mut MlpTape, grads: &mut ReluMlp, grad_q: &mut Vec<f32>| {
-                net.forward(input, b, tape);
-                grad_q.clear();
-                let mut squares = 0.0;
-                for (q, y) in tape.output.iter().zip(y) {
-                    squares += (q - y) * (q - y);
-                    grad_q.push(2.0 * (q - y) / b as f32);
-                }
-                net.backward(tape, grad_q, Some(grads), None);
-                squares / b as f32
-            };
+        let step = |net: &TrainableMlp,
+                    tape: &mut MlpTape,
+                    grads: &mut TrainableMlp,
+                    grad_q: &mut Vec<f32>| {
+            net.forward(input, b, tape);
+            grad_q.clear();
+            let mut squares = 0.0;
+            for (q, y) in tape.output.iter().zip(y) {
+                squares += (q - y) * (q - y);
+                grad_q.push(2.0 * (q - y) / b as f32);
+            }
+            net.backward(tape, grad_q, Some(grads), None);
+            squares / b as f32
+        };
         let (qf1_loss, qf2_loss) = rayon::join(
             || step(&self.q1, &mut w.q1_tape, &mut w.q1_grads, &mut w.grad_q1),
             || step(&self.q2, &mut w.q2_tape, &mut w.q2_grads, &mut w.grad_q2),
@@ -441,8 +443,8 @@ fn step_network(
     step: AdamStep,
     state: &mut AdamState,
     prefix: &str,
-    net: &mut ReluMlp,
-    grads: &ReluMlp,
+    net: &mut TrainableMlp,
+    grads: &TrainableMlp,
 ) {
     for (path, param, grad) in net.params_with(grads) {
         let moments = state.moments.entry(format!("{prefix}.{path}")).or_default();

@@ -11,7 +11,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
 use super::fit::{EnsembleFit, Scaler};
-use super::model::GaussianEnsemble;
+use super::model::{GaussianEnsemble, softplus};
 use crate::infer::{DenseMlp, MlpScratch, Rows, row_chunks, run_tiles, tile_rows, with_buffers};
 use crate::nn::to_f32_vec;
 use crate::shared::{BatchDynamics, BatchShape, ModelStep, step_batch};
@@ -211,11 +211,6 @@ impl FusedMembers {
         });
         (means, stds)
     }
-}
-
-/// ln(1 + eˣ), without overflow for large x.
-fn softplus(x: f32) -> f32 {
-    if x > 20.0 { x } else { x.exp().ln_1p() }
 }
 
 impl BatchDynamics for EnsembleDynamics {

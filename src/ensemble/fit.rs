@@ -4,11 +4,12 @@
 //! and the log-variance bounds' loss; an epoch counts as an update when some
 //! member's holdout MSE improves by more than 1 % on its best, and the fit
 //! stops after 5 epochs without one. Each member ends at its best epoch; the
-//! elites are the members with the lowest holdout MSE.
+//! elites are the members with the lowest holdout MSE. The members train on
+//! the fused CPU path (`Kernel::Fused`) or through burn's autodiff
+//! (`Kernel::Burn`, any device): the same loss, Adam and data order.
 
 use burn::module::Module;
-use burn::optim::{AdamConfig, GradientsParams};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::Device;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -16,9 +17,12 @@ use serde::{Deserialize, Serialize};
 
 use super::EnsembleError;
 use super::config::EnsembleConfig;
+use super::fused_trainer::FusedTrainer;
 use super::model::GaussianEnsemble;
+use super::trainer::{BurnTrainer, EnsembleTrainer, LossTerms, MemberBatch};
 use crate::data::Dataset;
-use crate::nn::{Mlp, seeded_init, to_f32_vec};
+use crate::infer::Kernel;
+use crate::nn::seeded_init;
 
 /// Inputs (s, a) and targets (s' − s, r) of a dataset, row-major.
 struct Rows {
@@ -50,10 +54,11 @@ impl Rows {
         }
     }
 
-    /// The rows `index` selects, inputs normalised, as tensors.
-    fn tensors(&self, index: &[usize], scaler: &Scaler, device: &Device) -> (Tensor<2>, Tensor<2>) {
-        let mut x = Vec::with_capacity(index.len() * self.d_in);
-        let mut y = Vec::with_capacity(index.len() * self.d_out);
+    /// The rows `index` selects into `batch`, inputs normalised.
+    fn gather(&self, index: &[usize], scaler: &Scaler, batch: &mut MemberBatch) {
+        let MemberBatch { x, y } = batch;
+        x.clear();
+        y.clear();
         for &i in index {
             let row = &self.inputs[i * self.d_in..(i + 1) * self.d_in];
             x.extend(
@@ -64,11 +69,6 @@ impl Rows {
             );
             y.extend_from_slice(&self.targets[i * self.d_out..(i + 1) * self.d_out]);
         }
-        let n = index.len();
-        (
-            Tensor::from_data(TensorData::new(x, [n, self.d_in]), device),
-            Tensor::from_data(TensorData::new(y, [n, self.d_out]), device),
-        )
     }
 }
 
@@ -132,10 +132,12 @@ pub struct EnsembleFit {
     pub history: Vec<EnsembleEpoch>,
 }
 
-/// Fits `config`'s ensemble to `dataset`; `progress` sees every epoch.
+/// Fits `config`'s ensemble to `dataset`, its members trained by `kernel`
+/// (burn's on `device`); `progress` sees every epoch.
 pub fn fit_ensemble(
     dataset: &Dataset,
     config: &EnsembleConfig,
+    kernel: Kernel,
     device: &Device,
     progress: &mut dyn FnMut(&EnsembleEpoch),
 ) -> Result<EnsembleFit, EnsembleError> {
@@ -153,10 +155,11 @@ pub fn fit_ensemble(
     order.shuffle(&mut rng);
     let (holdout_index, train_index) = order.split_at(holdout);
     let scaler = Scaler::fit(&rows, train_index);
-    let (holdout_x, holdout_y) = rows.tensors(holdout_index, &scaler, device);
+    let mut holdout_batch = MemberBatch::default();
+    rows.gather(holdout_index, &scaler, &mut holdout_batch);
 
     let train_device = device.clone().autodiff();
-    let mut model = seeded_init(&train_device, config.seed, || {
+    let model = seeded_init(&train_device, config.seed, || {
         GaussianEnsemble::init(
             rows.d_in,
             rows.d_out,
@@ -166,74 +169,27 @@ pub fn fit_ensemble(
             &train_device,
         )
     });
-    let mut optimizer = AdamConfig::new().with_epsilon(1e-8).init();
     // Each member's bootstrap resample of the training rows, drawn once.
-    let mut resamples: Vec<Vec<usize>> = (0..config.members)
+    let resamples: Vec<Vec<usize>> = (0..config.members)
         .map(|_| {
             (0..train_index.len())
                 .map(|_| train_index[rng.random_range(0..train_index.len())])
                 .collect()
         })
         .collect();
-
-    let mut best_mse = vec![f32::INFINITY; config.members];
-    let mut best: Vec<Mlp> = model.valid().members;
-    let mut history = Vec::new();
-    let mut since_update = 0;
-    let mut epoch = 0;
-    while since_update < config.max_epochs_since_update
-        && config.max_epochs.is_none_or(|cap| epoch < cap)
-    {
-        for resample in &mut resamples {
-            resample.shuffle(&mut rng);
-        }
-        let mut losses = Vec::new();
-        for start in (0..train_index.len()).step_by(config.batch_size) {
-            let end = (start + config.batch_size).min(train_index.len());
-            let mut loss = bounds_loss(&model, config.logvar_loss_coef);
-            for (m, resample) in resamples.iter().enumerate() {
-                let (x, y) = rows.tensors(&resample[start..end], &scaler, &train_device);
-                let (mean, logvar) = model.member(m, x);
-                let inverse_variance = logvar.clone().neg().exp();
-                let nll = (mean - y).powi_scalar(2).mul(inverse_variance).mean() + logvar.mean();
-                loss = loss + nll + weight_decay(&model.members[m], &config.weight_decay);
-            }
-            losses.push(f64::from(to_f32_vec(loss.clone())[0]));
-            let grads = GradientsParams::from_grads(loss.backward(), &model);
-            model = optimizer.step(config.learning_rate, model, grads);
-        }
-        epoch += 1;
-
-        let valid = model.valid();
-        let holdout_mse: Vec<f32> = (0..config.members)
-            .map(|m| {
-                let (mean, _) = valid.member(m, holdout_x.clone());
-                to_f32_vec((mean - holdout_y.clone()).powi_scalar(2).mean())[0]
-            })
-            .collect();
-        let mut improved = false;
-        for (m, &mse) in holdout_mse.iter().enumerate() {
-            if best_mse[m].is_infinite()
-                || (best_mse[m] - mse) / best_mse[m] > config.min_improvement as f32
-            {
-                best_mse[m] = mse;
-                best[m] = valid.members[m].clone();
-                improved = true;
-            }
-        }
-        since_update = if improved { 0 } else { since_update + 1 };
-        let record = EnsembleEpoch {
-            epoch,
-            train_loss: losses.iter().sum::<f64>() / losses.len().max(1) as f64,
-            holdout_mse,
-            improved,
-        };
-        progress(&record);
-        history.push(record);
-    }
-
-    let mut model = model.valid();
-    model.members = best;
+    let run = FitRun {
+        rows: &rows,
+        scaler: &scaler,
+        holdout: &holdout_batch,
+        resamples,
+        rng,
+        config,
+    };
+    let terms = LossTerms::of(config);
+    let (model, best_mse, history) = match kernel {
+        Kernel::Burn => run.train(BurnTrainer::new(model, terms), progress),
+        Kernel::Fused => run.train(FusedTrainer::new(model.valid(), terms), progress),
+    };
     let mut ranked: Vec<usize> = (0..config.members).collect();
     ranked.sort_by(|&a, &b| best_mse[a].total_cmp(&best_mse[b]));
     ranked.truncate(config.elites);
@@ -246,18 +202,69 @@ pub fn fit_ensemble(
     })
 }
 
-/// Σ_l coef_l·‖W_l‖²/2 over a member's layers.
-fn weight_decay(member: &Mlp, coefficients: &[f64]) -> Tensor<1> {
-    member
-        .layers
-        .iter()
-        .zip(coefficients)
-        .map(|(layer, &c)| layer.weight.val().powi_scalar(2).sum() * (0.5 * c))
-        .reduce(|a, b| a + b)
-        .expect("at least one layer")
+/// The data side of a fit: which rows each member sees, in which order.
+struct FitRun<'a> {
+    rows: &'a Rows,
+    scaler: &'a Scaler,
+    holdout: &'a MemberBatch,
+    resamples: Vec<Vec<usize>>,
+    rng: ChaCha8Rng,
+    config: &'a EnsembleConfig,
 }
 
-/// coef·(Σ max log σ² − Σ min log σ²): keeps the bounds tight.
-fn bounds_loss(model: &GaussianEnsemble, coef: f64) -> Tensor<1> {
-    (model.max_logvar.val().sum() - model.min_logvar.val().sum()) * coef
+impl FitRun<'_> {
+    /// Epochs until MOPO's stop (or the cap): the model with each member at
+    /// its best epoch, each member's best holdout MSE, and the history.
+    fn train<T: EnsembleTrainer>(
+        mut self,
+        mut trainer: T,
+        progress: &mut dyn FnMut(&EnsembleEpoch),
+    ) -> (GaussianEnsemble, Vec<f32>, Vec<EnsembleEpoch>) {
+        let config = self.config;
+        let train_rows = self.resamples[0].len();
+        let mut batches = vec![MemberBatch::default(); config.members];
+        let mut best_mse = vec![f32::INFINITY; config.members];
+        let mut best: Vec<T::Member> = (0..config.members).map(|m| trainer.member(m)).collect();
+        let mut history = Vec::new();
+        let mut since_update = 0;
+        let mut epoch = 0;
+        while since_update < config.max_epochs_since_update
+            && config.max_epochs.is_none_or(|cap| epoch < cap)
+        {
+            for resample in &mut self.resamples {
+                resample.shuffle(&mut self.rng);
+            }
+            let mut losses = Vec::new();
+            for start in (0..train_rows).step_by(config.batch_size) {
+                let end = (start + config.batch_size).min(train_rows);
+                for (batch, resample) in batches.iter_mut().zip(&self.resamples) {
+                    self.rows.gather(&resample[start..end], self.scaler, batch);
+                }
+                losses.push(trainer.step(&batches));
+            }
+            epoch += 1;
+
+            let holdout_mse = trainer.holdout_mse(self.holdout);
+            let mut improved = false;
+            for (m, &mse) in holdout_mse.iter().enumerate() {
+                if best_mse[m].is_infinite()
+                    || (best_mse[m] - mse) / best_mse[m] > config.min_improvement as f32
+                {
+                    best_mse[m] = mse;
+                    best[m] = trainer.member(m);
+                    improved = true;
+                }
+            }
+            since_update = if improved { 0 } else { since_update + 1 };
+            let record = EnsembleEpoch {
+                epoch,
+                train_loss: losses.iter().sum::<f64>() / losses.len().max(1) as f64,
+                holdout_mse,
+                improved,
+            };
+            progress(&record);
+            history.push(record);
+        }
+        (trainer.into_model(best), best_mse, history)
+    }
 }

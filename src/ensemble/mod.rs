@@ -6,7 +6,9 @@
 mod config;
 mod dynamics;
 mod fit;
+mod fused_trainer;
 mod model;
+mod trainer;
 
 pub use config::EnsembleConfig;
 pub use dynamics::{EnsembleDynamics, EnsembleUncertainty};

@@ -4,7 +4,7 @@
 //! log σ² = max − softplus(max − raw), then min + softplus(log σ² − min).
 
 use burn::module::{Module, Param};
-use burn::tensor::activation::softplus;
+use burn::tensor::activation;
 use burn::tensor::{Device, Tensor};
 
 use crate::nn::{Activation, Mlp, MlpConfig};
@@ -45,8 +45,14 @@ impl GaussianEnsemble {
         let raw = out.narrow(1, d, d);
         let max = self.max_logvar.val().unsqueeze::<2>();
         let min = self.min_logvar.val().unsqueeze::<2>();
-        let logvar = max.clone() - softplus(max - raw, 1.0);
-        let logvar = min.clone() + softplus(logvar - min, 1.0);
+        let logvar = max.clone() - activation::softplus(max - raw, 1.0);
+        let logvar = min.clone() + activation::softplus(logvar - min, 1.0);
         (mean, logvar)
     }
+}
+
+/// ln(1 + eˣ), without overflow for large x: the bounds on host buffers (the
+/// fused step and fit).
+pub(super) fn softplus(x: f32) -> f32 {
+    if x > 20.0 { x } else { x.exp().ln_1p() }
 }

@@ -1,7 +1,7 @@
-//! Training a ReLU MLP on plain `f32` buffers: the forward pass keeps each
-//! layer's input, the backward pass turns the output's gradient into every
-//! weight's and bias's (`∂W = xᵀ·g`, `∂b = Σ_rows g`) and the input's
-//! (`g ← (g·Wᵀ) ⊙ relu'(z)`). Each product is single-threaded `gemm` on row
+//! Training an MLP on plain `f32` buffers: the forward pass keeps each
+//! layer's input (and, for swish, its pre-activation), the backward pass turns
+//! the output's gradient into every weight's and bias's (`∂W = xᵀ·g`,
+//! `∂b = Σ_rows g`) and the input's (`g ← (g·Wᵀ) ⊙ act'(z)`). Each product is single-threaded `gemm` on row
 //! blocks, split over as many cores as the tape is given (gemm's own threads
 //! measured no faster than one core; rayon-joined row blocks do pay); buffers
 //! live in the tape and are reused every call.
@@ -10,7 +10,7 @@ use burn::module::{Module, ModuleMapper, Param};
 use burn::tensor::{Tensor, TensorData};
 
 use super::dense::product_on_cores;
-use super::vector_math::{bias_then_activate, column_sums, relu_gradient};
+use super::vector_math::{activate, activation_gradient, bias_then_activate, column_sums};
 use crate::nn::{Activation, Mlp, to_f32_vec};
 
 /// One dense layer `y = x·W + b`, W row-major `[d_in, d_out]` (burn's layout).
@@ -22,19 +22,24 @@ pub struct Layer {
     pub bias: Vec<f32>,
 }
 
-/// An MLP with ReLU between its layers and none after the last: SAC's actor and
-/// critics. Also holds gradients, which have the parameters' shapes.
+/// An MLP with `activation` between its layers and none after the last: SAC's
+/// actor and critics (ReLU), MOPO's ensemble members (swish). Also holds
+/// gradients, which have the parameters' shapes.
 #[derive(Debug, Clone, PartialEq)]
-pub struct ReluMlp {
+pub struct TrainableMlp {
     pub layers: Vec<Layer>,
+    pub activation: Activation,
 }
 
 /// What a forward pass keeps for the backward pass, and the buffers both use.
 #[derive(Debug, Clone, Default)]
 pub struct MlpTape {
     rows: usize,
-    /// The input of each layer, `[rows, d_in]` (the ReLU outputs past the first).
+    /// The input of each layer, `[rows, d_in]` (the activations past the first).
     inputs: Vec<Vec<f32>>,
+    /// Each hidden layer's pre-activation `z`, kept only where act'(z) needs
+    /// it (swish; ReLU's and tanh's derivatives follow from their outputs).
+    pre_activations: Vec<Vec<f32>>,
     /// The last layer's output, `[rows, d_out]`.
     pub output: Vec<f32>,
     grad: Vec<f32>,
@@ -55,14 +60,9 @@ impl MlpTape {
     }
 }
 
-impl ReluMlp {
-    /// The weights of a burn [`Mlp`] with ReLU activations.
+impl TrainableMlp {
+    /// The weights of a burn [`Mlp`].
     pub fn from_burn(mlp: &Mlp) -> Self {
-        assert_eq!(
-            mlp.activation,
-            Activation::Relu,
-            "ReluMlp needs ReLU layers"
-        );
         let layers = mlp
             .layers
             .iter()
@@ -79,7 +79,10 @@ impl ReluMlp {
                 }
             })
             .collect();
-        Self { layers }
+        Self {
+            layers,
+            activation: mlp.activation,
+        }
     }
 
     /// `mlp` with these weights (parameter ids and trainability kept).
@@ -108,7 +111,7 @@ impl ReluMlp {
                     }),
                     _ => None,
                 };
-                let values = values.expect("ReluMlp::write_to: the MLP's layout");
+                let values = values.expect("TrainableMlp::write_to: the MLP's layout");
                 let require_grad = old.is_require_grad();
                 let tensor = Tensor::from_data(TensorData::new(values, old.dims()), &old.device());
                 Param::initialized(id, tensor.set_require_grad(require_grad))
@@ -133,6 +136,7 @@ impl ReluMlp {
                     bias: vec![0.0; l.bias.len()],
                 })
                 .collect(),
+            activation: self.activation,
         }
     }
 
@@ -163,12 +167,16 @@ impl ReluMlp {
     }
 
     /// The network on `rows` rows of `input` (`[rows, d_in]`), into `tape.output`,
-    /// keeping what [`ReluMlp::backward`] needs.
+    /// keeping what [`TrainableMlp::backward`] needs.
     pub fn forward(&self, input: &[f32], rows: usize, tape: &mut MlpTape) {
         assert_eq!(input.len(), rows * self.d_in(), "MLP input size");
         let last = self.layers.len() - 1;
         tape.rows = rows;
         tape.inputs.resize_with(self.layers.len(), Vec::new);
+        let keeps_pre_activations = self.activation == Activation::Swish;
+        if keeps_pre_activations {
+            tape.pre_activations.resize_with(last, Vec::new);
+        }
         tape.inputs[0].clear();
         tape.inputs[0].extend_from_slice(input);
         for (i, layer) in self.layers.iter().enumerate() {
@@ -188,19 +196,27 @@ impl ReluMlp {
                 (x, layer.d_in as isize, 1),
                 (&layer.weight, layer.d_out as isize, 1),
             );
-            let activation = (i != last).then_some(Activation::Relu);
-            bias_then_activate(out, &layer.bias, activation);
+            if i == last {
+                bias_then_activate(out, &layer.bias, None);
+            } else if keeps_pre_activations {
+                bias_then_activate(out, &layer.bias, None);
+                tape.pre_activations[i].clear();
+                tape.pre_activations[i].extend_from_slice(out);
+                activate(out, self.activation);
+            } else {
+                bias_then_activate(out, &layer.bias, Some(self.activation));
+            }
         }
     }
 
     /// Back-propagates `grad_output` (`[rows, d_out]`, ∂L/∂output) through the
-    /// last [`ReluMlp::forward`]: writes ∂L/∂θ into `grads` (overwriting) and
+    /// last [`TrainableMlp::forward`]: writes ∂L/∂θ into `grads` (overwriting) and
     /// ∂L/∂input into `grad_input` (`[rows, d_in]`), each only when asked.
     pub fn backward(
         &self,
         tape: &mut MlpTape,
         grad_output: &[f32],
-        mut grads: Option<&mut ReluMlp>,
+        mut grads: Option<&mut TrainableMlp>,
         grad_input: Option<&mut Vec<f32>>,
     ) {
         let rows = tape.rows;
@@ -239,8 +255,9 @@ impl ReluMlp {
                 (&layer.weight, 1, layer.d_out as isize),
             );
             if i > 0 {
-                // This layer's input is the previous layer's ReLU output.
-                relu_gradient(&mut tape.grad_next, x);
+                // This layer's input is the previous layer's activation.
+                let pre = tape.pre_activations.get(i - 1).map(Vec::as_slice);
+                activation_gradient(self.activation, &mut tape.grad_next, x, pre);
             }
             std::mem::swap(&mut tape.grad, &mut tape.grad_next);
         }

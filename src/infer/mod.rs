@@ -9,8 +9,10 @@
 //! evaluate trained weights, so this path reads the same weights into plain
 //! `f32` buffers and evaluates them with bias and activation fused into each
 //! layer's pass, batch tiles sized for cache and spread over all cores
-//! ([`tiles`]), and per-thread buffers reused across steps. burn stays the
-//! path for training and for the GPU; [`Kernel`] picks between them.
+//! ([`tiles`]), and per-thread buffers reused across steps. [`TrainableMlp`]
+//! adds the backward pass, on which SAC's updates and the ensemble's fit run;
+//! burn stays the path for the SDE's fit and for the GPU; [`Kernel`] picks
+//! between them.
 
 mod dense;
 mod mlp_grad;
@@ -19,7 +21,7 @@ mod tiles;
 mod vector_math;
 
 pub use dense::{Dense, DenseMlp, GEMM_MIN_ROWS, MlpScratch, Rows};
-pub use mlp_grad::{Layer, MlpTape, ReluMlp};
+pub use mlp_grad::{Layer, MlpTape, TrainableMlp};
 pub use simd::{SimdLevel, detected_simd_level, set_simd_cap, simd_level};
 pub use tiles::{MAX_TILE_ROWS, row_chunks, run_tiles, tile_rows, with_buffers};
 

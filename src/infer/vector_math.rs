@@ -45,21 +45,78 @@ impl<F: Fn(f32) -> f32> Vectorized for BiasMap<'_, F> {
     }
 }
 
-/// `g ← 0` wherever the ReLU's output `a` is not positive (relu'(z) = 0 there):
-/// a gradient through a ReLU layer, in place.
-pub fn relu_gradient(grad: &mut [f32], outputs: &[f32]) {
-    struct Mask<'a>(&'a mut [f32], &'a [f32]);
-    impl Vectorized for Mask<'_> {
+/// `v ← activation(v)` for every element, in place.
+pub fn activate(values: &mut [f32], activation: Activation) {
+    struct Map<'a, F>(&'a mut [f32], F);
+    impl<F: Fn(f32) -> f32> Vectorized for Map<'_, F> {
         #[inline(always)]
         fn run(self) {
-            for (g, &a) in self.0.iter_mut().zip(self.1) {
-                // A select, not a branch, so that it vectorises.
-                *g = if a > 0.0 { *g } else { 0.0 };
+            for v in self.0.iter_mut() {
+                *v = (self.1)(*v);
             }
         }
     }
-    assert_eq!(grad.len(), outputs.len(), "relu_gradient: sizes");
-    widest(Mask(grad, outputs));
+    match activation {
+        Activation::Swish => widest(Map(values, swish)),
+        Activation::Tanh => widest(Map(values, tanh)),
+        Activation::Relu => widest(Map(values, |v: f32| v.max(0.0))),
+    }
+}
+
+/// `g ← g ⊙ act'(z)` in place: a gradient through a hidden layer whose
+/// activations are `outputs`. ReLU's and tanh's derivatives follow from the
+/// outputs (relu' = [a > 0], tanh' = 1 − a²); swish's needs the layer's
+/// pre-activations `pre` (swish'(z) = s(z)·(1 + z·(1 − s(z))), s the sigmoid).
+pub fn activation_gradient(
+    activation: Activation,
+    grad: &mut [f32],
+    outputs: &[f32],
+    pre: Option<&[f32]>,
+) {
+    struct Scale<'a, F>(&'a mut [f32], &'a [f32], F);
+    impl<F: Fn(f32) -> f32> Vectorized for Scale<'_, F> {
+        #[inline(always)]
+        fn run(self) {
+            for (g, &x) in self.0.iter_mut().zip(self.1) {
+                *g *= (self.2)(x);
+            }
+        }
+    }
+    assert_eq!(grad.len(), outputs.len(), "activation_gradient: sizes");
+    match activation {
+        // A select, not a branch, so that it vectorises; and 0 (not 0·g) where
+        // the unit is off, so that an infinite g stays out.
+        Activation::Relu => {
+            struct Mask<'a>(&'a mut [f32], &'a [f32]);
+            impl Vectorized for Mask<'_> {
+                #[inline(always)]
+                fn run(self) {
+                    for (g, &a) in self.0.iter_mut().zip(self.1) {
+                        *g = if a > 0.0 { *g } else { 0.0 };
+                    }
+                }
+            }
+            widest(Mask(grad, outputs))
+        }
+        Activation::Tanh => widest(Scale(grad, outputs, |a: f32| 1.0 - a * a)),
+        Activation::Swish => {
+            let pre = pre.expect("swish's gradient needs the pre-activations");
+            assert_eq!(pre.len(), grad.len(), "activation_gradient: sizes");
+            widest(Scale(grad, pre, swish_derivative))
+        }
+    }
+}
+
+/// swish'(z) = s(z)·(1 + z·(1 − s(z))), s(z) = 1/(1 + e^(−z)).
+#[inline(always)]
+pub fn swish_derivative(z: f32) -> f32 {
+    let e = exp(-f64::from(z.abs())) as f32;
+    let (s, one_minus_s) = if z >= 0.0 {
+        (1.0 / (1.0 + e), e / (1.0 + e))
+    } else {
+        (e / (1.0 + e), 1.0 / (1.0 + e))
+    };
+    s * (1.0 + z * one_minus_s)
 }
 
 /// `sums[j] = Σ_rows values[row, j]` (rows as wide as `sums`), overwriting `sums`.
@@ -215,10 +272,30 @@ mod tests {
     }
 
     #[test]
-    fn relu_gradient_and_column_sums_by_hand() {
+    fn activation_gradients_and_column_sums_by_hand() {
         let mut grad = vec![1.0, -2.0, 3.0, 4.0, 5.0];
-        relu_gradient(&mut grad, &[0.5, 0.0, -1.0, 2.0, f32::MIN_POSITIVE]);
+        let outputs = [0.5, 0.0, -1.0, 2.0, f32::MIN_POSITIVE];
+        activation_gradient(Activation::Relu, &mut grad, &outputs, None);
         assert_eq!(grad, [1.0, 0.0, 0.0, 4.0, 5.0]);
+        let mut grad = vec![2.0, 2.0];
+        activation_gradient(Activation::Tanh, &mut grad, &[0.5, -0.25], None);
+        assert_eq!(grad, [1.5, 1.875]);
+        // swish'(z) against a central difference of swish in f64.
+        let z: Vec<f32> = grid().step_by(53).collect();
+        let mut grad = vec![1.0; z.len()];
+        activation_gradient(Activation::Swish, &mut grad, &z, Some(&z));
+        let swish64 = |x: f64| x / (1.0 + (-x).exp());
+        for (x, g) in z.iter().zip(&grad) {
+            let (x, h) = (f64::from(*x), 1e-5);
+            let want = (swish64(x + h) - swish64(x - h)) / (2.0 * h);
+            assert!(
+                (f64::from(*g) - want).abs() < 1e-6,
+                "swish'({x}) = {g}, want {want}"
+            );
+        }
+        let mut values = vec![-2.0, 0.0, 3.0];
+        activate(&mut values, Activation::Swish);
+        assert_eq!(values, [swish(-2.0), 0.0, swish(3.0)]);
         let mut sums = vec![9.0; 3];
         column_sums(&[1.0, 2.0, 3.0, 10.0, 20.0, 30.0], &mut sums);
         assert_eq!(sums, [11.0, 22.0, 33.0]);

@@ -7,6 +7,7 @@ use std::path::PathBuf;
 
 use nuno::artifact::save_ensemble;
 use nuno::ensemble::{EnsembleConfig, fit_ensemble};
+use nuno::infer::Kernel;
 use nuno::sde::ComputeDevice;
 
 use crate::data_source::DataSource;
@@ -38,6 +39,10 @@ pub struct Args {
     max_epochs: Option<usize>,
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// What trains the members: `fused` (the CPU kernels, all cores) or `burn`
+    /// (autodiff; the reference). The same loss, optimiser and data order.
+    #[arg(long, default_value_t = Kernel::Fused)]
+    kernel: Kernel,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -56,7 +61,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let dataset = args.data.read()?;
     let device = ComputeDevice::Cpu.device().map_err(anyhow::Error::msg)?;
 
-    let fit = fit_ensemble(&dataset, &config, &device, &mut |epoch| {
+    let fit = fit_ensemble(&dataset, &config, args.kernel, &device, &mut |epoch| {
         let best = epoch
             .holdout_mse
             .iter()

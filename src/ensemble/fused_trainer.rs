@@ -1,0 +1,249 @@
+//! The ensemble's fit on the fused CPU path (`crate::infer`): each member a
+//! [`TrainableMlp`] on one core, the members spread over the cores; the loss's
+//! gradient with respect to each member's output by hand, through the soft
+//! log-variance bounds (`GaussianEnsemble::member`):
+//!
+//! log σ²₁ = max − softplus(max − raw), log σ² = min + softplus(log σ²₁ − min);
+//! ∂/∂μ = 2(μ − y)·e^(−log σ²)/n, ∂/∂log σ² = (1 − (μ − y)²·e^(−log σ²))/n
+//! (n = rows × outputs), ∂log σ²/∂log σ²₁ = s(log σ²₁ − min),
+//! ∂log σ²₁/∂raw = s(max − raw), the rest to max and min (s the sigmoid).
+//! The same Adam as burn's path (`nn::Adam`), so both train the same model;
+//! `tests/ensemble.rs` holds them to each other.
+
+use rayon::prelude::*;
+
+use super::model::{GaussianEnsemble, softplus};
+use super::trainer::{ADAM_EPSILON, EnsembleTrainer, LossTerms, MemberBatch};
+use crate::infer::{MlpTape, TrainableMlp};
+use crate::nn::{Adam, AdamState, to_f32_vec};
+
+/// One member with its optimiser state and buffers.
+struct Member {
+    net: TrainableMlp,
+    grads: TrainableMlp,
+    tape: MlpTape,
+    state: AdamState,
+    /// ∂L/∂output, `[rows, 2·d_out]`.
+    grad_output: Vec<f32>,
+}
+
+/// What one member's step contributes to the shared bounds.
+struct BoundsGradient {
+    loss: f64,
+    max: Vec<f32>,
+    min: Vec<f32>,
+}
+
+pub(super) struct FusedTrainer {
+    members: Vec<Member>,
+    max_logvar: Vec<f32>,
+    min_logvar: Vec<f32>,
+    bounds_state: AdamState,
+    adam: Adam,
+    terms: LossTerms,
+    /// The model the weights came from, written back at the end.
+    template: GaussianEnsemble,
+}
+
+impl FusedTrainer {
+    /// Trains `model`'s weights (read to host memory once).
+    pub fn new(model: GaussianEnsemble, terms: LossTerms) -> Self {
+        let members = model
+            .members
+            .iter()
+            .map(|mlp| {
+                let net = TrainableMlp::from_burn(mlp);
+                Member {
+                    grads: net.zeros_like(),
+                    net,
+                    // One core each: the members themselves are spread over the cores.
+                    tape: MlpTape::on_cores(1),
+                    state: AdamState::default(),
+                    grad_output: Vec::new(),
+                }
+            })
+            .collect();
+        Self {
+            members,
+            max_logvar: to_f32_vec(model.max_logvar.val()),
+            min_logvar: to_f32_vec(model.min_logvar.val()),
+            bounds_state: AdamState::default(),
+            adam: Adam::new(ADAM_EPSILON),
+            terms,
+            template: model,
+        }
+    }
+}
+
+impl EnsembleTrainer for FusedTrainer {
+    type Member = TrainableMlp;
+
+    fn step(&mut self, batches: &[MemberBatch]) -> f64 {
+        let (adam, terms) = (self.adam, &self.terms);
+        let (max, min) = (&self.max_logvar, &self.min_logvar);
+        let contributions: Vec<BoundsGradient> = self
+            .members
+            .par_iter_mut()
+            .zip(batches)
+            .map(|(member, batch)| {
+                let d = max.len();
+                let rows = batch.y.len() / d;
+                member.net.forward(&batch.x, rows, &mut member.tape);
+                let mut bounds = nll_gradient(
+                    &member.tape.output,
+                    &batch.y,
+                    (max, min),
+                    &mut member.grad_output,
+                );
+                member.net.backward(
+                    &mut member.tape,
+                    &member.grad_output,
+                    Some(&mut member.grads),
+                    None,
+                );
+                for ((layer, grad), &c) in member
+                    .net
+                    .layers
+                    .iter()
+                    .zip(&mut member.grads.layers)
+                    .zip(&terms.weight_decay)
+                {
+                    let c = c as f32;
+                    let mut squares = 0.0f64;
+                    for (g, &w) in grad.weight.iter_mut().zip(&layer.weight) {
+                        *g += c * w;
+                        squares += f64::from(w) * f64::from(w);
+                    }
+                    bounds.loss += 0.5 * f64::from(c) * squares;
+                }
+                let step = adam.begin(&mut member.state, terms.learning_rate);
+                for (path, param, grad) in member.net.params_with(&member.grads) {
+                    let moments = member.state.moments.entry(path).or_default();
+                    adam.update(step, param, grad, moments);
+                }
+                bounds
+            })
+            .collect();
+
+        let coef = self.terms.bounds_coef as f32;
+        let mut loss = self.terms.bounds_coef
+            * (self.max_logvar.iter().map(|&v| f64::from(v)).sum::<f64>()
+                - self.min_logvar.iter().map(|&v| f64::from(v)).sum::<f64>());
+        let mut grad_max = vec![coef; self.max_logvar.len()];
+        let mut grad_min = vec![-coef; self.min_logvar.len()];
+        for c in &contributions {
+            loss += c.loss;
+            grad_max.iter_mut().zip(&c.max).for_each(|(g, v)| *g += v);
+            grad_min.iter_mut().zip(&c.min).for_each(|(g, v)| *g += v);
+        }
+        let step = self.adam.begin(&mut self.bounds_state, terms.learning_rate);
+        for (name, param, grad) in [
+            ("max_logvar", &mut self.max_logvar, &grad_max),
+            ("min_logvar", &mut self.min_logvar, &grad_min),
+        ] {
+            let moments = self.bounds_state.moments.entry(name.into()).or_default();
+            self.adam.update(step, param, grad, moments);
+        }
+        loss
+    }
+
+    fn holdout_mse(&mut self, holdout: &MemberBatch) -> Vec<f32> {
+        let d = self.max_logvar.len();
+        let rows = holdout.y.len() / d;
+        self.members
+            .par_iter_mut()
+            .map(|member| {
+                member.net.forward(&holdout.x, rows, &mut member.tape);
+                let out = &member.tape.output;
+                let mut sum = 0.0f64;
+                for (r, y) in holdout.y.chunks_exact(d).enumerate() {
+                    for (mean, y) in out[r * 2 * d..r * 2 * d + d].iter().zip(y) {
+                        sum += f64::from(mean - y) * f64::from(mean - y);
+                    }
+                }
+                (sum / (rows * d) as f64) as f32
+            })
+            .collect()
+    }
+
+    fn member(&self, m: usize) -> TrainableMlp {
+        self.members[m].net.clone()
+    }
+
+    fn into_model(self, best: Vec<TrainableMlp>) -> GaussianEnsemble {
+        let mut model = self.template;
+        model.members = model
+            .members
+            .into_iter()
+            .zip(&best)
+            .map(|(mlp, net)| net.write_to(mlp))
+            .collect();
+        model.max_logvar = replaced(model.max_logvar, self.max_logvar);
+        model.min_logvar = replaced(model.min_logvar, self.min_logvar);
+        model
+    }
+}
+
+/// `param` holding `values` (its id kept).
+fn replaced(
+    param: burn::module::Param<burn::tensor::Tensor<1>>,
+    values: Vec<f32>,
+) -> burn::module::Param<burn::tensor::Tensor<1>> {
+    use burn::tensor::{Tensor, TensorData};
+    let (id, old) = (param.id, param.val());
+    let n = values.len();
+    burn::module::Param::initialized(
+        id,
+        Tensor::from_data(TensorData::new(values, [n]), &old.device()),
+    )
+}
+
+/// The mean Gaussian NLL of one member's `output` (`[rows, 2·d]`: μ, then the
+/// raw log-variance) against `targets` (`[rows, d]`), its gradient with respect
+/// to the output into `grad_output`, and its gradient with respect to the
+/// bounds.
+fn nll_gradient(
+    output: &[f32],
+    targets: &[f32],
+    (max, min): (&[f32], &[f32]),
+    grad_output: &mut Vec<f32>,
+) -> BoundsGradient {
+    let d = max.len();
+    let rows = targets.len() / d;
+    let scale = 1.0 / (rows * d) as f32;
+    grad_output.resize(rows * 2 * d, 0.0);
+    let mut bounds = BoundsGradient {
+        loss: 0.0,
+        max: vec![0.0; d],
+        min: vec![0.0; d],
+    };
+    let mut sum = 0.0f64;
+    for ((out, grad), y) in output
+        .chunks_exact(2 * d)
+        .zip(grad_output.chunks_exact_mut(2 * d))
+        .zip(targets.chunks_exact(d))
+    {
+        for j in 0..d {
+            let above = max[j] - out[d + j];
+            let logvar_1 = max[j] - softplus(above);
+            let below = logvar_1 - min[j];
+            let logvar = min[j] + softplus(below);
+            let diff = out[j] - y[j];
+            let inverse_variance = (-logvar).exp();
+            sum += f64::from(diff * diff * inverse_variance + logvar);
+            grad[j] = 2.0 * diff * inverse_variance * scale;
+            let d_logvar = (1.0 - diff * diff * inverse_variance) * scale;
+            let (s_below, s_above) = (sigmoid(below), sigmoid(above));
+            let d_logvar_1 = d_logvar * s_below;
+            grad[d + j] = d_logvar_1 * s_above;
+            bounds.max[j] += d_logvar_1 * sigmoid(-above);
+            bounds.min[j] += d_logvar * sigmoid(-below);
+        }
+    }
+    bounds.loss = sum * f64::from(scale);
+    bounds
+}
+
+fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
