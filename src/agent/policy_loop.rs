@@ -152,6 +152,13 @@ pub struct PhaseSeconds {
     pub eta_probe: f64,
 }
 
+impl PhaseSeconds {
+    /// The epoch's wall-clock seconds, all phases.
+    pub fn total(&self) -> f64 {
+        self.updates + self.rollouts + self.evaluation + self.eta_probe
+    }
+}
+
 /// What one epoch did.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EpochRecord {

@@ -30,6 +30,11 @@ pub struct CellResult {
     pub steps: usize,
     /// (gradient step, normalised score) after every epoch.
     pub curve: Vec<(usize, f64)>,
+    /// Wall-clock seconds of the policy's epochs (updates, rollouts,
+    /// evaluation, η probe; the model fit not included). Absent from results
+    /// written before it was recorded.
+    #[serde(default)]
+    pub policy_seconds: Option<f64>,
 }
 
 /// Where a cell stands.
@@ -79,6 +84,7 @@ pub fn summarize_run(cell: &Cell, metrics: &Path) -> Result<CellResult, Experime
             .iter()
             .map(|r| (r.step, r.eval.normalized_score))
             .collect(),
+        policy_seconds: Some(records.iter().map(|r| r.seconds.total()).sum()),
     })
 }
 
@@ -169,17 +175,20 @@ fn mean_std(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
 
 /// One line per finished cell.
 pub fn results_csv(results: &[CellResult]) -> String {
-    let mut csv = String::from("dataset,method,seed,best_score,best_step,final_score,steps\n");
+    let mut csv =
+        String::from("dataset,method,seed,best_score,best_step,final_score,steps,policy_seconds\n");
     for r in results {
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{}\n",
             r.cell.dataset,
             r.cell.method,
             r.cell.seed,
             r.best_score,
             r.best_step,
             r.final_score,
-            r.steps
+            r.steps,
+            r.policy_seconds
+                .map_or(String::new(), |s| format!("{s:.1}"))
         ));
     }
     csv

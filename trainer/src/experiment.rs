@@ -8,6 +8,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::fs::OpenOptions;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command as Process, Stdio};
+use std::time::Instant;
 
 use anyhow::Context;
 use clap::{Subcommand, ValueEnum};
@@ -140,7 +141,7 @@ const CELL_POLL: std::time::Duration = std::time::Duration::from_millis(200);
 fn run_local(grid: &GridArgs, cells: &[Cell], jobs: usize) -> anyhow::Result<()> {
     let exe = std::env::current_exe().context("locating nuno-trainer")?;
     let mut queue = cells.iter();
-    let mut running: Vec<(Cell, Child)> = Vec::new();
+    let mut running: Vec<(Cell, Child, Instant)> = Vec::new();
     let mut failed = Vec::new();
     loop {
         while running.len() < jobs {
@@ -162,27 +163,34 @@ fn run_local(grid: &GridArgs, cells: &[Cell], jobs: usize) -> anyhow::Result<()>
                 .spawn()
                 .context("starting a cell")?;
             println!("started {}", cell.id());
-            running.push((cell.clone(), child));
+            running.push((cell.clone(), child, Instant::now()));
         }
         if running.is_empty() {
             break;
         }
         // Whichever cell ends first frees its slot for the next.
-        let (cell, status) = loop {
+        let (cell, status, started) = loop {
             let mut ended = None;
-            for (i, (_, child)) in running.iter_mut().enumerate() {
+            for (i, (_, child, _)) in running.iter_mut().enumerate() {
                 if let Some(status) = child.try_wait()? {
                     ended = Some((i, status));
                     break;
                 }
             }
             match ended {
-                Some((i, status)) => break (running.remove(i).0, status),
+                Some((i, status)) => {
+                    let (cell, _, started) = running.remove(i);
+                    break (cell, status, started);
+                }
                 None => std::thread::sleep(CELL_POLL),
             }
         };
         if status.success() {
-            println!("finished {}", cell.id());
+            println!(
+                "finished {} in {:.1} min",
+                cell.id(),
+                started.elapsed().as_secs_f64() / 60.0
+            );
         } else {
             println!(
                 "FAILED {} ({status}); see {}/log.txt",
@@ -405,11 +413,14 @@ fn report(args: GridArgs) -> anyhow::Result<()> {
         args.grid.display()
     );
     let summaries = summarize(&results);
+    let timed: Vec<f64> = results.iter().filter_map(|r| r.policy_seconds).collect();
     let table = format!(
-        "# {}\n\n{} of {} cells finished.\n\n{}",
+        "# {}\n\n{} of {} cells finished; {:.2} h of policy training over {} cells (model fits not counted).\n\n{}",
         args.grid.display(),
         results.len(),
         cells.len(),
+        timed.iter().sum::<f64>() / 3600.0,
+        timed.len(),
         markdown_table(&summaries)
     );
     for (name, text) in [

@@ -304,6 +304,28 @@ fn a_local_grid_runs_once_resumes_and_reports() {
     }
     let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
     assert_eq!(csv.lines().count(), 3, "{csv}");
+    // Each cell's policy time is the sum of its epochs' phase times.
+    let mut total = 0.0;
+    for line in csv.lines().skip(1) {
+        let fields: Vec<&str> = line.split(',').collect();
+        let cell = out.join(format!("hopper-random/nuno/seed-{}", fields[2]));
+        let want: f64 = std::fs::read_to_string(cell.join("policy/metrics.jsonl"))
+            .unwrap()
+            .lines()
+            .map(|l| {
+                let v: serde_json::Value = serde_json::from_str(l).unwrap();
+                ["updates", "rollouts", "evaluation", "eta_probe"]
+                    .iter()
+                    .map(|phase| v["seconds"][phase].as_f64().unwrap())
+                    .sum::<f64>()
+            })
+            .sum();
+        let got: f64 = fields[7].parse().unwrap();
+        assert!((got - want).abs() < 0.06, "{line}: want {want}");
+        total += want;
+    }
+    let hours = format!("{:.2} h of policy training over 2 cells", total / 3600.0);
+    assert!(report.contains(&hours), "expected {hours} in\n{report}");
     assert!(out.join("results.md").is_file());
     assert!(out.join("curves-hopper-random.svg").is_file());
 }
