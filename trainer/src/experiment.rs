@@ -414,13 +414,21 @@ fn report(args: GridArgs) -> anyhow::Result<()> {
     );
     let summaries = summarize(&results);
     let timed: Vec<f64> = results.iter().filter_map(|r| r.policy_seconds).collect();
+    // Results written before policy time was recorded have none to add.
+    let time = if timed.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "; {:.2} h of policy training over {} cells (model fits not counted)",
+            timed.iter().sum::<f64>() / 3600.0,
+            timed.len()
+        )
+    };
     let table = format!(
-        "# {}\n\n{} of {} cells finished; {:.2} h of policy training over {} cells (model fits not counted).\n\n{}",
+        "# {}\n\n{} of {} cells finished{time}.\n\n{}",
         args.grid.display(),
         results.len(),
         cells.len(),
-        timed.iter().sum::<f64>() / 3600.0,
-        timed.len(),
         markdown_table(&summaries)
     );
     for (name, text) in [
