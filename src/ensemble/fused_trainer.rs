@@ -10,6 +10,8 @@
 //! The same Adam as burn's path (`nn::Adam`), so both train the same model;
 //! `tests/ensemble.rs` holds them to each other.
 
+use burn::module::Param;
+use burn::tensor::{Tensor, TensorData};
 use rayon::prelude::*;
 
 use super::model::{GaussianEnsemble, softplus};
@@ -185,14 +187,10 @@ impl EnsembleTrainer for FusedTrainer {
 }
 
 /// `param` holding `values` (its id kept).
-fn replaced(
-    param: burn::module::Param<burn::tensor::Tensor<1>>,
-    values: Vec<f32>,
-) -> burn::module::Param<burn::tensor::Tensor<1>> {
-    use burn::tensor::{Tensor, TensorData};
+fn replaced(param: Param<Tensor<1>>, values: Vec<f32>) -> Param<Tensor<1>> {
     let (id, old) = (param.id, param.val());
     let n = values.len();
-    burn::module::Param::initialized(
+    Param::initialized(
         id,
         Tensor::from_data(TensorData::new(values, [n]), &old.device()),
     )
