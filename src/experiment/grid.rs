@@ -216,7 +216,7 @@ impl Grid {
         Ok((grid, cells))
     }
 
-    /// The cells, datasets in file order, then methods, then seeds; every name checked.
+    /// The cells, every name checked, in the order below (seeds outermost).
     pub fn cells(&self, base: &Path) -> Result<Vec<Cell>, String> {
         let b = &self.budget;
         if b.model_steps == 0
@@ -233,6 +233,7 @@ impl Grid {
             return Err("the grid names no dataset".into());
         }
         let mut cells = Vec::new();
+        let mut checked = Vec::new();
         let mut names = std::collections::BTreeSet::new();
         for d in &self.datasets {
             if !names.insert(d.name.as_str()) {
@@ -278,15 +279,29 @@ impl Grid {
                     d.name, d.preset
                 ));
             }
-            // Seed-major: a run cut short has every method at its first seeds.
-            for &seed in &d.seeds {
-                for &method in &methods {
+            checked.push((d, file, preset.layout, methods));
+        }
+        // Seeds outermost (each dataset's first seed, then each one's second,
+        // ...), then datasets in file order, then methods: a sweep cut short
+        // has every dataset × method at its first seeds.
+        let rounds = self
+            .datasets
+            .iter()
+            .map(|d| d.seeds.len())
+            .max()
+            .unwrap_or(0);
+        for round in 0..rounds {
+            for (d, file, layout, methods) in &checked {
+                let Some(&seed) = d.seeds.get(round) else {
+                    continue;
+                };
+                for &method in methods {
                     cells.push(Cell {
                         index: cells.len(),
                         dataset: d.name.clone(),
                         file: file.clone(),
                         task: d.task,
-                        layout: preset.layout,
+                        layout: *layout,
                         preset: d.preset.clone(),
                         method,
                         seed,

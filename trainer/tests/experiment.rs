@@ -227,6 +227,59 @@ fn bad_grids_are_refused_before_anything_runs() {
     assert!(!dir.join("out/slurm").exists(), "nothing was submitted");
 }
 
+/// Seeds outermost across datasets: a sweep cut short has every dataset ×
+/// method at its first seed before any at its second.
+#[test]
+fn cells_run_each_seed_round_over_every_dataset() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    generate_hopper(&s(&dir.join("hopper.hdf5")), 300, 0);
+    let rows = [
+        dataset_row(
+            "a",
+            "hopper.hdf5",
+            "hopper",
+            "hopper-random",
+            "[\"nuno\", \"mopo\"]",
+            "[0, 1]",
+        ),
+        dataset_row(
+            "b",
+            "hopper.hdf5",
+            "hopper",
+            "hopper-medium",
+            "[\"nuno\"]",
+            "[7]",
+        ),
+    ];
+    let grid = write_grid(dir, "grid.toml", &rows);
+    let out = dir.join("out");
+    let status = ok(&[
+        "experiment",
+        "status",
+        "--grid",
+        &s(&grid),
+        "--out",
+        &s(&out),
+    ]);
+    let order: Vec<&str> = status
+        .lines()
+        .filter_map(|l| l.split_whitespace().nth(1))
+        .filter(|id| id.contains('/'))
+        .collect();
+    assert_eq!(
+        order,
+        [
+            "a/nuno/seed-0",
+            "a/mopo/seed-0",
+            "b/nuno/seed-7",
+            "a/nuno/seed-1",
+            "a/mopo/seed-1"
+        ],
+        "{status}"
+    );
+}
+
 #[test]
 fn a_local_grid_runs_once_resumes_and_reports() {
     let tmp = tempfile::tempdir().unwrap();
