@@ -44,7 +44,8 @@ fn main() {
             &config,
             kernel,
             &Device::flex(),
-            &mut |_| {},
+            None,
+            &mut |_| Ok(()),
         )
         .expect("fit");
         let seconds = start.elapsed().as_secs_f64();

@@ -69,7 +69,8 @@ fn fitted() -> EnsembleFit {
         &small_config(),
         Kernel::Fused,
         &Device::flex(),
-        &mut |_| {},
+        None,
+        &mut |_| Ok(()),
     )
     .unwrap()
 }
@@ -87,7 +88,12 @@ fn the_fused_fit_follows_burns_autodiff() {
         // that the data's gradient reaches it.
         .with_min_logvar_init(-6.0)
         .with_max_epochs(Some(3));
-    let fit = |kernel| fit_ensemble(&data, &config, kernel, &Device::flex(), &mut |_| {}).unwrap();
+    let fit = |kernel| {
+        fit_ensemble(&data, &config, kernel, &Device::flex(), None, &mut |_| {
+            Ok(())
+        })
+        .unwrap()
+    };
     let (burn, fused) = (fit(Kernel::Burn), fit(Kernel::Fused));
     let close = |a: f64, b: f64, what: &str| {
         assert!(
@@ -137,13 +143,121 @@ fn the_fused_fit_follows_burns_autodiff() {
     assert_eq!(burn.elites, fused.elites);
 }
 
+/// A fit stopped after its second epoch, checkpointed to disk and resumed,
+/// ends where the uninterrupted fit ends: bit for bit on the same trainer,
+/// within rounding when the other trainer resumes it.
+#[test]
+fn a_checkpointed_fit_resumes_where_it_stopped() {
+    use nuno::artifact::{EnsembleFitShape, load_ensemble_checkpoint, save_ensemble_checkpoint};
+    use nuno::ensemble::EnsembleError;
+
+    let data = linear_gaussian(900, 5);
+    let config = small_config().with_members(3).with_hidden(vec![16, 16]);
+    let shape = EnsembleFitShape {
+        rows: data.len(),
+        obs_dim: 2,
+        act_dim: 1,
+    };
+    let device = Device::flex();
+    let whole = fit_ensemble(
+        &data,
+        &config.clone().with_max_epochs(Some(4)),
+        Kernel::Fused,
+        &device,
+        None,
+        &mut |_| Ok(()),
+    )
+    .unwrap();
+    assert_eq!(whole.history.len(), 4);
+
+    for (first, second) in [
+        (Kernel::Fused, Kernel::Fused),
+        (Kernel::Burn, Kernel::Fused),
+        (Kernel::Fused, Kernel::Burn),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let stopped = fit_ensemble(&data, &config, first, &device, None, &mut |state| {
+            save_ensemble_checkpoint(dir.path(), &config, &shape, state).unwrap();
+            if state.history.len() == 2 {
+                return Err(EnsembleError::Checkpoint("stopped".into()));
+            }
+            Ok(())
+        });
+        assert!(stopped.unwrap_err().to_string().contains("stopped"));
+        let latest = nuno::artifact::latest_checkpoint(dir.path())
+            .unwrap()
+            .unwrap();
+        assert!(latest.ends_with("epoch-000002"), "{}", latest.display());
+        // The epoch cap may change on resume; the rest of the config may not.
+        let capped = config.clone().with_max_epochs(Some(4));
+        let state = load_ensemble_checkpoint(&latest, &capped, &shape, &device).unwrap();
+        let resumed = fit_ensemble(
+            &data,
+            &capped,
+            second,
+            &device,
+            Some(state),
+            &mut |_| Ok(()),
+        )
+        .unwrap();
+        assert_eq!(resumed.history.len(), 4);
+        let weights = |fit: &EnsembleFit| {
+            let mut all = to_f32_vec(fit.model.max_logvar.val());
+            for member in &fit.model.members {
+                for layer in &member.layers {
+                    all.extend(to_f32_vec(layer.weight.val()));
+                }
+            }
+            all
+        };
+        if first == second {
+            assert_eq!(resumed.history, whole.history);
+            assert_eq!(weights(&resumed), weights(&whole));
+        } else {
+            for (a, b) in resumed.history.iter().zip(&whole.history) {
+                let rel = (a.train_loss - b.train_loss).abs() / b.train_loss.abs();
+                assert!(
+                    rel < 1e-4,
+                    "epoch {}: {} vs {}",
+                    a.epoch,
+                    a.train_loss,
+                    b.train_loss
+                );
+            }
+            let worst = weights(&resumed)
+                .iter()
+                .zip(&weights(&whole))
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f32::max);
+            assert!(worst < 1e-4, "{worst}");
+        }
+
+        // Another config's or dataset's checkpoint is refused by name.
+        let other = config.clone().with_hidden(vec![8, 8]);
+        let error = load_ensemble_checkpoint(&latest, &other, &shape, &device).unwrap_err();
+        assert!(
+            error.to_string().contains("other settings or data"),
+            "{error}"
+        );
+        let more_rows = EnsembleFitShape {
+            rows: 901,
+            ..shape.clone()
+        };
+        assert!(load_ensemble_checkpoint(&latest, &config, &more_rows, &device).is_err());
+    }
+}
+
 #[test]
 fn the_ensemble_learns_a_linear_gaussian_system() {
     let device = Device::flex();
     let data = linear_gaussian(4000, 0);
     let config = small_config();
     let mut epochs = 0;
-    let fit = fit_ensemble(&data, &config, Kernel::Fused, &device, &mut |_| epochs += 1).unwrap();
+    let fit = fit_ensemble(&data, &config, Kernel::Fused, &device, None, &mut |_| {
+        epochs += 1;
+        Ok(())
+    })
+    .unwrap();
     assert_eq!(epochs, fit.history.len());
 
     // MOPO's stopping rule, replayed from the history: the fit ends after 5
@@ -238,9 +352,16 @@ fn bad_ensemble_settings_are_refused_by_name() {
         ),
     ];
     for (config, name) in cases {
-        let error = fit_ensemble(&data, &config, Kernel::Fused, &device, &mut |_| {})
-            .unwrap_err()
-            .to_string();
+        let error = fit_ensemble(
+            &data,
+            &config,
+            Kernel::Fused,
+            &device,
+            None,
+            &mut |_| Ok(()),
+        )
+        .unwrap_err()
+        .to_string();
         assert!(error.contains(name), "{error}");
     }
 }
@@ -366,7 +487,8 @@ fn a_saved_ensemble_loads_to_the_same_steps_and_refuses_damage() {
         &config,
         Kernel::Fused,
         &Device::flex(),
-        &mut |_| {},
+        None,
+        &mut |_| Ok(()),
     )
     .unwrap();
     let dir = tempfile::tempdir().unwrap();

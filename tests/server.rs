@@ -1421,7 +1421,15 @@ async fn a_gaussian_ensemble_is_served_by_the_same_routes() {
         .with_hidden(vec![16, 16])
         .with_weight_decay(vec![2.5e-5, 5e-5, 1e-4])
         .with_max_epochs(Some(2));
-    let fit = fit_ensemble(&data, &config, Kernel::Fused, &Device::flex(), &mut |_| {}).unwrap();
+    let fit = fit_ensemble(
+        &data,
+        &config,
+        Kernel::Fused,
+        &Device::flex(),
+        None,
+        &mut |_| Ok(()),
+    )
+    .unwrap();
     let models = tempfile::tempdir().unwrap();
     copy_model(&models.path().join(MODEL));
     nuno::artifact::save_ensemble(&models.path().join("mopo"), &fit, &config, task, None).unwrap();

@@ -6,6 +6,7 @@ mod behaviour;
 mod checkpoint;
 mod dynamics;
 mod ensemble;
+mod ensemble_checkpoint;
 mod json_file;
 mod online_run;
 mod policy;
@@ -29,6 +30,10 @@ pub use dynamics::{
 pub use ensemble::{
     ENSEMBLE_METADATA, ENSEMBLE_SCHEMA_VERSION, ENSEMBLE_WEIGHTS, EnsembleMetadata, load_ensemble,
     save_ensemble,
+};
+pub use ensemble_checkpoint::{
+    ENSEMBLE_CHECKPOINT_SCHEMA_VERSION, EnsembleFitShape, load_ensemble_checkpoint,
+    save_ensemble_checkpoint,
 };
 pub use json_file::{read_checked_weights, read_versioned_json, write_json};
 pub use online_run::{

@@ -150,17 +150,7 @@ pub(crate) fn write_sac(dir: &Path, sac: &Sac) -> Result<SacFiles, ArtifactError
     let mut adam_time = BTreeMap::new();
     for (name, state) in OPTIMIZERS.iter().zip([&a.actor, &a.critic, &a.alpha]) {
         adam_time.insert(name.to_string(), state.time);
-        for (path, moments) in &state.moments {
-            let n = moments.first.len();
-            adam.insert(
-                format!("{name}/{path}/first"),
-                (vec![n], moments.first.clone()),
-            );
-            adam.insert(
-                format!("{name}/{path}/second"),
-                (vec![n], moments.second.clone()),
-            );
-        }
+        put_moments(&mut adam, &format!("{name}/"), state);
     }
     let adam = safetensors_bytes(&adam, None)?;
     write_synced(&dir.join(ADAM), &adam)?;
@@ -213,20 +203,49 @@ fn read_adam(
     networks: &NamedTensors,
 ) -> Result<AdamState, ArtifactError> {
     let network = if name == "alpha" { "temperature" } else { name };
-    let prefix = format!("{name}/");
+    let moments = take_moments(adam, &format!("{name}/"), |path| {
+        networks
+            .get(&format!("{network}.{path}"))
+            .map(|(_, values)| values.len())
+    })?;
+    Ok(AdamState {
+        time: files.adam_time.get(name).copied().unwrap_or(0),
+        moments,
+    })
+}
+
+/// Adds `state`'s moments to `adam` as `{prefix}{path}/first` and `/second`.
+pub(crate) fn put_moments(adam: &mut NamedTensors, prefix: &str, state: &AdamState) {
+    for (path, moments) in &state.moments {
+        let n = moments.first.len();
+        adam.insert(
+            format!("{prefix}{path}/first"),
+            (vec![n], moments.first.clone()),
+        );
+        adam.insert(
+            format!("{prefix}{path}/second"),
+            (vec![n], moments.second.clone()),
+        );
+    }
+}
+
+/// Takes the moments under `prefix` out of `adam`, by parameter path; each
+/// must belong to a parameter `size` knows and have its size.
+pub(crate) fn take_moments(
+    adam: &mut NamedTensors,
+    prefix: &str,
+    size: impl Fn(&str) -> Option<usize>,
+) -> Result<BTreeMap<String, Moments>, ArtifactError> {
     let paths: Vec<String> = adam
         .keys()
-        .filter_map(|k| k.strip_prefix(&prefix)?.strip_suffix("/first"))
+        .filter_map(|k| k.strip_prefix(prefix)?.strip_suffix("/first"))
         .map(str::to_string)
         .collect();
     let mut moments = BTreeMap::new();
     for path in paths {
         let first = adam.remove(&format!("{prefix}{path}/first"));
         let second = adam.remove(&format!("{prefix}{path}/second"));
-        let size = networks
-            .get(&format!("{network}.{path}"))
-            .map(|(_, values)| values.len());
-        match (first, second, size) {
+        match (first, second, size(&path)) {
             (Some((_, first)), Some((_, second)), Some(n))
                 if first.len() == n && second.len() == n =>
             {
@@ -234,13 +253,10 @@ fn read_adam(
             }
             _ => {
                 return Err(ArtifactError::Invalid(format!(
-                    "{ADAM}: the moments of `{name}/{path}` do not match a parameter of `{network}`"
+                    "{ADAM}: the moments of `{prefix}{path}` do not match a saved parameter"
                 )));
             }
         }
     }
-    Ok(AdamState {
-        time: files.adam_time.get(name).copied().unwrap_or(0),
-        moments,
-    })
+    Ok(moments)
 }

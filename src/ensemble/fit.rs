@@ -22,7 +22,7 @@ use super::model::GaussianEnsemble;
 use super::trainer::{BurnTrainer, EnsembleTrainer, LossTerms, MemberBatch};
 use crate::data::Dataset;
 use crate::infer::Kernel;
-use crate::nn::seeded_init;
+use crate::nn::{AdamState, seeded_init};
 
 /// Inputs (s, a) and targets (s' − s, r) of a dataset, row-major.
 struct Rows {
@@ -132,14 +132,36 @@ pub struct EnsembleFit {
     pub history: Vec<EnsembleEpoch>,
 }
 
+/// Where a fit stands after an epoch: everything it needs to continue exactly
+/// as if it had not stopped (the data's split, resamples and each epoch's
+/// order follow from the seed and the epoch's number).
+#[derive(Debug, Clone)]
+pub struct EnsembleFitState {
+    /// The epochs behind it; `history` has one record each.
+    pub history: Vec<EnsembleEpoch>,
+    /// Epochs in a row without an improvement.
+    pub since_update: usize,
+    /// Each member's best holdout MSE so far.
+    pub best_mse: Vec<f32>,
+    /// The members and bounds now.
+    pub current: GaussianEnsemble,
+    /// Each member at its best epoch (the bounds: now).
+    pub best: GaussianEnsemble,
+    /// Adam's state, moments by module path (either kernel's).
+    pub adam: AdamState,
+}
+
 /// Fits `config`'s ensemble to `dataset`, its members trained by `kernel`
-/// (burn's on `device`); `progress` sees every epoch.
+/// (burn's on `device`), continuing from `resume` when given (a state this
+/// dataset and config produced). `on_epoch` sees the state after every epoch
+/// (to report, or to checkpoint it); an error it returns stops the fit.
 pub fn fit_ensemble(
     dataset: &Dataset,
     config: &EnsembleConfig,
     kernel: Kernel,
     device: &Device,
-    progress: &mut dyn FnMut(&EnsembleEpoch),
+    resume: Option<EnsembleFitState>,
+    on_epoch: &mut dyn FnMut(&EnsembleFitState) -> Result<(), EnsembleError>,
 ) -> Result<EnsembleFit, EnsembleError> {
     config.validate()?;
     let rows = Rows::of(dataset);
@@ -179,16 +201,15 @@ pub fn fit_ensemble(
         .collect();
     let run = FitRun {
         rows: &rows,
-        scaler: &scaler,
         holdout: &holdout_batch,
+        scaler: &scaler,
         resamples,
-        rng,
         config,
     };
     let terms = LossTerms::of(config);
     let (model, best_mse, history) = match kernel {
-        Kernel::Burn => run.train(BurnTrainer::new(model, terms), progress),
-        Kernel::Fused => run.train(FusedTrainer::new(model.valid(), terms), progress),
+        Kernel::Burn => run.train(BurnTrainer::new(model, terms), resume, on_epoch)?,
+        Kernel::Fused => run.train(FusedTrainer::new(model.valid(), terms), resume, on_epoch)?,
     };
     let mut ranked: Vec<usize> = (0..config.members).collect();
     ranked.sort_by(|&a, &b| best_mse[a].total_cmp(&best_mse[b]));
@@ -205,44 +226,62 @@ pub fn fit_ensemble(
 /// The data side of a fit: which rows each member sees, in which order.
 struct FitRun<'a> {
     rows: &'a Rows,
-    scaler: &'a Scaler,
     holdout: &'a MemberBatch,
+    scaler: &'a Scaler,
     resamples: Vec<Vec<usize>>,
-    rng: ChaCha8Rng,
     config: &'a EnsembleConfig,
 }
 
 impl FitRun<'_> {
-    /// Epochs until MOPO's stop (or the cap): the model with each member at
-    /// its best epoch, each member's best holdout MSE, and the history.
+    /// Epochs until MOPO's stop (or the cap), from `resume` when given: the
+    /// model with each member at its best epoch, each member's best holdout
+    /// MSE, and the history.
     fn train<T: EnsembleTrainer>(
-        mut self,
+        &self,
         mut trainer: T,
-        progress: &mut dyn FnMut(&EnsembleEpoch),
-    ) -> (GaussianEnsemble, Vec<f32>, Vec<EnsembleEpoch>) {
+        resume: Option<EnsembleFitState>,
+        on_epoch: &mut dyn FnMut(&EnsembleFitState) -> Result<(), EnsembleError>,
+    ) -> Result<(GaussianEnsemble, Vec<f32>, Vec<EnsembleEpoch>), EnsembleError> {
         let config = self.config;
-        let train_rows = self.resamples[0].len();
-        let mut batches = vec![MemberBatch::default(); config.members];
         let mut best_mse = vec![f32::INFINITY; config.members];
         let mut best: Vec<T::Member> = (0..config.members).map(|m| trainer.member(m)).collect();
         let mut history = Vec::new();
         let mut since_update = 0;
-        let mut epoch = 0;
-        while since_update < config.max_epochs_since_update
-            && config.max_epochs.is_none_or(|cap| epoch < cap)
-        {
-            for resample in &mut self.resamples {
-                resample.shuffle(&mut self.rng);
+        if let Some(state) = resume {
+            if state.best_mse.len() != config.members
+                || state.current.members.len() != config.members
+                || state.best.members.len() != config.members
+            {
+                return Err(EnsembleError::Config(format!(
+                    "the checkpoint holds {} members, the config {}",
+                    state.current.members.len(),
+                    config.members
+                )));
             }
+            trainer.restore(&state.current, state.adam);
+            best = state
+                .best
+                .members
+                .iter()
+                .map(|m| trainer.member_of(m))
+                .collect();
+            (best_mse, history, since_update) = (state.best_mse, state.history, state.since_update);
+        }
+        let train_rows = self.resamples[0].len();
+        let mut batches = vec![MemberBatch::default(); config.members];
+        while since_update < config.max_epochs_since_update
+            && config.max_epochs.is_none_or(|cap| history.len() < cap)
+        {
+            let epoch = history.len() + 1;
+            let orders = self.epoch_orders(epoch);
             let mut losses = Vec::new();
             for start in (0..train_rows).step_by(config.batch_size) {
                 let end = (start + config.batch_size).min(train_rows);
-                for (batch, resample) in batches.iter_mut().zip(&self.resamples) {
-                    self.rows.gather(&resample[start..end], self.scaler, batch);
+                for (batch, order) in batches.iter_mut().zip(&orders) {
+                    self.rows.gather(&order[start..end], self.scaler, batch);
                 }
                 losses.push(trainer.step(&batches));
             }
-            epoch += 1;
 
             let holdout_mse = trainer.holdout_mse(self.holdout);
             let mut improved = false;
@@ -256,15 +295,37 @@ impl FitRun<'_> {
                 }
             }
             since_update = if improved { 0 } else { since_update + 1 };
-            let record = EnsembleEpoch {
+            history.push(EnsembleEpoch {
                 epoch,
                 train_loss: losses.iter().sum::<f64>() / losses.len().max(1) as f64,
                 holdout_mse,
                 improved,
-            };
-            progress(&record);
-            history.push(record);
+            });
+            let current: Vec<T::Member> = (0..config.members).map(|m| trainer.member(m)).collect();
+            on_epoch(&EnsembleFitState {
+                history: history.clone(),
+                since_update,
+                best_mse: best_mse.clone(),
+                current: trainer.model_with(&current),
+                best: trainer.model_with(&best),
+                adam: trainer.optimizer_state(),
+            })?;
         }
-        (trainer.into_model(best), best_mse, history)
+        Ok((trainer.model_with(&best), best_mse, history))
+    }
+
+    /// Each member's order of its resample in `epoch`: a fresh permutation
+    /// from the seed's stream `epoch`, so a resumed fit sees what it would have.
+    fn epoch_orders(&self, epoch: usize) -> Vec<Vec<usize>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(self.config.seed);
+        rng.set_stream(epoch as u64);
+        self.resamples
+            .iter()
+            .map(|resample| {
+                let mut order = resample.clone();
+                order.shuffle(&mut rng);
+                order
+            })
+            .collect()
     }
 }

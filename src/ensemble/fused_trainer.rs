@@ -17,7 +17,7 @@ use rayon::prelude::*;
 use super::model::{GaussianEnsemble, softplus};
 use super::trainer::{ADAM_EPSILON, EnsembleTrainer, LossTerms, MemberBatch};
 use crate::infer::{MlpTape, TrainableMlp};
-use crate::nn::{Adam, AdamState, to_f32_vec};
+use crate::nn::{Adam, AdamState, Mlp, to_f32_vec};
 
 /// One member with its optimiser state and buffers.
 struct Member {
@@ -172,17 +172,62 @@ impl EnsembleTrainer for FusedTrainer {
         self.members[m].net.clone()
     }
 
-    fn into_model(self, best: Vec<TrainableMlp>) -> GaussianEnsemble {
-        let mut model = self.template;
+    fn member_of(&self, mlp: &Mlp) -> TrainableMlp {
+        TrainableMlp::from_burn(mlp)
+    }
+
+    fn model_with(&self, best: &[TrainableMlp]) -> GaussianEnsemble {
+        let mut model = self.template.clone();
         model.members = model
             .members
             .into_iter()
-            .zip(&best)
+            .zip(best)
             .map(|(mlp, net)| net.write_to(mlp))
             .collect();
-        model.max_logvar = replaced(model.max_logvar, self.max_logvar);
-        model.min_logvar = replaced(model.min_logvar, self.min_logvar);
+        model.max_logvar = replaced(model.max_logvar, self.max_logvar.clone());
+        model.min_logvar = replaced(model.min_logvar, self.min_logvar.clone());
         model
+    }
+
+    fn optimizer_state(&self) -> AdamState {
+        let mut state = AdamState {
+            time: self.bounds_state.time,
+            moments: self.bounds_state.moments.clone(),
+        };
+        for (m, member) in self.members.iter().enumerate() {
+            for (path, moments) in &member.state.moments {
+                state
+                    .moments
+                    .insert(format!("members.{m}.{path}"), moments.clone());
+            }
+        }
+        state
+    }
+
+    fn restore(&mut self, current: &GaussianEnsemble, mut adam: AdamState) {
+        for (m, (member, mlp)) in self.members.iter_mut().zip(&current.members).enumerate() {
+            member.net = TrainableMlp::from_burn(mlp);
+            let prefix = format!("members.{m}.");
+            let paths: Vec<String> = adam
+                .moments
+                .keys()
+                .filter(|k| k.starts_with(&prefix))
+                .cloned()
+                .collect();
+            member.state = AdamState {
+                time: adam.time,
+                moments: paths
+                    .into_iter()
+                    .filter_map(|k| {
+                        let moments = adam.moments.remove(&k)?;
+                        Some((k[prefix.len()..].to_string(), moments))
+                    })
+                    .collect(),
+            };
+        }
+        self.max_logvar = to_f32_vec(current.max_logvar.val());
+        self.min_logvar = to_f32_vec(current.min_logvar.val());
+        self.bounds_state = adam;
     }
 }
 

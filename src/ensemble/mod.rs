@@ -12,7 +12,7 @@ mod trainer;
 
 pub use config::EnsembleConfig;
 pub use dynamics::{EnsembleDynamics, EnsembleUncertainty};
-pub use fit::{EnsembleEpoch, EnsembleFit, Scaler, fit_ensemble};
+pub use fit::{EnsembleEpoch, EnsembleFit, EnsembleFitState, Scaler, fit_ensemble};
 pub use model::GaussianEnsemble;
 
 /// Everything that can go wrong building or fitting an ensemble.
@@ -20,4 +20,7 @@ pub use model::GaussianEnsemble;
 pub enum EnsembleError {
     #[error("ensemble: {0}")]
     Config(String),
+    /// What the caller's per-epoch hook (a checkpoint's writer) reported.
+    #[error("ensemble checkpoint: {0}")]
+    Checkpoint(String),
 }

@@ -13,7 +13,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use super::config::EnsembleConfig;
 use super::model::GaussianEnsemble;
-use crate::nn::{Adam, AdamState, Mlp, to_f32_vec};
+use crate::nn::{Adam, AdamState, Mlp, assign_params, to_f32_vec};
 
 /// Rows for one member: normalised inputs `[rows, d_in]` and targets
 /// `[rows, d_out]`, row-major.
@@ -34,8 +34,16 @@ pub(super) trait EnsembleTrainer {
     fn holdout_mse(&mut self, holdout: &MemberBatch) -> Vec<f32>;
     /// Member `m`'s weights now.
     fn member(&self, m: usize) -> Self::Member;
+    /// A member's weights from a saved ensemble's member.
+    fn member_of(&self, mlp: &Mlp) -> Self::Member;
     /// The ensemble with `best` as its members and the current bounds.
-    fn into_model(self, best: Vec<Self::Member>) -> GaussianEnsemble;
+    fn model_with(&self, best: &[Self::Member]) -> GaussianEnsemble;
+    /// Adam's state, moments by the ensemble's module paths
+    /// (`members.0.layers.0.weight`, ..., `max_logvar`), the same for both
+    /// trainers, so that either resumes the other's checkpoint.
+    fn optimizer_state(&self) -> AdamState;
+    /// Continues from `current`'s weights and `adam`'s state.
+    fn restore(&mut self, current: &GaussianEnsemble, adam: AdamState);
 }
 
 /// The loss's constants, shared by both trainers.
@@ -132,10 +140,23 @@ impl EnsembleTrainer for BurnTrainer {
         self.model.members[m].valid()
     }
 
-    fn into_model(self, best: Vec<Mlp>) -> GaussianEnsemble {
+    fn member_of(&self, mlp: &Mlp) -> Mlp {
+        mlp.clone()
+    }
+
+    fn model_with(&self, best: &[Mlp]) -> GaussianEnsemble {
         let mut model = self.model.valid();
-        model.members = best;
+        model.members = best.to_vec();
         model
+    }
+
+    fn optimizer_state(&self) -> AdamState {
+        self.state.clone()
+    }
+
+    fn restore(&mut self, current: &GaussianEnsemble, adam: AdamState) {
+        self.model = assign_params(self.model.clone(), current);
+        self.state = adam;
     }
 }
 

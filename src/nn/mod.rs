@@ -54,15 +54,49 @@ pub fn to_f32_vec<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
         .unwrap_or_default()
 }
 
-/// Polyak averaging `θ̄ ← τ·θ + (1 − τ)·θ̄` of `target` towards `online`
-/// (same module structure), on `target`'s device and off the autodiff graph.
-pub fn polyak_update<M: Module>(target: M, online: &M, tau: f64) -> M {
+/// Every float parameter of `module`, flattened, off the autodiff graph, in
+/// visiting order.
+fn flat_params<M: Module>(module: &M) -> Vec<Tensor<1>> {
     struct Collect(Vec<Tensor<1>>);
     impl ModuleVisitor for Collect {
         fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
             self.0.push(param.val().inner().flatten(0, D - 1));
         }
     }
+    let mut params = Collect(Vec::new());
+    module.visit(&mut params);
+    params.0
+}
+
+/// `target` holding `source`'s values (same module structure), on `target`'s
+/// device, its parameter ids and whether each trains kept: a restored
+/// checkpoint's weights into a module that trains.
+pub fn assign_params<M: Module>(target: M, source: &M) -> M {
+    struct Assign(std::vec::IntoIter<Tensor<1>>);
+    impl ModuleMapper for Assign {
+        fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+            let Some(value) = self.0.next() else {
+                return param;
+            };
+            let (id, old) = (param.id, param.val());
+            let require_grad = old.is_require_grad();
+            let value: Tensor<D> = value.to_device(&old.device()).reshape(old.dims());
+            // A trained parameter lives on the autodiff device, which
+            // `device()` does not name.
+            let value = if require_grad {
+                value.autodiff().set_require_grad(true)
+            } else {
+                value
+            };
+            Param::initialized(id, value)
+        }
+    }
+    target.map(&mut Assign(flat_params(source).into_iter()))
+}
+
+/// Polyak averaging `θ̄ ← τ·θ + (1 − τ)·θ̄` of `target` towards `online`
+/// (same module structure), on `target`'s device and off the autodiff graph.
+pub fn polyak_update<M: Module>(target: M, online: &M, tau: f64) -> M {
     struct Blend {
         online: std::vec::IntoIter<Tensor<1>>,
         tau: f64,
@@ -79,10 +113,8 @@ pub fn polyak_update<M: Module>(target: M, online: &M, tau: f64) -> M {
             Param::initialized(id, blended)
         }
     }
-    let mut online_params = Collect(Vec::new());
-    online.visit(&mut online_params);
     target.map(&mut Blend {
-        online: online_params.0.into_iter(),
+        online: flat_params(online).into_iter(),
         tau,
     })
 }

@@ -1,12 +1,17 @@
 //! `nuno-trainer fit-ensemble`: fit MOPO's Gaussian ensemble (OfflineRL-Kit's
 //! defaults) on a dataset and write it into a model directory
 //! (`ensemble.safetensors`, `ensemble.json`), with the fit's metrics and a
-//! holdout-error plot.
+//! holdout-error plot; a checkpoint after every epoch in
+//! `--out/ensemble-checkpoints`, which `--resume` continues.
 
 use std::path::PathBuf;
 
-use nuno::artifact::save_ensemble;
-use nuno::ensemble::{EnsembleConfig, fit_ensemble};
+use anyhow::Context;
+use nuno::artifact::{
+    EnsembleFitShape, latest_checkpoint, load_ensemble_checkpoint, save_ensemble,
+    save_ensemble_checkpoint,
+};
+use nuno::ensemble::{EnsembleConfig, EnsembleError, fit_ensemble};
 use nuno::infer::Kernel;
 use nuno::sde::ComputeDevice;
 
@@ -43,6 +48,9 @@ pub struct Args {
     /// (autodiff; the reference). The same loss, optimiser and data order.
     #[arg(long, default_value_t = Kernel::Fused)]
     kernel: Kernel,
+    /// Continue the fit checkpointed in --out (either kernel's checkpoint).
+    #[arg(long)]
+    resume: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -61,23 +69,65 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let dataset = args.data.read()?;
     let device = ComputeDevice::Cpu.device().map_err(anyhow::Error::msg)?;
 
-    let fit = fit_ensemble(&dataset, &config, args.kernel, &device, &mut |epoch| {
-        let best = epoch
-            .holdout_mse
-            .iter()
-            .copied()
-            .fold(f32::INFINITY, f32::min);
-        println!(
-            "epoch {:>4}: train loss {:.4}, best member's holdout MSE {best:.5}{}",
-            epoch.epoch,
-            epoch.train_loss,
-            if epoch.improved {
-                ""
-            } else {
-                " (no improvement)"
-            }
-        );
-    })?;
+    let checkpoints = args.out.join("ensemble-checkpoints");
+    let shape = EnsembleFitShape {
+        rows: dataset.len(),
+        obs_dim: dataset.obs_dim(),
+        act_dim: dataset.act_dim(),
+    };
+    let resume = match (latest_checkpoint(&checkpoints)?, args.resume) {
+        (Some(checkpoint), true) => {
+            let state = load_ensemble_checkpoint(&checkpoint, &config, &shape, &device)
+                .with_context(|| format!("resuming from {}", checkpoint.display()))?;
+            println!(
+                "resumed from {} (epoch {})",
+                checkpoint.display(),
+                state.history.len()
+            );
+            Some(state)
+        }
+        (Some(_), false) => anyhow::bail!(
+            "{} already holds an ensemble fit; pass --resume to continue it or choose another --out",
+            args.out.display()
+        ),
+        (None, true) => {
+            println!(
+                "no checkpoint in {}; starting afresh",
+                checkpoints.display()
+            );
+            None
+        }
+        (None, false) => None,
+    };
+
+    let fit = fit_ensemble(
+        &dataset,
+        &config,
+        args.kernel,
+        &device,
+        resume,
+        &mut |state| {
+            let epoch = state.history.last().expect("an epoch behind the state");
+            let best = epoch
+                .holdout_mse
+                .iter()
+                .copied()
+                .fold(f32::INFINITY, f32::min);
+            println!(
+                "epoch {:>4}: train loss {:.4}, best member's holdout MSE {best:.5}{}",
+                epoch.epoch,
+                epoch.train_loss,
+                if epoch.improved {
+                    ""
+                } else {
+                    " (no improvement)"
+                }
+            );
+            save_ensemble_checkpoint(&checkpoints, &config, &shape, state)
+                .map(|_| ())
+                .map_err(|e| EnsembleError::Checkpoint(e.to_string()))
+        },
+    )?;
     save_ensemble(
         &args.out,
         &fit,

@@ -232,7 +232,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let resuming = args.resume && latest_checkpoint(&checkpoints)?.is_some();
     let threshold = truncation_threshold(&args, &config, &model, &ctx, resuming)?;
     let mut training = PolicyTraining::new(config, &ctx, threshold, &device)?;
-    let checkpoints = args.out.join("checkpoints");
     match (latest_checkpoint(&checkpoints)?, args.resume) {
         (Some(checkpoint), true) => {
             load_checkpoint(&checkpoint, &mut training)

@@ -106,8 +106,13 @@ pub fn tiny_fit_policy(
 
 /// `fit-ensemble`: a tiny ensemble (3 members, 2 elites, 16×16, 2 epochs) of `dataset` in `out`.
 pub fn tiny_fit_ensemble(dataset: &Path, out: &Path) {
+    ok(&fit_ensemble_args(dataset, out, &["--max-epochs", "2"]));
+}
+
+/// `fit-ensemble`'s arguments for the tiny ensemble above, then `extra`.
+pub fn fit_ensemble_args(dataset: &Path, out: &Path, extra: &[&str]) -> Vec<String> {
     let path = |p: &Path| p.display().to_string();
-    ok(&[
+    let mut args: Vec<String> = [
         "fit-ensemble",
         "--dataset",
         &path(dataset),
@@ -123,7 +128,9 @@ pub fn tiny_fit_ensemble(dataset: &Path, out: &Path) {
         "16,16",
         "--weight-decay",
         "2.5e-5,5e-5,1e-4",
-        "--max-epochs",
-        "2",
-    ]);
+    ]
+    .map(String::from)
+    .to_vec();
+    args.extend(extra.iter().map(|e| e.to_string()));
+    args
 }
