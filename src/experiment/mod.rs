@@ -15,8 +15,8 @@ pub use analysis::{
 };
 pub use grid::{Budget, Cell, Grid, GridDataset, Method};
 pub use results::{
-    CellResult, CellStatus, Summary, cell_dir, cell_status, markdown_table, results_csv, summarize,
-    summarize_run, write_result,
+    CellResult, CellStatus, Summary, cell_dir, cell_status, markdown_table, policy_time_left,
+    results_csv, summarize, summarize_run, write_result,
 };
 
 /// Everything that can be wrong with an experiment.

@@ -122,6 +122,26 @@ pub fn cell_status(root: &Path, cell: &Cell) -> Result<CellStatus, ExperimentErr
     }
 }
 
+/// Policy training left in a grid at the pace of its finished cells: their
+/// recorded seconds per epoch times the epochs not yet run, each cell running
+/// `epochs_per_cell`. None until some finished cell has recorded its time.
+pub fn policy_time_left(statuses: &[CellStatus], epochs_per_cell: usize) -> Option<f64> {
+    let (mut seconds, mut timed_epochs, mut left) = (0.0, 0usize, 0usize);
+    for status in statuses {
+        match status {
+            CellStatus::Done(r) => {
+                if let Some(s) = r.policy_seconds {
+                    seconds += s;
+                    timed_epochs += r.curve.len();
+                }
+            }
+            CellStatus::Partial { epochs } => left += epochs_per_cell.saturating_sub(*epochs),
+            CellStatus::Pending => left += epochs_per_cell,
+        }
+    }
+    (timed_epochs > 0).then(|| seconds / timed_epochs as f64 * left as f64)
+}
+
 /// Mean ± std over the seeds of one dataset × method.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Summary {
@@ -244,4 +264,47 @@ pub fn markdown_table(summaries: &[Summary]) -> String {
         out.push('\n');
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::envs::{ObservationLayout, TaskName};
+
+    fn done(epochs: usize, policy_seconds: Option<f64>) -> CellStatus {
+        CellStatus::Done(Box::new(CellResult {
+            schema_version: RESULT_SCHEMA_VERSION,
+            cell: Cell {
+                index: 0,
+                dataset: "d".into(),
+                file: PathBuf::from("d.hdf5"),
+                task: TaskName::Hopper,
+                layout: ObservationLayout::D4rl,
+                preset: "hopper-random".into(),
+                method: Method::Nuno,
+                seed: 0,
+            },
+            best_score: 0.0,
+            best_step: 0,
+            final_score: 0.0,
+            steps: epochs * 1000,
+            curve: (1..=epochs).map(|e| (e * 1000, 0.0)).collect(),
+            policy_seconds,
+        }))
+    }
+
+    #[test]
+    fn time_left_is_the_finished_pace_times_the_epochs_to_run() {
+        // 10 + 10 epochs in 30 s + 50 s: 4 s an epoch; an untimed result adds
+        // nothing; left: 10 − 4 of a partial cell and 10 of a pending one.
+        let statuses = [
+            done(10, Some(30.0)),
+            done(10, Some(50.0)),
+            done(10, None),
+            CellStatus::Partial { epochs: 4 },
+            CellStatus::Pending,
+        ];
+        assert_eq!(policy_time_left(&statuses, 10), Some(4.0 * 16.0));
+        assert_eq!(policy_time_left(&statuses[2..], 10), None);
+    }
 }

@@ -15,8 +15,8 @@ use clap::{Subcommand, ValueEnum};
 use nuno::data::read_dataset;
 use nuno::envs::{ObservationLayout, TaskConfig};
 use nuno::experiment::{
-    Cell, CellResult, CellStatus, Grid, Method, cell_dir, cell_status, markdown_table, results_csv,
-    summarize, summarize_run, write_result,
+    Cell, CellResult, CellStatus, Grid, Method, cell_dir, cell_status, markdown_table,
+    policy_time_left, results_csv, summarize, summarize_run, write_result,
 };
 
 use crate::output::write_text;
@@ -381,23 +381,35 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
 }
 
 fn status(args: GridArgs) -> anyhow::Result<()> {
-    let (_, cells) = Grid::read(&args.grid)?;
-    let mut done = 0;
+    let (grid, cells) = Grid::read(&args.grid)?;
+    let mut statuses = Vec::new();
     for cell in &cells {
-        let state = match cell_status(&args.out, cell)? {
-            CellStatus::Done(r) => {
-                done += 1;
-                format!(
-                    "done: best {:.1}, final {:.1} ({} steps)",
-                    r.best_score, r.final_score, r.steps
-                )
-            }
+        let status = cell_status(&args.out, cell)?;
+        let state = match &status {
+            CellStatus::Done(r) => format!(
+                "done: best {:.1}, final {:.1} ({} steps)",
+                r.best_score, r.final_score, r.steps
+            ),
             CellStatus::Partial { epochs } => format!("training: {epochs} epochs checkpointed"),
             CellStatus::Pending => "pending".into(),
         };
         println!("{:>4} {:<40} {state}", cell.index, cell.id());
+        statuses.push(status);
     }
-    println!("{done}/{} cells done", cells.len());
+    let done = statuses
+        .iter()
+        .filter(|s| matches!(s, CellStatus::Done(_)))
+        .count();
+    let b = &grid.budget;
+    let epochs_per_cell = b.policy_steps.div_ceil(b.steps_per_epoch);
+    match policy_time_left(&statuses, epochs_per_cell) {
+        Some(left) if done < cells.len() => println!(
+            "{done}/{} cells done; about {:.1} h of policy training left at the finished cells' pace (model fits not included)",
+            cells.len(),
+            left / 3600.0
+        ),
+        _ => println!("{done}/{} cells done", cells.len()),
+    }
     Ok(())
 }
 
