@@ -5,6 +5,7 @@
 //! ```toml
 //! [budget]
 //! model_steps = 5000        # fit-model's --max-steps
+//! model_likelihood = "data" # fit-model's --likelihood (optional; default "particle")
 //! ensemble_max_epochs = 100 # fit-ensemble's --max-epochs (optional)
 //! policy_steps = 100000     # fit-policy's --steps (the same for every method)
 //! steps_per_epoch = 1000
@@ -28,6 +29,7 @@ use serde::{Deserialize, Serialize};
 use super::ExperimentError;
 use crate::agent::preset;
 use crate::envs::{ObservationLayout, TaskName};
+use crate::sde::LikelihoodPath;
 
 /// A policy-learning method a cell runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -108,6 +110,10 @@ impl FromStr for Method {
 pub struct Budget {
     /// fit-model's gradient steps (NUNO's SDE).
     pub model_steps: usize,
+    /// fit-model's `--likelihood`: where each step of L_data starts (eq. 6's
+    /// particle, the default, or the recorded data).
+    #[serde(default = "default_likelihood")]
+    pub model_likelihood: LikelihoodPath,
     /// A cap on fit-ensemble's epochs (MOPO; default: until its early stop).
     #[serde(default)]
     pub ensemble_max_epochs: Option<usize>,
@@ -124,6 +130,9 @@ pub struct Budget {
     pub hidden: Vec<usize>,
 }
 
+fn default_likelihood() -> LikelihoodPath {
+    LikelihoodPath::Particle
+}
 fn default_steps_per_epoch() -> usize {
     1000
 }

@@ -331,7 +331,12 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
                 fit.extend(["--max-epochs".into(), epochs.to_string()]);
             }
         } else {
-            fit.extend(["--max-steps".into(), b.model_steps.to_string()]);
+            fit.extend([
+                "--max-steps".into(),
+                b.model_steps.to_string(),
+                "--likelihood".into(),
+                b.model_likelihood.to_string(),
+            ]);
             if cell.method == Method::NunoR {
                 fit.push("--reward-model".into());
             }

@@ -194,6 +194,29 @@ fn bad_grids_are_refused_before_anything_runs() {
     }
     assert!(!dir.join("out").exists(), "nothing ran");
 
+    // A model option the fit does not have.
+    let row = dataset_row(
+        "h",
+        "hopper.hdf5",
+        "hopper",
+        "hopper-random",
+        "[\"nuno\"]",
+        "[0]",
+    );
+    let grid = write_grid(dir, "grid-likelihood.toml", &[row]);
+    let text = std::fs::read_to_string(&grid).unwrap();
+    std::fs::write(
+        &grid,
+        text.replace("[budget]\n", "[budget]\nmodel_likelihood = \"exact\"\n"),
+    )
+    .unwrap();
+    let error = fails(&["experiment", "run", "--grid", &s(&grid), "--out", &out]);
+    assert!(
+        error.contains("exact") && error.contains("model_likelihood"),
+        "{error}"
+    );
+    assert!(!dir.join("out").exists(), "nothing ran");
+
     // --executor slurm without Slurm's client.
     let grid = s(&write_grid(
         dir,
@@ -388,6 +411,10 @@ fn methods_in_the_same_kind_of_model_share_one_fit_per_seed() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let grid = hopper_grid(dir, "[\"nuno\", \"nuno-al\"]", "[0]");
+    // The grid's model options reach the fit.
+    let text = std::fs::read_to_string(&grid).unwrap();
+    let text = text.replace("[budget]\n", "[budget]\nmodel_likelihood = \"data\"\n");
+    std::fs::write(&grid, text).unwrap();
     let out = dir.join("out");
     // Both cells start together; one fits the SDE, the other waits for it.
     let run = ok(&[
@@ -402,7 +429,9 @@ fn methods_in_the_same_kind_of_model_share_one_fit_per_seed() {
     ]);
     assert!(run.contains("2 to run"), "{run}");
     let model = out.join("models/hopper-random/sde/seed-0");
-    assert!(model.join("model.json").is_file());
+    let metadata: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(model.join("model.json")).unwrap()).unwrap();
+    assert_eq!(metadata["fit"]["loss"]["likelihood"], "data");
     let fitted = ["nuno", "nuno-al"]
         .iter()
         .filter(|m| {
