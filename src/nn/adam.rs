@@ -98,14 +98,29 @@ impl Adam {
         &self,
         lr: f64,
         module: M,
+        grads: GradientsParams,
+        state: &mut AdamState,
+    ) -> M {
+        self.step_module_clipped(lr, module, grads, state, None)
+    }
+
+    /// [`Adam::step_module`] with each parameter's gradient first scaled to an
+    /// L2 norm of at most `clip_norm` (burn's `GradientClipping::Norm`:
+    /// g·min(1, c/(‖g‖ + the smallest positive f32)), per parameter tensor).
+    pub fn step_module_clipped<M: Module>(
+        &self,
+        lr: f64,
+        module: M,
         mut grads: GradientsParams,
         state: &mut AdamState,
+        clip_norm: Option<f32>,
     ) -> M {
         struct Stepper<'a> {
             adam: &'a Adam,
             step: AdamStep,
             grads: &'a mut GradientsParams,
             state: &'a mut AdamState,
+            clip_norm: Option<f32>,
             path: Vec<String>,
         }
         impl ModuleMapper for Stepper<'_> {
@@ -122,9 +137,14 @@ impl Adam {
                 let (id, value) = (param.id, param.val());
                 let (shape, device) = (value.dims(), value.device());
                 let mut values = to_f32_vec(value);
+                let mut grad = to_f32_vec(grad);
+                if let Some(clip) = self.clip_norm {
+                    let norm = grad.iter().map(|g| g * g).sum::<f32>().sqrt();
+                    let coef = (clip / (norm + f32::MIN_POSITIVE)).min(1.0);
+                    grad.iter_mut().for_each(|g| *g *= coef);
+                }
                 let moments = self.state.moments.entry(self.path.join(".")).or_default();
-                self.adam
-                    .update(self.step, &mut values, &to_f32_vec(grad), moments);
+                self.adam.update(self.step, &mut values, &grad, moments);
                 let tensor = Tensor::from_data(TensorData::new(values, shape), &device);
                 Param::initialized(id, tensor.require_grad())
             }
@@ -135,6 +155,7 @@ impl Adam {
             step,
             grads: &mut grads,
             state,
+            clip_norm,
             path: Vec::new(),
         })
     }

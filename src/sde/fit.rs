@@ -6,7 +6,6 @@
 use std::time::Instant;
 
 use burn::module::Module;
-use burn::optim::grad_clipping::GradientClippingConfig;
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Device, Tensor, TensorData};
 use rand::{Rng, SeedableRng};
@@ -20,7 +19,7 @@ use super::losses::WindowTensors;
 use super::model::NeuralSde;
 use super::spec::{DynamicsSpec, PhysicalScales};
 use crate::data::{Dataset, NormalizerConfig, WindowBatch, WindowSampler};
-use crate::nn::{normal, seeded_init};
+use crate::nn::{Adam, AdamState, assign_params, normal, seeded_init};
 
 /// Losses at one logged step (and the validation NLL when it was measured).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -114,6 +113,27 @@ pub fn validation_nll(
     total / starts.len() as f32
 }
 
+/// Where a fit stands at one of its evaluations: enough to continue it
+/// exactly as if it had not stopped.
+#[derive(Debug, Clone)]
+pub struct SdeFitState {
+    /// Gradient steps taken.
+    pub step: usize,
+    /// Every record logged so far.
+    pub records: Vec<FitRecord>,
+    /// The model now (its config holds h's calibrated bias).
+    pub current: NeuralSde,
+    /// The model at the best validation NLL so far, and where that was.
+    pub best: NeuralSde,
+    pub best_nll: f32,
+    pub best_step: usize,
+    pub evals_without_improvement: usize,
+    /// Adam's state, moments by module path.
+    pub adam: AdamState,
+    /// The generator's position (batches, noise, far-field samples).
+    pub rng: ChaCha8Rng,
+}
+
 /// Fits a neural SDE on `train`, early-stopping on `valid`; `on_record` sees
 /// every logged step. Returns the best model (without autodiff) and a summary.
 pub fn fit(
@@ -123,6 +143,25 @@ pub fn fit(
     config: &FitConfig,
     device: &Device,
     on_record: &mut dyn FnMut(&FitRecord),
+) -> Result<(NeuralSde, FitSummary), SdeError> {
+    fit_from(train, valid, spec, config, device, None, on_record, &mut |_| {
+        Ok(())
+    })
+}
+
+/// [`fit`], continuing from `resume` when given (a state the same data and
+/// config produced, up to `max_steps`), with `on_evaluation` seeing the state
+/// after every validation (to checkpoint it; an error it returns stops the fit).
+#[allow(clippy::too_many_arguments)]
+pub fn fit_from(
+    train: &Dataset,
+    valid: &Dataset,
+    spec: DynamicsSpec,
+    config: &FitConfig,
+    device: &Device,
+    resume: Option<SdeFitState>,
+    on_record: &mut dyn FnMut(&FitRecord),
+    on_evaluation: &mut dyn FnMut(&SdeFitState) -> Result<(), SdeError>,
 ) -> Result<(NeuralSde, FitSummary), SdeError> {
     spec.validate()?;
     config
@@ -158,10 +197,8 @@ pub fn fit(
     let mut model = seeded_init(&train_device, config.seed, || {
         NeuralSde::init(spec, scales, config.model.clone(), &train_device)
     });
-    let mut optimizer = AdamConfig::new()
-        .with_epsilon(config.adam_epsilon)
-        .with_grad_clipping(Some(GradientClippingConfig::Norm(config.grad_clip_norm)))
-        .init();
+    let adam = Adam::new(config.adam_epsilon as f32);
+    let mut adam_state = AdamState::default();
     let state_dim = model.constants.state_dim();
     let input_dim = model.spec().obs_dim + model.spec().act_dim;
     let reference = training_inputs(&model, train, config.loss.far_reference, &mut rng);
@@ -181,7 +218,23 @@ pub fn fit(
         device,
     );
     let (mut best_step, mut evals_without_improvement, mut step) = (0, 0, 0);
-    while step < config.max_steps {
+    let mut records = Vec::new();
+    if let Some(state) = resume {
+        if state.current.constants.spec != model.constants.spec
+            || state.current.constants.scales != model.constants.scales
+        {
+            return Err(SdeError::Config(
+                "the checkpoint was fitted on other data (its scales differ)".into(),
+            ));
+        }
+        model = assign_params(model, &state.current);
+        model.constants = state.current.constants.clone();
+        (best, best_nll, best_step) = (state.best, state.best_nll, state.best_step);
+        (evals_without_improvement, step) = (state.evals_without_improvement, state.step);
+        (adam_state, rng, records) = (state.adam, state.rng, state.records);
+    }
+    let stopped = |evals: usize| evals >= config.patience;
+    while step < config.max_steps && !stopped(evals_without_improvement) {
         // eq. 7 on a batch of windows of horizon H.
         let lr = config.learning_rate(step);
         let batch = train_windows.sample(config.batch_size, &mut rng);
@@ -201,7 +254,13 @@ pub fn fit(
         let far = far_field.sample(config.batch_size, &mut rng, &train_device);
         let terms = model.loss(&windows, step_noise, ball_noise, far, &config.loss);
         let grads = GradientsParams::from_grads(terms.total.backward(), &model);
-        model = optimizer.step(lr, model, grads);
+        model = adam.step_module_clipped(
+            lr,
+            model,
+            grads,
+            &mut adam_state,
+            Some(config.grad_clip_norm),
+        );
         step += 1;
         if step % config.h_bias_every == 0 {
             model.calibrate_h_bias(reference.clone());
@@ -235,14 +294,26 @@ pub fn fit(
                 record.valid_nll = Some(nll);
                 if nll < best_nll {
                     (best, best_nll, best_step, evals_without_improvement) =
-                        (current, nll, step, 0);
+                        (current.clone(), nll, step, 0);
                 } else {
                     evals_without_improvement += 1;
                 }
-            }
-            on_record(&record);
-            if evals_without_improvement >= config.patience {
-                break;
+                on_record(&record);
+                records.push(record);
+                on_evaluation(&SdeFitState {
+                    step,
+                    records: records.clone(),
+                    current,
+                    best: best.clone(),
+                    best_nll,
+                    best_step,
+                    evals_without_improvement,
+                    adam: adam_state.clone(),
+                    rng: rng.clone(),
+                })?;
+            } else {
+                on_record(&record);
+                records.push(record);
             }
         }
     }

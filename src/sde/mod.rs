@@ -30,7 +30,9 @@ pub use eta_report::{EtaComparison, EtaReport, EtaReportConfig, auroc, eta_repor
 pub use evaluation::{
     HorizonError, TaskComparison, TaskComparisonConfig, compare_with_task, prediction_error,
 };
-pub use fit::{FitRecord, FitSummary, fit, fit_eta, validation_nll, window_tensors};
+pub use fit::{
+    FitRecord, FitSummary, SdeFitState, fit, fit_eta, fit_from, validation_nll, window_tensors,
+};
 pub use fused::FusedSde;
 pub use losses::{LossTerms, WindowTensors};
 pub use model::{NeuralSde, SdeConstants, SdeTerms};
@@ -50,4 +52,7 @@ pub enum SdeError {
     Config(String),
     #[error(transparent)]
     Data(#[from] crate::data::DataError),
+    /// What the caller's per-evaluation hook (a checkpoint's writer) reported.
+    #[error("SDE fit checkpoint: {0}")]
+    Checkpoint(String),
 }

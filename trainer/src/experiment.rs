@@ -302,8 +302,8 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
     };
     // Cells sharing the model fit it once: the first to hold the lock fits,
     // the others wait on it and find the model there. The operating system
-    // drops the lock of a killed cell, whose successor fits again (an
-    // ensemble's fit from its last epoch's checkpoint, the SDE's afresh).
+    // drops the lock of a killed cell, whose successor continues the fit
+    // from its last checkpoint.
     std::fs::create_dir_all(&model).with_context(|| format!("creating {}", model.display()))?;
     let lock_path = model.with_extension("lock");
     let lock = std::fs::File::create(&lock_path)
@@ -325,8 +325,9 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         if cell.layout == ObservationLayout::Neorl {
             fit.push("--neorl".into());
         }
+        // A killed fit continues from its last checkpoint.
+        fit.push("--resume".into());
         if cell.method.uses_ensemble() {
-            fit.push("--resume".into());
             if let Some(epochs) = b.ensemble_max_epochs {
                 fit.extend(["--max-epochs".into(), epochs.to_string()]);
             }

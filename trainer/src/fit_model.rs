@@ -1,5 +1,7 @@
 //! `nuno-trainer fit-model`: fit the neural SDE on a dataset, compute the
-//! truncation thresholds, and write the artifact with metrics and plots.
+//! truncation thresholds, and write the artifact with metrics and plots; a
+//! checkpoint at every validation in `--out/fit-checkpoints`, which
+//! `--resume` continues.
 
 use std::fs::File;
 use std::io::Write;
@@ -7,11 +9,14 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use nuno::artifact::{DynamicsProvenance, save_dynamics};
+use nuno::artifact::{
+    DynamicsProvenance, latest_checkpoint, load_sde_checkpoint, save_dynamics, save_sde_checkpoint,
+};
 use nuno::envs::MujocoTask;
 use nuno::sde::{
     CalibrationConfig, ComputeDevice, DynamicsSpec, FitConfig, LikelihoodPath, LossConfig,
-    SdeConfig, ThresholdConfig, calibration_report, compute_thresholds, fit, prediction_error,
+    SdeConfig, SdeError, ThresholdConfig, calibration_report, compute_thresholds, fit_from,
+    prediction_error,
 };
 
 use crate::data_source::DataSource;
@@ -66,6 +71,9 @@ pub struct Args {
     /// Compute device: cpu, or wgpu in a build with the `wgpu` feature.
     #[arg(long, default_value_t = ComputeDevice::Cpu)]
     device: ComputeDevice,
+    /// Continue the fit checkpointed in --out (the same settings; --max-steps may grow).
+    #[arg(long)]
+    resume: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -121,6 +129,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let bar = ProgressBar::new(config.max_steps as u64).with_style(ProgressStyle::with_template(
         "{bar:30} {pos}/{len} steps {per_sec} | {msg}",
     )?);
+    let checkpoints = args.out.join("fit-checkpoints");
+    let resume = match (latest_checkpoint(&checkpoints)?, args.resume) {
+        (Some(checkpoint), true) => {
+            let state = load_sde_checkpoint(&checkpoint, &config, &device)
+                .with_context(|| format!("resuming from {}", checkpoint.display()))?;
+            println!("resumed from {} (step {})", checkpoint.display(), state.step);
+            Some(state)
+        }
+        (Some(_), false) => anyhow::bail!(
+            "{} already holds a fit; pass --resume to continue it or choose another --out",
+            args.out.display()
+        ),
+        (None, true) => {
+            println!("no checkpoint in {}; starting afresh", checkpoints.display());
+            None
+        }
+        (None, false) => None,
+    };
     let metrics_path = args.out.join("metrics.csv");
     let mut csv = File::create(&metrics_path)
         .with_context(|| format!("creating {}", metrics_path.display()))?;
@@ -130,7 +156,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     let mut records = Vec::new();
     let mut write_error = None;
-    let (model, summary) = fit(&train, &valid, spec, &config, &device, &mut |r| {
+    let mut log = |r: &nuno::sde::FitRecord| {
         bar.set_position(r.step as u64);
         let valid_nll = r.valid_nll.map_or(String::new(), |v| v.to_string());
         bar.set_message(format!(
@@ -154,7 +180,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             write_error.get_or_insert(e);
         }
         records.push(r.clone());
-    })?;
+    };
+    // A resumed fit's metrics start with the records before the checkpoint.
+    for r in resume.iter().flat_map(|state| &state.records) {
+        log(r);
+    }
+    let (model, summary) = fit_from(
+        &train,
+        &valid,
+        spec,
+        &config,
+        &device,
+        resume,
+        &mut log,
+        &mut |state| {
+            save_sde_checkpoint(&checkpoints, &config, state)
+                .map(|_| ())
+                .map_err(|e| SdeError::Checkpoint(e.to_string()))
+        },
+    )?;
     bar.finish();
     if let Some(e) = write_error {
         return Err(e).with_context(|| format!("writing {}", metrics_path.display()));
