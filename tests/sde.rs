@@ -390,12 +390,16 @@ fn hopper_fit_beats_constant_velocity_and_flags_random_actions() {
 }
 
 /// Every dimension's z std at most the band's top, and ±2Σ covering at least
-/// 90 % (a Gaussian's 95.4 %; hopper's joint velocities have heavier tails, the
-/// shipped model covers 91 % on its thigh velocity).
+/// 80 % (a Gaussian's 95.4 %; hopper's joint velocities have heavier tails).
+/// The floor is where the fit lies over seeds, not one seed's value: the
+/// narrow fit's worst dimension held 84–97 % over fit seeds 0–3 with either
+/// optimiser path (burn's Adam, `nn::Adam`; equal to 1e-7 for 60 steps, apart
+/// by rounding after 1500), the shipped model 91 %. A Σ half as wide as the
+/// errors would hold about 68 %.
 fn assert_not_overconfident(report: &nuno::sde::CalibrationReport, summary: &str) {
     for (d, c) in report.dimensions.iter().enumerate() {
         assert!(c.z_std <= Z_STD_BAND.1, "dim {d}: {summary}");
-        assert!(c.within_two >= 0.90, "dim {d}: {summary}");
+        assert!(c.within_two >= 0.80, "dim {d}: {summary}");
     }
 }
 
@@ -472,9 +476,10 @@ fn diffusion_is_calibrated_on_the_data_and_truncation_spares_it_but_not_random_a
     let summary = format!("{report:#?}");
     eprintln!("{summary}");
     // Σ is never overconfident on the data: every dimension's z std is at most the
-    // band's top and ±2Σ holds nearly the Gaussian's 95 % or more. It comes out
-    // over-dispersed instead (z std 0.43–0.91 here, positions lowest): eq. 6's second
-    // step sees the noise its first step sampled (docs/paper-map.md, known gaps).
+    // band's top and ±2Σ holds most of the errors. It comes out mostly
+    // over-dispersed instead (z std 0.44–1.29 over fit seeds 0–3, positions
+    // lowest): eq. 6's second step sees the noise its first step sampled
+    // (docs/paper-map.md, known gaps).
     assert_not_overconfident(&report, &summary);
     // h(η) adds little noise on the data ...
     assert!(report.h_share_at_median_eta <= 0.25, "{summary}");
@@ -986,4 +991,82 @@ fn eta_report_on_the_shipped_model_separates_perturbed_data() {
     .unwrap();
     let err = eta_report(&model, &walker, 0.1, &config, &device).unwrap_err();
     assert!(err.to_string().contains("17-D observations"), "{err}");
+}
+
+/// A fit stopped at its second validation, checkpointed to disk and resumed,
+/// ends exactly where the uninterrupted fit ends (records and best weights);
+/// a checkpoint of other settings is refused by name.
+#[test]
+fn a_checkpointed_sde_fit_resumes_where_it_stopped() {
+    use nuno::artifact::{latest_checkpoint, load_sde_checkpoint, save_sde_checkpoint};
+    use nuno::sde::fit_from;
+
+    let dataset = hopper_dataset(3000, 4);
+    let (train, valid) = dataset.split_by_trajectory(0.2, 0);
+    let mut config = small_config(40);
+    config.model.drift_hidden = vec![16, 16];
+    config.model.sigma_hidden = vec![16, 16];
+    config.eval_every = 10;
+    config.log_every = 5;
+    config.valid_windows = 64;
+    let device = Device::flex();
+    let run = |resume, stop_at: Option<usize>, dir: &Path| {
+        let mut records = Vec::new();
+        let result = fit_from(
+            &train,
+            &valid,
+            hopper_spec(),
+            &config,
+            &device,
+            resume,
+            &mut |r| records.push(r.clone()),
+            &mut |state| {
+                save_sde_checkpoint(dir, &config, state).unwrap();
+                match stop_at {
+                    Some(step) if state.step == step => Err(SdeError::Checkpoint("stopped".into())),
+                    _ => Ok(()),
+                }
+            },
+        );
+        (result, records)
+    };
+    let scratch = tempfile::tempdir().unwrap();
+    let (whole, whole_records) = run(None, None, scratch.path());
+    let (whole, _) = whole.unwrap();
+
+    let dir = tempfile::tempdir().unwrap();
+    let (stopped, _) = run(None, Some(20), dir.path());
+    assert!(stopped.unwrap_err().to_string().contains("stopped"));
+    let latest = latest_checkpoint(dir.path()).unwrap().unwrap();
+    assert!(latest.ends_with("step-0000020"), "{}", latest.display());
+    let state = load_sde_checkpoint(&latest, &config, &device).unwrap();
+    assert_eq!(state.records, whole_records[..state.records.len()]);
+    let (resumed, later) = run(Some(state), None, dir.path());
+    let (resumed, summary) = resumed.unwrap();
+    assert_eq!(summary.steps, 40);
+    assert_eq!(later, whole_records[whole_records.len() - later.len()..]);
+    assert_eq!(
+        later[0].step, 25,
+        "the resumed fit logs from where it stopped"
+    );
+    let weights = |m: &NeuralSde| {
+        let mut all = Vec::new();
+        for (_, (_, values)) in nuno::artifact::collect_tensors(m) {
+            all.extend(values);
+        }
+        all
+    };
+    assert_eq!(weights(&resumed), weights(&whole));
+    assert_eq!(
+        resumed.constants.config.h_bias,
+        whole.constants.config.h_bias
+    );
+
+    // The resumed fit's own checkpoints replaced the one it started from.
+    let latest = latest_checkpoint(dir.path()).unwrap().unwrap();
+    assert!(latest.ends_with("step-0000040"), "{}", latest.display());
+    let mut other = config.clone();
+    other.loss.lambda_grad *= 2.0;
+    let error = load_sde_checkpoint(&latest, &other, &device).unwrap_err();
+    assert!(error.to_string().contains("other settings"), "{error}");
 }

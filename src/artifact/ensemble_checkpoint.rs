@@ -10,18 +10,15 @@ use std::path::{Path, PathBuf};
 use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
-use super::json_file::{read_checked_weights, read_versioned_json, write_json};
-use super::sac_state::{put_moments, save_checkpoint_dir, take_moments, write_synced};
-use super::safetensors_file::safetensors_bytes;
-use super::tensors::{NamedTensors, collect_tensors, load_tensors};
-use super::{ArtifactError, sha256_hex};
+use super::ArtifactError;
+use super::fit_checkpoint::{FitFiles, read_fit_files, write_fit_files};
+use super::json_file::{read_versioned_json, write_json};
+use super::sac_state::save_checkpoint_dir;
+use super::tensors::load_tensors;
 use crate::ensemble::{EnsembleConfig, EnsembleEpoch, EnsembleFitState, GaussianEnsemble};
-use crate::nn::{AdamState, seeded_init};
+use crate::nn::seeded_init;
 
 pub const ENSEMBLE_CHECKPOINT_SCHEMA_VERSION: u32 = 1;
-const CURRENT: &str = "current.safetensors";
-const BEST: &str = "best.safetensors";
-const ADAM: &str = "adam.safetensors";
 const STATE: &str = "state.json";
 
 /// What the fit ran on: a checkpoint resumes only the same fit.
@@ -42,10 +39,8 @@ struct CheckpointState {
     history: Vec<EnsembleEpoch>,
     since_update: usize,
     best_mse: Vec<f32>,
-    adam_time: u64,
-    current_sha256: String,
-    best_sha256: String,
-    adam_sha256: String,
+    #[serde(flatten)]
+    files: FitFiles,
 }
 
 /// Saves `state` as the newest checkpoint in `dir`.
@@ -57,14 +52,7 @@ pub fn save_ensemble_checkpoint(
 ) -> Result<PathBuf, ArtifactError> {
     let name = format!("epoch-{:06}", state.history.len());
     save_checkpoint_dir(dir, &name, |tmp| {
-        let current = safetensors_bytes(&collect_tensors(&state.current), None)?;
-        let best = safetensors_bytes(&collect_tensors(&state.best), None)?;
-        let mut moments = NamedTensors::new();
-        put_moments(&mut moments, "", &state.adam);
-        let adam = safetensors_bytes(&moments, None)?;
-        for (file, bytes) in [(CURRENT, &current), (BEST, &best), (ADAM, &adam)] {
-            write_synced(&tmp.join(file), bytes)?;
-        }
+        let files = write_fit_files(tmp, &state.current, &state.best, &state.adam)?;
         write_json(
             &tmp.join(STATE),
             &CheckpointState {
@@ -74,10 +62,7 @@ pub fn save_ensemble_checkpoint(
                 history: state.history.clone(),
                 since_update: state.since_update,
                 best_mse: state.best_mse.clone(),
-                adam_time: state.adam.time,
-                current_sha256: sha256_hex(&current),
-                best_sha256: sha256_hex(&best),
-                adam_sha256: sha256_hex(&adam),
+                files,
             },
         )
     })
@@ -123,22 +108,11 @@ pub fn load_ensemble_checkpoint(
             )
         })
     };
-    let current = read_checked_weights(&checkpoint.join(CURRENT), &state.current_sha256)?;
-    let best = read_checked_weights(&checkpoint.join(BEST), &state.best_sha256)?;
-    let mut adam = read_checked_weights(&checkpoint.join(ADAM), &state.adam_sha256)?;
-    let moments = take_moments(&mut adam, "", |path| {
-        current.get(path).map(|(_, values)| values.len())
-    })?;
-    if let Some(extra) = adam.keys().next() {
-        return Err(ArtifactError::UnexpectedTensor(format!("{ADAM}: {extra}")));
-    }
+    let tensors = read_fit_files(checkpoint, &state.files)?;
     Ok(EnsembleFitState {
-        current: load_tensors(skeleton(), &current, device)?,
-        best: load_tensors(skeleton(), &best, device)?,
-        adam: AdamState {
-            time: state.adam_time,
-            moments,
-        },
+        current: load_tensors(skeleton(), &tensors.current, device)?,
+        best: load_tensors(skeleton(), &tensors.best, device)?,
+        adam: tensors.adam,
         history: state.history,
         since_update: state.since_update,
         best_mse: state.best_mse,

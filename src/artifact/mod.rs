@@ -7,12 +7,13 @@ mod checkpoint;
 mod dynamics;
 mod ensemble;
 mod ensemble_checkpoint;
+mod fit_checkpoint;
 mod json_file;
 mod online_run;
 mod policy;
 mod sac_state;
-mod sde_checkpoint;
 mod safetensors_file;
+mod sde_checkpoint;
 mod tensors;
 
 use std::path::{Path, PathBuf};
@@ -46,8 +47,8 @@ pub use policy::{
     load_policy, save_policy,
 };
 pub use sac_state::latest_checkpoint;
-pub use sde_checkpoint::{SDE_CHECKPOINT_SCHEMA_VERSION, load_sde_checkpoint, save_sde_checkpoint};
 pub use safetensors_file::{parse_safetensors, parse_safetensors_with_metadata, safetensors_bytes};
+pub use sde_checkpoint::{SDE_CHECKPOINT_SCHEMA_VERSION, load_sde_checkpoint, save_sde_checkpoint};
 pub use tensors::{NamedTensors, collect_tensors, load_tensors};
 
 /// Everything that can be wrong with an artifact.

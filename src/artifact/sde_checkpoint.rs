@@ -11,20 +11,17 @@ use std::path::{Path, PathBuf};
 use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
-use super::json_file::{read_checked_weights, read_versioned_json, write_json};
-use super::sac_state::{RngState, put_moments, save_checkpoint_dir, take_moments, write_synced};
-use super::safetensors_file::safetensors_bytes;
-use super::tensors::{NamedTensors, collect_tensors, load_tensors};
-use super::{ArtifactError, sha256_hex};
-use crate::nn::{AdamState, seeded_init};
+use super::ArtifactError;
+use super::fit_checkpoint::{FitFiles, read_fit_files, write_fit_files};
+use super::json_file::{read_versioned_json, write_json};
+use super::sac_state::{RngState, save_checkpoint_dir};
+use super::tensors::{NamedTensors, load_tensors};
+use crate::nn::seeded_init;
 use crate::sde::{
     DynamicsSpec, FitConfig, FitRecord, NeuralSde, PhysicalScales, SdeConfig, SdeFitState,
 };
 
 pub const SDE_CHECKPOINT_SCHEMA_VERSION: u32 = 1;
-const CURRENT: &str = "current.safetensors";
-const BEST: &str = "best.safetensors";
-const ADAM: &str = "adam.safetensors";
 const STATE: &str = "state.json";
 
 /// `state.json`.
@@ -42,10 +39,8 @@ struct CheckpointState {
     best_step: usize,
     evals_without_improvement: usize,
     rng: RngState,
-    adam_time: u64,
-    current_sha256: String,
-    best_sha256: String,
-    adam_sha256: String,
+    #[serde(flatten)]
+    files: FitFiles,
 }
 
 /// Saves `state` of a fit with `fit` as the newest checkpoint in `dir`.
@@ -56,14 +51,7 @@ pub fn save_sde_checkpoint(
 ) -> Result<PathBuf, ArtifactError> {
     let name = format!("step-{:07}", state.step);
     save_checkpoint_dir(dir, &name, |tmp| {
-        let current = safetensors_bytes(&collect_tensors(&state.current), None)?;
-        let best = safetensors_bytes(&collect_tensors(&state.best), None)?;
-        let mut moments = NamedTensors::new();
-        put_moments(&mut moments, "", &state.adam);
-        let adam = safetensors_bytes(&moments, None)?;
-        for (file, bytes) in [(CURRENT, &current), (BEST, &best), (ADAM, &adam)] {
-            write_synced(&tmp.join(file), bytes)?;
-        }
+        let files = write_fit_files(tmp, &state.current, &state.best, &state.adam)?;
         let c = &state.current.constants;
         write_json(
             &tmp.join(STATE),
@@ -80,10 +68,7 @@ pub fn save_sde_checkpoint(
                 best_step: state.best_step,
                 evals_without_improvement: state.evals_without_improvement,
                 rng: RngState::of(&state.rng),
-                adam_time: state.adam.time,
-                current_sha256: sha256_hex(&current),
-                best_sha256: sha256_hex(&best),
-                adam_sha256: sha256_hex(&adam),
+                files,
             },
         )
     })
@@ -108,8 +93,8 @@ pub fn load_sde_checkpoint(
             checkpoint.display()
         )));
     }
-    let model = |file: &str, sha: &str, config: &SdeConfig| -> Result<NeuralSde, ArtifactError> {
-        let tensors = read_checked_weights(&checkpoint.join(file), sha)?;
+    let tensors = read_fit_files(checkpoint, &state.files)?;
+    let model = |weights: &NamedTensors, config: &SdeConfig| -> Result<NeuralSde, ArtifactError> {
         let skeleton = seeded_init(device, 0, || {
             NeuralSde::init(
                 state.spec.clone(),
@@ -118,18 +103,10 @@ pub fn load_sde_checkpoint(
                 device,
             )
         });
-        load_tensors(skeleton, &tensors, device)
+        load_tensors(skeleton, weights, device)
     };
-    let current = model(CURRENT, &state.current_sha256, &state.current_config)?;
-    let best = model(BEST, &state.best_sha256, &state.best_config)?;
-    let weights = collect_tensors(&current);
-    let mut adam = read_checked_weights(&checkpoint.join(ADAM), &state.adam_sha256)?;
-    let moments = take_moments(&mut adam, "", |path| {
-        weights.get(path).map(|(_, values)| values.len())
-    })?;
-    if let Some(extra) = adam.keys().next() {
-        return Err(ArtifactError::UnexpectedTensor(format!("{ADAM}: {extra}")));
-    }
+    let current = model(&tensors.current, &state.current_config)?;
+    let best = model(&tensors.best, &state.best_config)?;
     Ok(SdeFitState {
         step: state.step,
         records: state.records,
@@ -138,10 +115,7 @@ pub fn load_sde_checkpoint(
         best_nll: state.best_nll,
         best_step: state.best_step,
         evals_without_improvement: state.evals_without_improvement,
-        adam: AdamState {
-            time: state.adam_time,
-            moments,
-        },
+        adam: tensors.adam,
         rng: state.rng.restore(),
     })
 }

@@ -1,7 +1,8 @@
 //! Fitting the neural SDE (Section 4.2, Appendix C.4), top to bottom: measure
 //! scales, initialise, then Adam on eq. 7 over windows of H = 2 steps with the
 //! learning rate decayed linearly 1e-2 → 1e-3 over 5000 steps, validation NLL
-//! on held-out trajectories, early stopping on it, and the best model kept.
+//! on held-out trajectories, early stopping on it, and the best model kept;
+//! the whole state at every validation for checkpoints ([`fit_from`]).
 
 use std::time::Instant;
 
@@ -144,9 +145,16 @@ pub fn fit(
     device: &Device,
     on_record: &mut dyn FnMut(&FitRecord),
 ) -> Result<(NeuralSde, FitSummary), SdeError> {
-    fit_from(train, valid, spec, config, device, None, on_record, &mut |_| {
-        Ok(())
-    })
+    fit_from(
+        train,
+        valid,
+        spec,
+        config,
+        device,
+        None,
+        on_record,
+        &mut |_| Ok(()),
+    )
 }
 
 /// [`fit`], continuing from `resume` when given (a state the same data and
@@ -197,7 +205,7 @@ pub fn fit_from(
     let mut model = seeded_init(&train_device, config.seed, || {
         NeuralSde::init(spec, scales, config.model.clone(), &train_device)
     });
-    let adam = Adam::new(config.adam_epsilon as f32);
+    let adam = Adam::new(config.adam_epsilon);
     let mut adam_state = AdamState::default();
     let state_dim = model.constants.state_dim();
     let input_dim = model.spec().obs_dim + model.spec().act_dim;

@@ -8,8 +8,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use nuno::artifact::{
-    EnsembleFitShape, latest_checkpoint, load_ensemble_checkpoint, save_ensemble,
-    save_ensemble_checkpoint,
+    EnsembleFitShape, load_ensemble_checkpoint, save_ensemble, save_ensemble_checkpoint,
 };
 use nuno::ensemble::{EnsembleConfig, EnsembleError, fit_ensemble};
 use nuno::infer::Kernel;
@@ -19,6 +18,7 @@ use crate::data_source::DataSource;
 
 use crate::output::write_text;
 use crate::plot::{Series, line_chart};
+use crate::resume::checkpoint_to_resume;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -75,30 +75,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         obs_dim: dataset.obs_dim(),
         act_dim: dataset.act_dim(),
     };
-    let resume = match (latest_checkpoint(&checkpoints)?, args.resume) {
-        (Some(checkpoint), true) => {
-            let state = load_ensemble_checkpoint(&checkpoint, &config, &shape, &device)
-                .with_context(|| format!("resuming from {}", checkpoint.display()))?;
-            println!(
-                "resumed from {} (epoch {})",
-                checkpoint.display(),
-                state.history.len()
-            );
-            Some(state)
-        }
-        (Some(_), false) => anyhow::bail!(
-            "{} already holds an ensemble fit; pass --resume to continue it or choose another --out",
-            args.out.display()
-        ),
-        (None, true) => {
-            println!(
-                "no checkpoint in {}; starting afresh",
-                checkpoints.display()
-            );
-            None
-        }
-        (None, false) => None,
-    };
+    let resume =
+        match checkpoint_to_resume(&checkpoints, args.resume, &args.out, "an ensemble fit")? {
+            Some(checkpoint) => {
+                let state = load_ensemble_checkpoint(&checkpoint, &config, &shape, &device)
+                    .with_context(|| format!("resuming from {}", checkpoint.display()))?;
+                println!(
+                    "resumed from {} (epoch {})",
+                    checkpoint.display(),
+                    state.history.len()
+                );
+                Some(state)
+            }
+            None => None,
+        };
 
     let fit = fit_ensemble(
         &dataset,

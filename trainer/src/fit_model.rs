@@ -9,9 +9,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use nuno::artifact::{
-    DynamicsProvenance, latest_checkpoint, load_sde_checkpoint, save_dynamics, save_sde_checkpoint,
-};
+use nuno::artifact::{DynamicsProvenance, load_sde_checkpoint, save_dynamics, save_sde_checkpoint};
 use nuno::envs::MujocoTask;
 use nuno::sde::{
     CalibrationConfig, ComputeDevice, DynamicsSpec, FitConfig, LikelihoodPath, LossConfig,
@@ -22,6 +20,7 @@ use nuno::sde::{
 use crate::data_source::DataSource;
 use crate::eta_report::{action_space, calibration_charts, print_calibration};
 use crate::plot::{Series, line_chart};
+use crate::resume::checkpoint_to_resume;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -130,22 +129,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "{bar:30} {pos}/{len} steps {per_sec} | {msg}",
     )?);
     let checkpoints = args.out.join("fit-checkpoints");
-    let resume = match (latest_checkpoint(&checkpoints)?, args.resume) {
-        (Some(checkpoint), true) => {
+    let resume = match checkpoint_to_resume(&checkpoints, args.resume, &args.out, "a fit")? {
+        Some(checkpoint) => {
             let state = load_sde_checkpoint(&checkpoint, &config, &device)
                 .with_context(|| format!("resuming from {}", checkpoint.display()))?;
-            println!("resumed from {} (step {})", checkpoint.display(), state.step);
+            println!(
+                "resumed from {} (step {})",
+                checkpoint.display(),
+                state.step
+            );
             Some(state)
         }
-        (Some(_), false) => anyhow::bail!(
-            "{} already holds a fit; pass --resume to continue it or choose another --out",
-            args.out.display()
-        ),
-        (None, true) => {
-            println!("no checkpoint in {}; starting afresh", checkpoints.display());
-            None
-        }
-        (None, false) => None,
+        None => None,
     };
     let metrics_path = args.out.join("metrics.csv");
     let mut csv = File::create(&metrics_path)

@@ -24,6 +24,7 @@ use nuno::shared::BatchDynamics;
 
 use crate::output::write_text;
 use crate::plot::{Series, line_chart};
+use crate::resume::checkpoint_to_resume;
 
 /// The offline method: which model kind, penalty and truncation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -232,26 +233,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let resuming = args.resume && latest_checkpoint(&checkpoints)?.is_some();
     let threshold = truncation_threshold(&args, &config, &model, &ctx, resuming)?;
     let mut training = PolicyTraining::new(config, &ctx, threshold, &device)?;
-    match (latest_checkpoint(&checkpoints)?, args.resume) {
-        (Some(checkpoint), true) => {
-            load_checkpoint(&checkpoint, &mut training)
-                .with_context(|| format!("resuming from {}", checkpoint.display()))?;
-            println!(
-                "resumed from {} (epoch {}, step {})",
-                checkpoint.display(),
-                training.epoch,
-                training.step
-            );
-        }
-        (Some(_), false) => anyhow::bail!(
-            "{} already holds a run; pass --resume to continue it or choose another --out",
-            args.out.display()
-        ),
-        (None, true) => println!(
-            "no checkpoint in {}; starting afresh",
-            checkpoints.display()
-        ),
-        (None, false) => {}
+    if let Some(checkpoint) = checkpoint_to_resume(&checkpoints, args.resume, &args.out, "a run")? {
+        load_checkpoint(&checkpoint, &mut training)
+            .with_context(|| format!("resuming from {}", checkpoint.display()))?;
+        println!(
+            "resumed from {} (epoch {}, step {})",
+            checkpoint.display(),
+            training.epoch,
+            training.step
+        );
     }
     if let Some(threshold) = training.threshold {
         println!(

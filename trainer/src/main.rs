@@ -14,6 +14,7 @@ mod fit_model;
 mod fit_policy;
 mod output;
 mod plot;
+mod resume;
 
 use std::process::ExitCode;
 

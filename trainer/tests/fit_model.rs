@@ -1,9 +1,10 @@
 //! `nuno-trainer fit-model`'s η loss, h(η) and threshold flags: bad values are named before any
-//! work starts, and nothing is written.
+//! work starts, and nothing is written; a fit checkpoints at every validation and `--resume`
+//! continues it.
 
 mod common;
 
-use common::fails;
+use common::{fails, generate_hopper, ok};
 
 #[test]
 fn fit_model_names_unusable_loss_flags_before_reading_anything() {
@@ -40,4 +41,58 @@ fn fit_model_names_unusable_loss_flags_before_reading_anything() {
         );
         assert!(!out.exists(), "{flag} {value} left {}", out.display());
     }
+}
+
+#[test]
+fn fit_model_checkpoints_and_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dataset = tmp.path().join("hopper.hdf5");
+    generate_hopper(dataset.to_str().unwrap(), 1500, 0);
+    let out = tmp.path().join("model");
+    let args = |steps: &str, extra: &[&str]| -> Vec<String> {
+        let mut a: Vec<String> = [
+            "fit-model",
+            "--dataset",
+            dataset.to_str().unwrap(),
+            "--task",
+            "hopper",
+            "--out",
+            out.to_str().unwrap(),
+            "--max-steps",
+            steps,
+            "--eval-every",
+            "10",
+            "--drift-hidden",
+            "16,16",
+            "--threshold-windows",
+            "32",
+        ]
+        .map(String::from)
+        .to_vec();
+        a.extend(extra.iter().map(|e| e.to_string()));
+        a
+    };
+    let valid_steps = |csv: &str| -> Vec<usize> {
+        csv.lines()
+            .skip(1)
+            .filter(|l| !l.ends_with(','))
+            .map(|l| l.split(',').next().unwrap().parse().unwrap())
+            .collect()
+    };
+    ok(&args("20", &[]));
+    let latest = std::fs::read_to_string(out.join("fit-checkpoints/LATEST")).unwrap();
+    assert_eq!(latest.trim(), "step-0000020");
+
+    let again = fails(&args("30", &[]));
+    assert!(again.contains("--resume"), "{again}");
+    let resumed = ok(&args("30", &["--resume"]));
+    assert!(resumed.contains("(step 20)"), "{resumed}");
+    let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    assert_eq!(valid_steps(&metrics), [10, 20, 30], "{metrics}");
+    let model: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("model.json")).unwrap()).unwrap();
+    assert_eq!(model["training"]["steps"], 30);
+
+    let other = fails(&args("40", &["--resume", "--lambda-grad", "0.5"]));
+    assert!(other.contains("other settings"), "{other}");
 }
