@@ -29,7 +29,8 @@ struct Member {
     grad_output: Vec<f32>,
 }
 
-/// What one member's step contributes to the shared bounds.
+/// What one member's step reports: its loss (NLL and weight decay) and its
+/// gradient with respect to the shared bounds.
 struct BoundsGradient {
     loss: f64,
     max: Vec<f32>,
