@@ -56,6 +56,16 @@ fn hopper_grid(dir: &Path, methods: &str, seeds: &str) -> String {
     s(&write_grid(dir, "grid.toml", &[row]))
 }
 
+/// Adds `line` to the grid file's `[budget]` table.
+fn add_to_budget(grid: &Path, line: &str) {
+    let text = std::fs::read_to_string(grid).unwrap();
+    std::fs::write(
+        grid,
+        text.replace("[budget]\n", &format!("[budget]\n{line}\n")),
+    )
+    .unwrap();
+}
+
 fn s(p: &Path) -> String {
     p.to_str().unwrap().to_string()
 }
@@ -194,8 +204,7 @@ fn bad_grids_are_refused_before_anything_runs() {
     }
     assert!(!dir.join("out").exists(), "nothing ran");
 
-    // A model option the fit does not have.
-    let row = dataset_row(
+    let good_row = dataset_row(
         "h",
         "hopper.hdf5",
         "hopper",
@@ -203,13 +212,9 @@ fn bad_grids_are_refused_before_anything_runs() {
         "[\"nuno\"]",
         "[0]",
     );
-    let grid = write_grid(dir, "grid-likelihood.toml", &[row]);
-    let text = std::fs::read_to_string(&grid).unwrap();
-    std::fs::write(
-        &grid,
-        text.replace("[budget]\n", "[budget]\nmodel_likelihood = \"exact\"\n"),
-    )
-    .unwrap();
+    // A model option the fit does not have.
+    let grid = write_grid(dir, "grid-likelihood.toml", std::slice::from_ref(&good_row));
+    add_to_budget(&grid, "model_likelihood = \"exact\"");
     let error = fails(&["experiment", "run", "--grid", &s(&grid), "--out", &out]);
     assert!(
         error.contains("exact") && error.contains("model_likelihood"),
@@ -218,18 +223,7 @@ fn bad_grids_are_refused_before_anything_runs() {
     assert!(!dir.join("out").exists(), "nothing ran");
 
     // --executor slurm without Slurm's client.
-    let grid = s(&write_grid(
-        dir,
-        "grid.toml",
-        &[dataset_row(
-            "h",
-            "hopper.hdf5",
-            "hopper",
-            "hopper-random",
-            "[\"nuno\"]",
-            "[0]",
-        )],
-    ));
+    let grid = s(&write_grid(dir, "grid.toml", &[good_row]));
     let output = Command::new(env!("CARGO_BIN_EXE_nuno-trainer"))
         .args([
             "experiment",
@@ -412,9 +406,7 @@ fn methods_in_the_same_kind_of_model_share_one_fit_per_seed() {
     let dir = tmp.path();
     let grid = hopper_grid(dir, "[\"nuno\", \"nuno-al\"]", "[0]");
     // The grid's model options reach the fit.
-    let text = std::fs::read_to_string(&grid).unwrap();
-    let text = text.replace("[budget]\n", "[budget]\nmodel_likelihood = \"data\"\n");
-    std::fs::write(&grid, text).unwrap();
+    add_to_budget(Path::new(&grid), "model_likelihood = \"data\"");
     let out = dir.join("out");
     // Both cells start together; one fits the SDE, the other waits for it.
     let run = ok(&[
