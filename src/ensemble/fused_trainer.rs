@@ -205,30 +205,38 @@ impl EnsembleTrainer for FusedTrainer {
         state
     }
 
-    fn restore(&mut self, current: &GaussianEnsemble, mut adam: AdamState) {
-        for (m, (member, mlp)) in self.members.iter_mut().zip(&current.members).enumerate() {
+    fn restore(&mut self, current: &GaussianEnsemble, adam: AdamState) {
+        for (member, mlp) in self.members.iter_mut().zip(&current.members) {
             member.net = TrainableMlp::from_burn(mlp);
-            let prefix = format!("members.{m}.");
-            let paths: Vec<String> = adam
-                .moments
-                .keys()
-                .filter(|k| k.starts_with(&prefix))
-                .cloned()
-                .collect();
             member.state = AdamState {
                 time: adam.time,
-                moments: paths
-                    .into_iter()
-                    .filter_map(|k| {
-                        let moments = adam.moments.remove(&k)?;
-                        Some((k[prefix.len()..].to_string(), moments))
-                    })
-                    .collect(),
+                moments: Default::default(),
             };
+        }
+        self.bounds_state = AdamState {
+            time: adam.time,
+            moments: Default::default(),
+        };
+        // `members.{m}.{path}` is member m's; the rest (the bounds) is shared.
+        for (path, moments) in adam.moments {
+            let owner = path
+                .strip_prefix("members.")
+                .and_then(|rest| rest.split_once('.'))
+                .and_then(|(m, rest)| Some((m.parse::<usize>().ok()?, rest)));
+            match owner {
+                Some((m, rest)) if m < self.members.len() => {
+                    self.members[m]
+                        .state
+                        .moments
+                        .insert(rest.to_string(), moments);
+                }
+                _ => {
+                    self.bounds_state.moments.insert(path, moments);
+                }
+            }
         }
         self.max_logvar = to_f32_vec(current.max_logvar.val());
         self.min_logvar = to_f32_vec(current.min_logvar.val());
-        self.bounds_state = adam;
     }
 }
 

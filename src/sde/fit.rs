@@ -289,10 +289,10 @@ pub fn fit_from(
                 residual: terms.residual.into_scalar(),
                 valid_nll: None,
             };
-            if evaluate {
-                let current = model.valid();
+            let current = evaluate.then(|| model.valid());
+            if let Some(current) = &current {
                 let nll = validation_nll(
-                    &current,
+                    current,
                     &valid_windows,
                     &valid_starts,
                     config.loss.likelihood,
@@ -306,8 +306,10 @@ pub fn fit_from(
                 } else {
                     evals_without_improvement += 1;
                 }
-                on_record(&record);
-                records.push(record);
+            }
+            on_record(&record);
+            records.push(record);
+            if let Some(current) = current {
                 on_evaluation(&SdeFitState {
                     step,
                     records: records.clone(),
@@ -319,9 +321,6 @@ pub fn fit_from(
                     adam: adam_state.clone(),
                     rng: rng.clone(),
                 })?;
-            } else {
-                on_record(&record);
-                records.push(record);
             }
         }
     }
