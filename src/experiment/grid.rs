@@ -199,6 +199,60 @@ impl Cell {
     }
 }
 
+/// Which of a grid's cells to run: those matching every dimension named (any
+/// of its values); a dimension left empty matches every cell.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CellSelection {
+    pub datasets: Vec<String>,
+    pub methods: Vec<Method>,
+    pub seeds: Vec<u64>,
+}
+
+impl CellSelection {
+    /// The selected cells in grid order. A value no cell of the grid has, or a
+    /// combination that leaves no cell, is an error naming it.
+    pub fn select(&self, cells: &[Cell]) -> Result<Vec<Cell>, ExperimentError> {
+        check_known("dataset", &self.datasets, cells, |c| c.dataset.clone())?;
+        check_known("method", &self.methods, cells, |c| c.method)?;
+        check_known("seed", &self.seeds, cells, |c| c.seed)?;
+        let selected: Vec<Cell> = cells
+            .iter()
+            .filter(|c| {
+                (self.datasets.is_empty() || self.datasets.contains(&c.dataset))
+                    && (self.methods.is_empty() || self.methods.contains(&c.method))
+                    && (self.seeds.is_empty() || self.seeds.contains(&c.seed))
+            })
+            .cloned()
+            .collect();
+        if selected.is_empty() {
+            return Err(ExperimentError::Invalid(
+                "no cell of the grid matches every --dataset, --method and --seed given".into(),
+            ));
+        }
+        Ok(selected)
+    }
+}
+
+/// Each of `wanted` must be some cell's `key`.
+fn check_known<T: PartialEq + fmt::Display + Ord>(
+    flag: &str,
+    wanted: &[T],
+    cells: &[Cell],
+    key: impl Fn(&Cell) -> T,
+) -> Result<(), ExperimentError> {
+    let have: std::collections::BTreeSet<T> = cells.iter().map(key).collect();
+    match wanted.iter().find(|w| !have.contains(w)) {
+        Some(missing) => {
+            let have: Vec<String> = have.iter().map(ToString::to_string).collect();
+            Err(ExperimentError::Invalid(format!(
+                "--{flag} {missing}: no cell of the grid has it (the grid's: {})",
+                have.join(", ")
+            )))
+        }
+        None => Ok(()),
+    }
+}
+
 impl Grid {
     /// Reads and checks `path`; dataset files are resolved against its folder.
     pub fn read(path: &Path) -> Result<(Grid, Vec<Cell>), ExperimentError> {
@@ -251,14 +305,9 @@ impl Grid {
             if d.name.is_empty() || d.name.contains(['/', '\\']) || d.name.starts_with('.') {
                 return Err(format!("dataset name `{}` cannot name a folder", d.name));
             }
+            // Whether the file exists is the runner's check, on the cells it
+            // runs: a report or status needs only the cells' folders.
             let file = base.join(&d.file);
-            if !file.exists() {
-                return Err(format!(
-                    "dataset `{}`: {} does not exist",
-                    d.name,
-                    file.display()
-                ));
-            }
             let preset = preset(&d.preset).map_err(|e| format!("dataset `{}`: {e}", d.name))?;
             if preset.task != d.task {
                 return Err(format!(

@@ -15,8 +15,8 @@ use clap::{Subcommand, ValueEnum};
 use nuno::data::read_dataset;
 use nuno::envs::{ObservationLayout, TaskConfig};
 use nuno::experiment::{
-    Cell, CellResult, CellStatus, Grid, Method, cell_dir, cell_status, markdown_table,
-    policy_time_left, results_csv, summarize, summarize_run, write_result,
+    Cell, CellResult, CellSelection, CellStatus, Grid, Method, cell_dir, cell_status,
+    markdown_table, policy_time_left, results_csv, summarize, summarize_run, write_result,
 };
 
 use crate::output::write_text;
@@ -24,13 +24,13 @@ use crate::plot::{Series, line_chart};
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Run every unfinished cell of a grid.
+    /// Run every unfinished cell of a grid (or of the cells `--dataset`, `--method`, `--seed` pick).
     Run(RunArgs),
     /// Run one cell (what each local worker and each Slurm array task runs).
     #[command(hide = true)]
     RunCell(CellArgs),
     /// Print each cell's state: done (with scores), training (epochs), pending.
-    Status(GridArgs),
+    Status(StatusArgs),
     /// Aggregate the finished cells: results.csv, results.md, a learning-curve plot per dataset.
     Report(GridArgs),
 }
@@ -45,6 +45,40 @@ pub struct GridArgs {
     out: PathBuf,
 }
 
+/// Picks some of the grid's cells; each flag repeats, and a cell is picked
+/// when it matches every flag given.
+#[derive(Debug, Clone, clap::Args)]
+pub struct SelectArgs {
+    /// Only this dataset's cells (the grid's `name`).
+    #[arg(long = "dataset")]
+    datasets: Vec<String>,
+    /// Only this method's cells.
+    #[arg(long = "method")]
+    methods: Vec<Method>,
+    /// Only this seed's cells.
+    #[arg(long = "seed")]
+    seeds: Vec<u64>,
+}
+
+impl SelectArgs {
+    fn select(&self, cells: &[Cell]) -> anyhow::Result<Vec<Cell>> {
+        let selection = CellSelection {
+            datasets: self.datasets.clone(),
+            methods: self.methods.clone(),
+            seeds: self.seeds.clone(),
+        };
+        Ok(selection.select(cells)?)
+    }
+}
+
+#[derive(Debug, clap::Args)]
+pub struct StatusArgs {
+    #[command(flatten)]
+    grid: GridArgs,
+    #[command(flatten)]
+    select: SelectArgs,
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Executor {
     /// Cells as child processes on this machine, `--jobs` at a time.
@@ -57,6 +91,8 @@ pub enum Executor {
 pub struct RunArgs {
     #[command(flatten)]
     grid: GridArgs,
+    #[command(flatten)]
+    select: SelectArgs,
     #[arg(long, value_enum, default_value = "local")]
     executor: Executor,
     /// Cells at once with `--executor local`.
@@ -85,13 +121,21 @@ pub fn run(command: Command) -> anyhow::Result<()> {
     }
 }
 
-/// The grid's cells, every name and file checked, and each dataset read once
-/// and checked against its task.
-fn checked_cells(grid: &Path) -> anyhow::Result<Vec<Cell>> {
+/// The selected cells of the grid, every name checked, and each of their
+/// datasets read once and checked against its task.
+fn checked_cells(grid: &Path, select: &SelectArgs) -> anyhow::Result<Vec<Cell>> {
     let (_, cells) = Grid::read(grid)?;
+    let cells = select.select(&cells)?;
     let mut seen = BTreeSet::new();
     for cell in &cells {
         if seen.insert(cell.dataset.clone()) {
+            anyhow::ensure!(
+                cell.file.exists(),
+                "{}: dataset `{}`: {} does not exist",
+                grid.display(),
+                cell.dataset,
+                cell.file.display()
+            );
             let task = task_config(cell);
             read_dataset(&cell.file, None)
                 .and_then(|d| d.check_task(&task, &cell.file))
@@ -112,7 +156,7 @@ fn task_config(cell: &Cell) -> TaskConfig {
 
 fn run_grid(args: RunArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.jobs > 0, "--jobs must be at least 1");
-    let cells = checked_cells(&args.grid.grid)?;
+    let cells = checked_cells(&args.grid.grid, &args.select)?;
     let mut pending = Vec::new();
     for cell in &cells {
         if !matches!(cell_status(&args.grid.out, cell)?, CellStatus::Done(_)) {
@@ -386,8 +430,10 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn status(args: GridArgs) -> anyhow::Result<()> {
+fn status(args: StatusArgs) -> anyhow::Result<()> {
+    let StatusArgs { grid: args, select } = args;
     let (grid, cells) = Grid::read(&args.grid)?;
+    let cells = select.select(&cells)?;
     let mut statuses = Vec::new();
     for cell in &cells {
         let status = cell_status(&args.out, cell)?;

@@ -279,13 +279,8 @@ fn cells_run_each_seed_round_over_every_dataset() {
         "--out",
         &s(&out),
     ]);
-    let order: Vec<&str> = status
-        .lines()
-        .filter_map(|l| l.split_whitespace().nth(1))
-        .filter(|id| id.contains('/'))
-        .collect();
     assert_eq!(
-        order,
+        listed(&status),
         [
             "a/nuno/seed-0",
             "a/mopo/seed-0",
@@ -295,6 +290,87 @@ fn cells_run_each_seed_round_over_every_dataset() {
         ],
         "{status}"
     );
+}
+
+/// The ids of the cells `status` lists.
+fn listed(status: &str) -> Vec<&str> {
+    status
+        .lines()
+        .filter_map(|l| l.split_whitespace().nth(1))
+        .filter(|id| id.contains('/'))
+        .collect()
+}
+
+/// `--dataset`, `--method` and `--seed` pick cells (every flag given must
+/// match); a value the grid lacks is refused by name before anything runs,
+/// and only the picked cells' files need exist.
+#[test]
+fn flags_pick_some_of_the_cells() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    generate_hopper(&s(&dir.join("hopper.hdf5")), 300, 0);
+    let rows = [
+        dataset_row(
+            "a",
+            "hopper.hdf5",
+            "hopper",
+            "hopper-random",
+            "[\"nuno\", \"mopo\"]",
+            "[0, 1]",
+        ),
+        dataset_row(
+            "b",
+            "missing.hdf5",
+            "hopper",
+            "hopper-medium",
+            "[\"nuno\"]",
+            "[7]",
+        ),
+    ];
+    let grid = s(&write_grid(dir, "grid.toml", &rows));
+    let out = s(&dir.join("out"));
+    let status = |flags: &[&str]| {
+        let mut args = vec!["experiment", "status", "--grid", &grid, "--out", &out];
+        args.extend_from_slice(flags);
+        ok(&args)
+    };
+    assert_eq!(
+        listed(&status(&["--seed", "1"])),
+        ["a/nuno/seed-1", "a/mopo/seed-1"]
+    );
+    assert_eq!(
+        listed(&status(&["--method", "mopo", "--dataset", "a"])),
+        ["a/mopo/seed-0", "a/mopo/seed-1"]
+    );
+    assert_eq!(
+        listed(&status(&["--seed", "7", "--seed", "0", "--method", "nuno"])),
+        ["a/nuno/seed-0", "b/nuno/seed-7"]
+    );
+
+    let run = |flags: &[&str]| {
+        let mut args = vec!["experiment", "run", "--grid", &grid, "--out", &out];
+        args.extend_from_slice(flags);
+        fails(&args)
+    };
+    let error = run(&["--seed", "5"]);
+    assert!(
+        error.contains("--seed 5: no cell of the grid has it (the grid's: 0, 1, 7)"),
+        "{error}"
+    );
+    let error = run(&["--dataset", "c"]);
+    assert!(error.contains("--dataset c: no cell"), "{error}");
+    let error = run(&["--method", "tatu-mopo"]);
+    assert!(error.contains("--method tatu-mopo: no cell"), "{error}");
+    let error = run(&["--method", "dreamer"]);
+    assert!(error.contains("unknown method `dreamer`"), "{error}");
+    let error = run(&["--dataset", "b", "--seed", "0"]);
+    assert!(error.contains("no cell of the grid matches"), "{error}");
+    let error = run(&["--dataset", "b"]);
+    assert!(
+        error.contains("dataset `b`") && error.contains("missing.hdf5 does not exist"),
+        "{error}"
+    );
+    assert!(!dir.join("out").exists(), "nothing ran");
 }
 
 #[test]
