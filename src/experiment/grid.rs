@@ -187,6 +187,21 @@ impl Cell {
         format!("{}/{}/seed-{}", self.dataset, self.method, self.seed)
     }
 
+    /// Whether a result written for `other` is this cell's: the same dataset
+    /// (name and file name), task, layout, preset, method and seed. The cell's
+    /// place in the grid and the folder the grid was named from are not what
+    /// it computed, so a grid that gains a method, or is named by another path
+    /// (a cluster's login and compute nodes), keeps its finished cells.
+    pub fn is_same_cell_as(&self, other: &Cell) -> bool {
+        self.dataset == other.dataset
+            && self.file.file_name() == other.file.file_name()
+            && self.task == other.task
+            && self.layout == other.layout
+            && self.preset == other.preset
+            && self.method == other.method
+            && self.seed == other.seed
+    }
+
     /// `models/dataset/kind/seed-N`: the model's folder under the experiment,
     /// shared by the cells whose methods train in the same kind of model.
     pub fn model_id(&self) -> String {

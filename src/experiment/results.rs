@@ -96,18 +96,34 @@ pub fn write_result(root: &Path, result: &CellResult) -> Result<(), ExperimentEr
     )?)
 }
 
-/// Where `cell` stands under `root`.
-pub fn cell_status(root: &Path, cell: &Cell) -> Result<CellStatus, ExperimentError> {
+/// Where `cell` stands under `root` when the grid's budget is `policy_steps`:
+/// a cell finished at fewer steps (the budget has since grown) is partial, to
+/// be continued from its last checkpoint.
+pub fn cell_status(
+    root: &Path,
+    cell: &Cell,
+    policy_steps: usize,
+) -> Result<CellStatus, ExperimentError> {
     let dir = cell_dir(root, cell);
     let result = dir.join(RESULT);
     if result.is_file() {
-        let result: CellResult = read_versioned_json(&result, RESULT_SCHEMA_VERSION)?;
-        if result.cell != *cell {
+        let mut result: CellResult = read_versioned_json(&result, RESULT_SCHEMA_VERSION)?;
+        if !result.cell.is_same_cell_as(cell) {
+            let old = &result.cell;
             return Err(ExperimentError::Invalid(format!(
-                "{}: written for another grid's cell; move the old experiment away",
-                dir.display()
+                "{}: written for another cell (preset {}, dataset file {}); move the old experiment away",
+                dir.display(),
+                old.preset,
+                old.file.display()
             )));
         }
+        if result.steps < policy_steps {
+            return Ok(CellStatus::Partial {
+                epochs: result.curve.len(),
+            });
+        }
+        // Where the cell sits in this grid, and its file as this grid names it.
+        result.cell = cell.clone();
         return Ok(CellStatus::Done(Box::new(result)));
     }
     match latest_checkpoint(&dir.join("policy/checkpoints"))? {

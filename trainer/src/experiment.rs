@@ -123,8 +123,8 @@ pub fn run(command: Command) -> anyhow::Result<()> {
 
 /// The selected cells of the grid, every name checked, and each of their
 /// datasets read once and checked against its task.
-fn checked_cells(grid: &Path, select: &SelectArgs) -> anyhow::Result<Vec<Cell>> {
-    let (_, cells) = Grid::read(grid)?;
+fn checked_cells(grid: &Path, select: &SelectArgs) -> anyhow::Result<(Grid, Vec<Cell>)> {
+    let (parsed, cells) = Grid::read(grid)?;
     let cells = select.select(&cells)?;
     let mut seen = BTreeSet::new();
     for cell in &cells {
@@ -144,7 +144,7 @@ fn checked_cells(grid: &Path, select: &SelectArgs) -> anyhow::Result<Vec<Cell>> 
                 })?;
         }
     }
-    Ok(cells)
+    Ok((parsed, cells))
 }
 
 fn task_config(cell: &Cell) -> TaskConfig {
@@ -156,10 +156,14 @@ fn task_config(cell: &Cell) -> TaskConfig {
 
 fn run_grid(args: RunArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.jobs > 0, "--jobs must be at least 1");
-    let cells = checked_cells(&args.grid.grid, &args.select)?;
+    let (grid, cells) = checked_cells(&args.grid.grid, &args.select)?;
+    let steps = grid.budget.policy_steps;
     let mut pending = Vec::new();
     for cell in &cells {
-        if !matches!(cell_status(&args.grid.out, cell)?, CellStatus::Done(_)) {
+        if !matches!(
+            cell_status(&args.grid.out, cell, steps)?,
+            CellStatus::Done(_)
+        ) {
             pending.push(cell.clone());
         }
     }
@@ -317,7 +321,7 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         )
     })?;
     let root = &args.grid.out;
-    if let CellStatus::Done(_) = cell_status(root, cell)? {
+    if let CellStatus::Done(_) = cell_status(root, cell, grid.budget.policy_steps)? {
         println!("{} is finished", cell.id());
         return Ok(());
     }
@@ -436,7 +440,7 @@ fn status(args: StatusArgs) -> anyhow::Result<()> {
     let cells = select.select(&cells)?;
     let mut statuses = Vec::new();
     for cell in &cells {
-        let status = cell_status(&args.out, cell)?;
+        let status = cell_status(&args.out, cell, grid.budget.policy_steps)?;
         let state = match &status {
             CellStatus::Done(r) => format!(
                 "done: best {:.1}, final {:.1} ({} steps)",
@@ -466,10 +470,10 @@ fn status(args: StatusArgs) -> anyhow::Result<()> {
 }
 
 fn report(args: GridArgs) -> anyhow::Result<()> {
-    let (_, cells) = Grid::read(&args.grid)?;
+    let (grid, cells) = Grid::read(&args.grid)?;
     let mut results: Vec<CellResult> = Vec::new();
     for cell in &cells {
-        if let CellStatus::Done(r) = cell_status(&args.out, cell)? {
+        if let CellStatus::Done(r) = cell_status(&args.out, cell, grid.budget.policy_steps)? {
             results.push(*r);
         }
     }

@@ -398,10 +398,13 @@ fn a_local_grid_runs_once_resumes_and_reports() {
     assert!(again.contains("0 to run"), "{again}");
 
     // A cell killed after its second epoch, before its result was written,
-    // resumes there: given a longer budget, it trains the third epoch only.
+    // resumes there: given a longer budget, it trains the third epoch only;
+    // so does the finished cell, its result now short of the budget.
     let cell = out.join("hopper-random/nuno/seed-1");
     let before = scores(&cell);
     assert_eq!(before.len(), 2);
+    let finished = out.join("hopper-random/nuno/seed-0");
+    let finished_before = scores(&finished);
     std::fs::remove_file(cell.join("result.json")).unwrap();
     let row = dataset_row(
         "hopper-random",
@@ -412,22 +415,22 @@ fn a_local_grid_runs_once_resumes_and_reports() {
         "[0, 1]",
     );
     write_grid_with(dir, "grid.toml", 30, &[row]);
+    let status = ok(&["experiment", "status", "--grid", &grid, "--out", &s(&out)]);
+    assert!(status.contains("0/2 cells done"), "{status}");
     let resumed = ok(&run);
-    assert!(resumed.contains("1 to run"), "{resumed}");
-    let log = std::fs::read_to_string(cell.join("log.txt")).unwrap();
-    assert!(log.contains("resumed from"), "{log}");
-    let after = scores(&cell);
-    assert_eq!(after.len(), 3);
-    assert_eq!(
-        after[..2],
-        before[..],
-        "the resumed cell kept its first two epochs"
-    );
-    assert_eq!(
-        scores(&out.join("hopper-random/nuno/seed-0")).len(),
-        2,
-        "the finished cell was not rerun"
-    );
+    assert!(resumed.contains("2 to run"), "{resumed}");
+    for (cell, before) in [(&cell, &before), (&finished, &finished_before)] {
+        let log = std::fs::read_to_string(cell.join("log.txt")).unwrap();
+        assert!(log.contains("resumed from"), "{log}");
+        let after = scores(cell);
+        assert_eq!(after.len(), 3);
+        assert_eq!(
+            after[..2],
+            before[..],
+            "{}: kept its first two epochs",
+            cell.display()
+        );
+    }
 
     let report = ok(&["experiment", "report", "--grid", &grid, "--out", &s(&out)]);
     // The table against the cells' own metrics: best and final per seed, mean ± sample std.
@@ -474,6 +477,49 @@ fn a_local_grid_runs_once_resumes_and_reports() {
     assert!(report.contains(&hours), "expected {hours} in\n{report}");
     assert!(out.join("results.md").is_file());
     assert!(out.join("curves-hopper-random.svg").is_file());
+
+    // A grid that gains a method before the finished one (shifting every
+    // cell's place), named by another path, keeps its finished cells.
+    let row = dataset_row(
+        "hopper-random",
+        "hopper.hdf5",
+        "hopper",
+        "hopper-random",
+        "[\"nuno-al\", \"nuno\"]",
+        "[0, 1]",
+    );
+    write_grid_with(dir, "grid.toml", 30, &[row]);
+    std::fs::create_dir(dir.join("elsewhere")).unwrap();
+    let renamed = s(&dir.join("elsewhere/../grid.toml"));
+    let status = ok(&[
+        "experiment",
+        "status",
+        "--grid",
+        &renamed,
+        "--out",
+        &s(&out),
+    ]);
+    assert!(status.contains("2/4 cells done"), "{status}");
+    let moved = status.lines().find(|l| l.contains("nuno/seed-1")).unwrap();
+    assert!(
+        moved.trim_start().starts_with("3 ") && moved.contains("done"),
+        "{status}"
+    );
+    // ... but a dataset row pointed at another file does not.
+    let row = dataset_row(
+        "hopper-random",
+        "grid.toml",
+        "hopper",
+        "hopper-random",
+        "[\"nuno\"]",
+        "[0]",
+    );
+    write_grid_with(dir, "grid.toml", 30, &[row]);
+    let error = fails(&["experiment", "status", "--grid", &grid, "--out", &s(&out)]);
+    assert!(
+        error.contains("written for another cell") && error.contains("hopper.hdf5"),
+        "{error}"
+    );
 }
 
 #[test]
