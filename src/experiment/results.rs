@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::ExperimentError;
-use super::grid::{Cell, Method};
+use super::grid::{Budget, Cell, Method};
 use crate::agent::EpochRecord;
 use crate::artifact::{latest_checkpoint, read_versioned_json, write_json};
 
@@ -35,6 +35,10 @@ pub struct CellResult {
     /// written before it was recorded.
     #[serde(default)]
     pub policy_seconds: Option<f64>,
+    /// The grid's budget the cell ran under. Absent from results written
+    /// before it was recorded.
+    #[serde(default)]
+    pub budget: Option<Budget>,
 }
 
 /// Where a cell stands.
@@ -54,8 +58,12 @@ pub fn cell_dir(root: &Path, cell: &Cell) -> PathBuf {
     root.join(cell.id())
 }
 
-/// Reads fit-policy's `metrics.jsonl` into a result for `cell`.
-pub fn summarize_run(cell: &Cell, metrics: &Path) -> Result<CellResult, ExperimentError> {
+/// Reads fit-policy's `metrics.jsonl` into a result for `cell`, run under `budget`.
+pub fn summarize_run(
+    cell: &Cell,
+    budget: &Budget,
+    metrics: &Path,
+) -> Result<CellResult, ExperimentError> {
     let text = std::fs::read_to_string(metrics).map_err(|e| ExperimentError::Io {
         file: metrics.to_path_buf(),
         source: e,
@@ -85,6 +93,7 @@ pub fn summarize_run(cell: &Cell, metrics: &Path) -> Result<CellResult, Experime
             .map(|r| (r.step, r.eval.normalized_score))
             .collect(),
         policy_seconds: Some(records.iter().map(|r| r.seconds.total()).sum()),
+        budget: Some(budget.clone()),
     })
 }
 
@@ -96,13 +105,14 @@ pub fn write_result(root: &Path, result: &CellResult) -> Result<(), ExperimentEr
     )?)
 }
 
-/// Where `cell` stands under `root` when the grid's budget is `policy_steps`:
-/// a cell finished at fewer steps (the budget has since grown) is partial, to
-/// be continued from its last checkpoint.
+/// Where `cell` stands under `root` with the grid's `budget`. A cell finished
+/// at fewer policy steps (the budget has since grown) is partial, to be
+/// continued from its last checkpoint; one finished under any other budget
+/// is an error, so a table never mixes budgets.
 pub fn cell_status(
     root: &Path,
     cell: &Cell,
-    policy_steps: usize,
+    budget: &Budget,
 ) -> Result<CellStatus, ExperimentError> {
     let dir = cell_dir(root, cell);
     let result = dir.join(RESULT);
@@ -117,7 +127,17 @@ pub fn cell_status(
                 old.file.display()
             )));
         }
-        if result.steps < policy_steps {
+        if let Some(then) = &result.budget {
+            let changed = budget_changes(then, budget);
+            if !changed.is_empty() {
+                return Err(ExperimentError::Invalid(format!(
+                    "{}: finished under another budget ({}); give the grid another --out, or move this folder away",
+                    dir.display(),
+                    changed.join("; ")
+                )));
+            }
+        }
+        if result.steps < budget.policy_steps {
             return Ok(CellStatus::Partial {
                 epochs: result.curve.len(),
             });
@@ -136,6 +156,27 @@ pub fn cell_status(
         }
         None => Ok(CellStatus::Pending),
     }
+}
+
+/// The budget's entries that differ between `then` and `now`, as "name: then
+/// then, now now"; more policy steps now is not a change (the cell continues).
+fn budget_changes(then: &Budget, now: &Budget) -> Vec<String> {
+    let as_map = |b: &Budget| match serde_json::to_value(b) {
+        Ok(serde_json::Value::Object(map)) => map,
+        _ => serde_json::Map::new(),
+    };
+    let (then_map, now_map) = (as_map(then), as_map(now));
+    then_map
+        .iter()
+        .filter(|(key, value)| now_map.get(*key) != Some(*value))
+        .filter(|(key, _)| {
+            !(key.as_str() == "policy_steps" && now.policy_steps > then.policy_steps)
+        })
+        .map(|(key, value)| {
+            let now = now_map.get(key).map_or("none".into(), ToString::to_string);
+            format!("{key}: {value} then, {now} now")
+        })
+        .collect()
 }
 
 /// Policy training left in a grid at the pace of its finished cells: their
@@ -306,7 +347,30 @@ mod tests {
             steps: epochs * 1000,
             curve: (1..=epochs).map(|e| (e * 1000, 0.0)).collect(),
             policy_seconds,
+            budget: None,
         }))
+    }
+
+    #[test]
+    fn a_grown_policy_budget_is_no_change_but_anything_else_is() {
+        let then: Budget = toml::from_str("model_steps = 20\npolicy_steps = 100").unwrap();
+        let with = |text: &str| -> Budget { toml::from_str(text).unwrap() };
+        assert!(budget_changes(&then, &then).is_empty());
+        assert!(budget_changes(&then, &with("model_steps = 20\npolicy_steps = 300")).is_empty());
+        assert_eq!(
+            budget_changes(&then, &with("model_steps = 20\npolicy_steps = 50")),
+            ["policy_steps: 100 then, 50 now"]
+        );
+        assert_eq!(
+            budget_changes(
+                &then,
+                &with("model_steps = 30\npolicy_steps = 100\nhidden = [8]")
+            ),
+            [
+                "hidden: [256,256] then, [8] now",
+                "model_steps: 20 then, 30 now"
+            ]
+        );
     }
 
     #[test]

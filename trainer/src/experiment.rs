@@ -157,11 +157,10 @@ fn task_config(cell: &Cell) -> TaskConfig {
 fn run_grid(args: RunArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.jobs > 0, "--jobs must be at least 1");
     let (grid, cells) = checked_cells(&args.grid.grid, &args.select)?;
-    let steps = grid.budget.policy_steps;
     let mut pending = Vec::new();
     for cell in &cells {
         if !matches!(
-            cell_status(&args.grid.out, cell, steps)?,
+            cell_status(&args.grid.out, cell, &grid.budget)?,
             CellStatus::Done(_)
         ) {
             pending.push(cell.clone());
@@ -321,7 +320,7 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         )
     })?;
     let root = &args.grid.out;
-    if let CellStatus::Done(_) = cell_status(root, cell, grid.budget.policy_steps)? {
+    if let CellStatus::Done(_) = cell_status(root, cell, &grid.budget)? {
         println!("{} is finished", cell.id());
         return Ok(());
     }
@@ -422,7 +421,7 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         cell.method.as_str().into(),
         "--resume".into(),
     ])?;
-    let result = summarize_run(cell, &policy.join("metrics.jsonl"))?;
+    let result = summarize_run(cell, &grid.budget, &policy.join("metrics.jsonl"))?;
     write_result(root, &result)?;
     println!(
         "{}: best normalised score {:.1} at step {}, final {:.1}",
@@ -440,7 +439,7 @@ fn status(args: StatusArgs) -> anyhow::Result<()> {
     let cells = select.select(&cells)?;
     let mut statuses = Vec::new();
     for cell in &cells {
-        let status = cell_status(&args.out, cell, grid.budget.policy_steps)?;
+        let status = cell_status(&args.out, cell, &grid.budget)?;
         let state = match &status {
             CellStatus::Done(r) => format!(
                 "done: best {:.1}, final {:.1} ({} steps)",
@@ -473,7 +472,7 @@ fn report(args: GridArgs) -> anyhow::Result<()> {
     let (grid, cells) = Grid::read(&args.grid)?;
     let mut results: Vec<CellResult> = Vec::new();
     for cell in &cells {
-        if let CellStatus::Done(r) = cell_status(&args.out, cell, grid.budget.policy_steps)? {
+        if let CellStatus::Done(r) = cell_status(&args.out, cell, &grid.budget)? {
             results.push(*r);
         }
     }

@@ -505,7 +505,19 @@ fn a_local_grid_runs_once_resumes_and_reports() {
         moved.trim_start().starts_with("3 ") && moved.contains("done"),
         "{status}"
     );
-    // ... but a dataset row pointed at another file does not.
+    // ... but a budget changed otherwise refuses them,
+    let text = std::fs::read_to_string(dir.join("grid.toml")).unwrap();
+    std::fs::write(
+        dir.join("grid.toml"),
+        text.replace("eval_episodes = 1", "eval_episodes = 2"),
+    )
+    .unwrap();
+    let error = fails(&["experiment", "status", "--grid", &grid, "--out", &s(&out)]);
+    assert!(
+        error.contains("finished under another budget (eval_episodes: 1 then, 2 now)"),
+        "{error}"
+    );
+    // and so does a dataset row pointed at another file.
     let row = dataset_row(
         "hopper-random",
         "grid.toml",
