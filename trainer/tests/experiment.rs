@@ -244,12 +244,9 @@ fn bad_grids_are_refused_before_anything_runs() {
     assert!(!dir.join("out/slurm").exists(), "nothing was submitted");
 }
 
-/// Seeds outermost across datasets: a sweep cut short has every dataset ×
-/// method at its first seed before any at its second.
-#[test]
-fn cells_run_each_seed_round_over_every_dataset() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path();
+/// A grid over a 300-transition hopper file: dataset `a` (nuno and mopo,
+/// seeds 0 and 1) on it, dataset `b` (nuno, seed 7) on `b_file`.
+fn two_dataset_grid(dir: &Path, b_file: &str) -> PathBuf {
     generate_hopper(&s(&dir.join("hopper.hdf5")), 300, 0);
     let rows = [
         dataset_row(
@@ -260,16 +257,18 @@ fn cells_run_each_seed_round_over_every_dataset() {
             "[\"nuno\", \"mopo\"]",
             "[0, 1]",
         ),
-        dataset_row(
-            "b",
-            "hopper.hdf5",
-            "hopper",
-            "hopper-medium",
-            "[\"nuno\"]",
-            "[7]",
-        ),
+        dataset_row("b", b_file, "hopper", "hopper-medium", "[\"nuno\"]", "[7]"),
     ];
-    let grid = write_grid(dir, "grid.toml", &rows);
+    write_grid(dir, "grid.toml", &rows)
+}
+
+/// Seeds outermost across datasets: a sweep cut short has every dataset ×
+/// method at its first seed before any at its second.
+#[test]
+fn cells_run_each_seed_round_over_every_dataset() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let grid = two_dataset_grid(dir, "hopper.hdf5");
     let out = dir.join("out");
     let status = ok(&[
         "experiment",
@@ -308,26 +307,7 @@ fn listed(status: &str) -> Vec<&str> {
 fn flags_pick_some_of_the_cells() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    generate_hopper(&s(&dir.join("hopper.hdf5")), 300, 0);
-    let rows = [
-        dataset_row(
-            "a",
-            "hopper.hdf5",
-            "hopper",
-            "hopper-random",
-            "[\"nuno\", \"mopo\"]",
-            "[0, 1]",
-        ),
-        dataset_row(
-            "b",
-            "missing.hdf5",
-            "hopper",
-            "hopper-medium",
-            "[\"nuno\"]",
-            "[7]",
-        ),
-    ];
-    let grid = s(&write_grid(dir, "grid.toml", &rows));
+    let grid = s(&two_dataset_grid(dir, "missing.hdf5"));
     let out = s(&dir.join("out"));
     let status = |flags: &[&str]| {
         let mut args = vec!["experiment", "status", "--grid", &grid, "--out", &out];
