@@ -211,15 +211,20 @@ pub struct Summary {
     pub final_std: f64,
 }
 
-/// Aggregates finished cells per dataset × method, in grid order.
-pub fn summarize(results: &[CellResult]) -> Vec<Summary> {
-    let mut groups: BTreeMap<(usize, Method), Vec<&CellResult>> = BTreeMap::new();
+/// Aggregates finished cells per dataset × method, datasets in `dataset_order`
+/// (the grid file's order, whichever of their cells have finished; a dataset
+/// not named there comes last).
+pub fn summarize(results: &[CellResult], dataset_order: &[&str]) -> Vec<Summary> {
+    let mut groups: BTreeMap<(usize, &str, Method), Vec<&CellResult>> = BTreeMap::new();
     for r in results {
-        let first = results
+        let place = dataset_order
             .iter()
-            .find(|o| o.cell.dataset == r.cell.dataset)
-            .map_or(0, |o| o.cell.index);
-        groups.entry((first, r.cell.method)).or_default().push(r);
+            .position(|d| *d == r.cell.dataset)
+            .unwrap_or(dataset_order.len());
+        groups
+            .entry((place, &r.cell.dataset, r.cell.method))
+            .or_default()
+            .push(r);
     }
     groups
         .into_values()
@@ -328,27 +333,66 @@ mod tests {
     use super::*;
     use crate::envs::{ObservationLayout, TaskName};
 
-    fn done(epochs: usize, policy_seconds: Option<f64>) -> CellStatus {
-        CellStatus::Done(Box::new(CellResult {
+    fn result(index: usize, dataset: &str, method: Method, seed: u64, best: f64) -> CellResult {
+        CellResult {
             schema_version: RESULT_SCHEMA_VERSION,
             cell: Cell {
-                index: 0,
-                dataset: "d".into(),
-                file: PathBuf::from("d.hdf5"),
+                index,
+                dataset: dataset.into(),
+                file: PathBuf::from(format!("{dataset}.hdf5")),
                 task: TaskName::Hopper,
                 layout: ObservationLayout::D4rl,
                 preset: "hopper-random".into(),
-                method: Method::Nuno,
-                seed: 0,
+                method,
+                seed,
             },
-            best_score: 0.0,
+            best_score: best,
             best_step: 0,
             final_score: 0.0,
+            steps: 1000,
+            curve: vec![(1000, 0.0)],
+            policy_seconds: None,
+            budget: None,
+        }
+    }
+
+    fn done(epochs: usize, policy_seconds: Option<f64>) -> CellStatus {
+        CellStatus::Done(Box::new(CellResult {
             steps: epochs * 1000,
             curve: (1..=epochs).map(|e| (e * 1000, 0.0)).collect(),
             policy_seconds,
-            budget: None,
+            ..result(0, "d", Method::Nuno, 0, 0.0)
         }))
+    }
+
+    #[test]
+    fn the_report_lists_datasets_in_the_grid_order_whichever_cells_finished() {
+        // Seeds outermost: dataset a's seed-0 cells are missing, so b's
+        // finished cells come first by index, yet the grid lists a first.
+        let results = [
+            result(5, "b", Method::Mopo, 0, 10.0),
+            result(4, "b", Method::Nuno, 0, 30.0),
+            result(6, "a", Method::Nuno, 1, 70.0),
+            result(10, "b", Method::Nuno, 1, 50.0),
+            result(8, "a", Method::Nuno, 2, 80.0),
+        ];
+        let summaries = summarize(&results, &["a", "b"]);
+        let rows: Vec<(&str, Method, usize, f64)> = summaries
+            .iter()
+            .map(|s| (s.dataset.as_str(), s.method, s.runs, s.best_mean))
+            .collect();
+        assert_eq!(
+            rows,
+            [
+                ("a", Method::Nuno, 2, 75.0),
+                ("b", Method::Nuno, 2, 40.0),
+                ("b", Method::Mopo, 1, 10.0),
+            ]
+        );
+        let table = markdown_table(&summaries);
+        let a = table.find("| a |").unwrap();
+        let b = table.find("| b |").unwrap();
+        assert!(a < b, "{table}");
     }
 
     #[test]

@@ -481,7 +481,8 @@ fn report(args: GridArgs) -> anyhow::Result<()> {
         "no cell of {} has finished",
         args.grid.display()
     );
-    let summaries = summarize(&results);
+    let order: Vec<&str> = grid.datasets.iter().map(|d| d.name.as_str()).collect();
+    let summaries = summarize(&results, &order);
     let timed: Vec<f64> = results.iter().filter_map(|r| r.policy_seconds).collect();
     // Results written before policy time was recorded have none to add.
     let time = if timed.is_empty() {
