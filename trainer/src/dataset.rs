@@ -10,7 +10,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{
     ActionMode, ActorPolicy, BatchPolicy, FusedActor, OnlineSacConfig, RandomNetworkPolicy,
 };
-use nuno::artifact::{Behaviour, load_behaviour, read_online_run, read_run_transitions};
+use nuno::artifact::{
+    Behaviour, load_behaviour, read_online_run, read_run_transitions, run_policies,
+};
 use nuno::data::{
     BehaviourLevel, Budget, Dataset, DatasetFormat, DatasetMetadata, GenerateConfig, generate,
     read_dataset, write_d4rl, write_neorl,
@@ -304,7 +306,7 @@ fn from_behaviour(
 }
 
 /// How to re-create the medium policy's run up to its checkpoint (the run is
-/// deterministic on the same machine).
+/// deterministic with the same nuno revision).
 fn rerun_hint(task: TaskName, medium: &Behaviour) -> String {
     let Some(c) = &medium.metadata.provenance.online_training else {
         return String::new();
@@ -346,6 +348,28 @@ fn medium_replay(run: &Path, medium: &Behaviour) -> anyhow::Result<Dataset> {
         medium.entry.run
     );
     let step = medium.entry.pick.step;
+    // The same configuration is not the same run under a nuno whose float
+    // arithmetic differs (a kernel's summation order, say): the policy the run
+    // saved at the medium step must be the medium policy itself.
+    let saved = run_policies(run)?
+        .into_iter()
+        .find(|p| p.step == step)
+        .with_context(|| {
+            format!(
+                "{} has no policy at step {step}, the medium policy's checkpoint",
+                run.display()
+            )
+        })?;
+    anyhow::ensure!(
+        saved.metadata.weights_sha256 == medium.metadata.weights_sha256,
+        "{}'s policy at step {step} is not the medium policy (weights SHA-256 {} against {}): \
+         the run has the medium policy's configuration but did not reproduce it, as happens when \
+         it is re-run with a nuno whose arithmetic has changed since the policy was trained; \
+         re-run it with the nuno revision that trained the policy (models/behaviour/README.md)",
+        run.display(),
+        saved.metadata.weights_sha256,
+        medium.metadata.weights_sha256
+    );
     let mut dataset = read_run_transitions(run, step)?;
     let mut metadata = dataset.metadata.clone();
     metadata.insert("kind".into(), "medium-replay".into());

@@ -133,6 +133,19 @@ fn online_sac_records_d4rl_columns_and_resumes_bit_for_bit() {
     }
 }
 
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let path = entry.unwrap().path();
+        let target = to.join(path.file_name().unwrap());
+        if path.is_dir() {
+            copy_dir(&path, &target);
+        } else {
+            std::fs::copy(&path, &target).unwrap();
+        }
+    }
+}
+
 #[test]
 fn behaviour_recipes_make_d4rl_and_neorl_datasets() {
     let tmp = tempfile::tempdir().unwrap();
@@ -347,6 +360,33 @@ fn behaviour_recipes_make_d4rl_and_neorl_datasets() {
     ));
     assert!(
         error.contains("not the run the medium policy came from"),
+        "{error}"
+    );
+    // The same configuration, but another policy at the medium step (a re-run
+    // under changed arithmetic): its replay is not the medium policy's.
+    let diverged = p("diverged-run");
+    copy_dir(&run, &diverged);
+    let policies = diverged.join("policies");
+    let medium_stem = format!("step-{:08}", step("medium"));
+    let other_step = if step("medium") == 300 { 600 } else { 300 };
+    let other_stem = format!("step-{other_step:08}");
+    for ext in ["json", "safetensors"] {
+        std::fs::copy(
+            policies.join(format!("{other_stem}.{ext}")),
+            policies.join(format!("{medium_stem}.{ext}")),
+        )
+        .unwrap();
+    }
+    let error = fails(&generate(
+        "medium-replay",
+        &p("x.hdf5"),
+        &["--run", &s(&diverged)],
+    ));
+    assert!(
+        error.contains(&format!(
+            "policy at step {} is not the medium policy",
+            step("medium")
+        )),
         "{error}"
     );
     let mut walker = generate("medium", &p("x.hdf5"), &[]);
