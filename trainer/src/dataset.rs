@@ -81,6 +81,12 @@ pub struct GenerateArgs {
     /// medium-replay: the online run (`collect online-sac --out`) the medium policy came from.
     #[arg(long)]
     run: Option<PathBuf>,
+    /// medium-replay: accept a `--run` with the medium policy's configuration
+    /// whose policy at the medium step is not the medium policy (a re-run on
+    /// another kind of CPU, say), and cut it at the same step; the dataset then
+    /// records that run's own policy and evaluation there.
+    #[arg(long)]
+    accept_rerun: bool,
     /// Output file, written atomically: D4RL's `.hdf5`; with `--layout neorl`
     /// NeoRL's `.npz`, with the `.hdf5` of the same stem beside it.
     #[arg(long)]
@@ -180,7 +186,7 @@ fn generate_cmd(args: GenerateArgs) -> anyhow::Result<()> {
                     rerun_hint(args.task, &behaviour)
                 );
             };
-            medium_replay(run, &behaviour)?
+            medium_replay(run, &behaviour, args.accept_rerun)?
         }
         (Kind::MediumExpert, _) => {
             let (medium, expert) = (load(BehaviourLevel::Medium)?, load(BehaviourLevel::Expert)?);
@@ -326,7 +332,7 @@ fn rerun_hint(task: TaskName, medium: &Behaviour) -> String {
 }
 
 /// The medium policy's run, from its start to the medium checkpoint.
-fn medium_replay(run: &Path, medium: &Behaviour) -> anyhow::Result<Dataset> {
+fn medium_replay(run: &Path, medium: &Behaviour, accept_rerun: bool) -> anyhow::Result<Dataset> {
     let info =
         read_online_run(run).with_context(|| format!("reading the run in {}", run.display()))?;
     // The same run, possibly extended since (more steps).
@@ -348,9 +354,10 @@ fn medium_replay(run: &Path, medium: &Behaviour) -> anyhow::Result<Dataset> {
         medium.entry.run
     );
     let step = medium.entry.pick.step;
-    // The same configuration is not the same run under a nuno whose float
-    // arithmetic differs (a kernel's summation order, say): the policy the run
-    // saved at the medium step must be the medium policy itself.
+    // The same configuration is not the same run where the float arithmetic
+    // differs (gemm blocks, and so rounds, by the CPU's cache sizes; a kernel
+    // may change between revisions): the policy the run saved at the medium
+    // step shows whether it is the medium policy's run.
     let saved = run_policies(run)?
         .into_iter()
         .find(|p| p.step == step)
@@ -360,12 +367,14 @@ fn medium_replay(run: &Path, medium: &Behaviour) -> anyhow::Result<Dataset> {
                 run.display()
             )
         })?;
+    let reproduced = saved.metadata.weights_sha256 == medium.metadata.weights_sha256;
     anyhow::ensure!(
-        saved.metadata.weights_sha256 == medium.metadata.weights_sha256,
+        reproduced || accept_rerun,
         "{}'s policy at step {step} is not the medium policy (weights SHA-256 {} against {}): \
          the run has the medium policy's configuration but did not reproduce it, as happens when \
-         it is re-run with a nuno whose arithmetic has changed since the policy was trained; \
-         re-run it with the nuno revision that trained the policy (models/behaviour/README.md)",
+         it is re-run on another kind of CPU (matrix kernels block, and so round, by cache size) \
+         or with a nuno whose arithmetic has changed; --accept-rerun cuts this run at the same \
+         step anyway, recording its own policy there (models/behaviour/README.md)",
         run.display(),
         saved.metadata.weights_sha256,
         medium.metadata.weights_sha256
@@ -381,9 +390,18 @@ fn medium_replay(run: &Path, medium: &Behaviour) -> anyhow::Result<Dataset> {
     metadata.insert("run_seed".into(), info.config.seed.to_string());
     metadata.insert("behaviour_step".into(), step.to_string());
     metadata.insert(
-        "behaviour_eval_return".into(),
-        format!("{:.3}", medium.entry.pick.mean_return),
+        "behaviour_sha256".into(),
+        saved.metadata.weights_sha256.clone(),
     );
+    metadata.insert("medium_policy_reproduced".into(), reproduced.to_string());
+    let eval_return = if reproduced {
+        Some(medium.entry.pick.mean_return)
+    } else {
+        saved.metadata.provenance.mean_return
+    };
+    if let Some(r) = eval_return {
+        metadata.insert("behaviour_eval_return".into(), format!("{r:.3}"));
+    }
     metadata.insert(
         "generator".into(),
         format!("nuno {}", env!("CARGO_PKG_VERSION")),

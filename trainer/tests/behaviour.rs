@@ -389,6 +389,29 @@ fn behaviour_recipes_make_d4rl_and_neorl_datasets() {
         )),
         "{error}"
     );
+    assert!(error.contains("--accept-rerun"), "{error}");
+    // Accepted, it is cut at the same step and says whose policy ends it.
+    ok(&generate(
+        "medium-replay",
+        &p("rerun-replay.hdf5"),
+        &["--run", &s(&diverged), "--accept-rerun"],
+    ));
+    let rerun = read(&p("rerun-replay.hdf5"));
+    assert_eq!(rerun.observations, replay.observations);
+    assert_eq!(rerun.metadata["medium_policy_reproduced"], "false");
+    assert_eq!(replay.metadata["medium_policy_reproduced"], "true");
+    let other_policy: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(run.join("policies").join(format!("{other_stem}.json"))).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(
+        rerun.metadata["behaviour_sha256"],
+        other_policy["weights_sha256"].as_str().unwrap()
+    );
+    assert_eq!(
+        rerun.metadata["behaviour_eval_return"],
+        format!("{:.3}", other_policy["mean_return"].as_f64().unwrap())
+    );
     let mut walker = generate("medium", &p("x.hdf5"), &[]);
     walker[3] = "walker2d".into();
     let error = fails(&walker);
