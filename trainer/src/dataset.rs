@@ -148,6 +148,11 @@ fn level(kind: Kind, layout: Layout) -> anyhow::Result<Option<BehaviourLevel>> {
 fn generate_cmd(args: GenerateArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.transitions > 0, "--transitions must be at least 1");
     anyhow::ensure!(args.trajectories > 0, "--trajectories must be at least 1");
+    let replay = args.kind == Kind::MediumReplay;
+    anyhow::ensure!(
+        replay || (args.run.is_none() && !args.accept_rerun),
+        "--run and --accept-rerun are for --kind medium-replay only"
+    );
     let neorl = args.layout == Layout::Neorl;
     let extension = args.out.extension().and_then(|e| e.to_str());
     let wanted = if neorl { "npz" } else { "hdf5" };
@@ -312,7 +317,7 @@ fn from_behaviour(
 }
 
 /// How to re-create the medium policy's run up to its checkpoint (the run is
-/// deterministic with the same nuno revision).
+/// deterministic on the same kind of CPU).
 fn rerun_hint(task: TaskName, medium: &Behaviour) -> String {
     let Some(c) = &medium.metadata.provenance.online_training else {
         return String::new();

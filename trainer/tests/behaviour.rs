@@ -345,6 +345,8 @@ fn behaviour_recipes_make_d4rl_and_neorl_datasets() {
     assert!(error.contains(".hdf5"), "{error}");
     let error = fails(&generate("mediocre", &p("x.hdf5"), &[]));
     assert!(error.contains("mediocre"), "{error}");
+    let error = fails(&generate("medium", &p("x.hdf5"), &["--accept-rerun"]));
+    assert!(error.contains("medium-replay only"), "{error}");
     let error = fails(&generate("medium-replay", &p("x.hdf5"), &[]));
     assert!(error.contains("--run"), "{error}");
     assert!(
