@@ -148,9 +148,8 @@ fn level(kind: Kind, layout: Layout) -> anyhow::Result<Option<BehaviourLevel>> {
 fn generate_cmd(args: GenerateArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.transitions > 0, "--transitions must be at least 1");
     anyhow::ensure!(args.trajectories > 0, "--trajectories must be at least 1");
-    let replay = args.kind == Kind::MediumReplay;
     anyhow::ensure!(
-        replay || (args.run.is_none() && !args.accept_rerun),
+        args.kind == Kind::MediumReplay || (args.run.is_none() && !args.accept_rerun),
         "--run and --accept-rerun are for --kind medium-replay only"
     );
     let neorl = args.layout == Layout::Neorl;

@@ -11,7 +11,7 @@ mod python_peer;
 
 use std::path::{Path, PathBuf};
 
-use common::{fails, ok};
+use common::{copy_dir, fails, ok};
 use nuno::artifact::parse_safetensors;
 use nuno::data::{Dataset, DatasetFormat, read_dataset};
 
@@ -130,19 +130,6 @@ fn online_sac_records_d4rl_columns_and_resumes_bit_for_bit() {
             "{}",
             file.display()
         );
-    }
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let path = entry.unwrap().path();
-        let target = to.join(path.file_name().unwrap());
-        if path.is_dir() {
-            copy_dir(&path, &target);
-        } else {
-            std::fs::copy(&path, &target).unwrap();
-        }
     }
 }
 

@@ -6,17 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{fails, generate_hopper, ok, tiny_fit_ensemble, tiny_fit_policy};
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let path = entry.unwrap().path();
-        if path.is_file() {
-            std::fs::copy(&path, to.join(path.file_name().unwrap())).unwrap();
-        }
-    }
-}
+use common::{copy_dir, fails, generate_hopper, ok, tiny_fit_ensemble, tiny_fit_policy};
 
 #[test]
 fn fit_policy_runs_resumes_and_its_policy_evaluates() {

@@ -134,3 +134,17 @@ pub fn fit_ensemble_args(dataset: &Path, out: &Path, extra: &[&str]) -> Vec<Stri
     args.extend(extra.iter().map(|e| e.to_string()));
     args
 }
+
+/// Copies a folder and everything under it.
+pub fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let path = entry.unwrap().path();
+        let target = to.join(path.file_name().unwrap());
+        if path.is_dir() {
+            copy_dir(&path, &target);
+        } else {
+            std::fs::copy(&path, &target).unwrap();
+        }
+    }
+}
