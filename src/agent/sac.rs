@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use super::actor::{Actor, ActorConfig};
 use super::critic::{Temperature, TwinCritic};
 use crate::data::TransitionBatch;
-use crate::nn::{Adam, AdamState, normal, polyak_update};
+use crate::nn::{Adam, AdamState, Initialised, normal, polyak_update};
 
 /// SAC's hyperparameters.
 #[derive(Config, Debug, PartialEq)]
@@ -120,6 +120,15 @@ pub struct Sac {
     /// H̄
     pub target_entropy: f64,
     device: Device,
+}
+
+impl Initialised for Sac {
+    fn draw_parameters(&self) {
+        self.actor.draw_parameters();
+        self.critic.draw_parameters();
+        self.target_critic.draw_parameters();
+        self.temperature.draw_parameters();
+    }
 }
 
 impl Sac {

@@ -7,7 +7,7 @@ pub use adam::{Adam, AdamState, AdamStep, Moments};
 pub use mlp::{Activation, Mlp, MlpConfig};
 
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Bool, Device, Int, Tensor, TensorData};
 use std::sync::Mutex;
 
 use rand::Rng;
@@ -33,15 +33,44 @@ pub fn fill_standard_normal(values: &mut Vec<f32>, n: usize, rng: &mut impl Rng)
     values.extend((0..n).map(|_| rng.sample::<f32, _>(StandardNormal)));
 }
 
-/// Seeds burn's initialiser with `seed` and runs `init` under a process-wide
-/// lock. burn's generator is global: two fits (or tests) seeding and drawing at
-/// once would interleave, and neither would get the weights its seed gives alone.
-/// Code that draws initial weights without this lock can still interleave.
-pub fn seeded_init<T>(device: &Device, seed: u64, init: impl FnOnce() -> T) -> T {
+/// Seeds burn's initialiser with `seed`, runs `init` and draws every parameter it
+/// built, all under a process-wide lock. burn's generator is global: two fits (or
+/// tests) seeding and drawing at once would interleave, and neither would get the
+/// weights its seed gives alone. burn 0.22 draws a parameter's values lazily, at
+/// its first use, so they are drawn here, before the lock is released; otherwise
+/// another thread's seed would decide them.
+pub fn seeded_init<T: Initialised>(device: &Device, seed: u64, init: impl FnOnce() -> T) -> T {
     static INIT: Mutex<()> = Mutex::new(());
     let _guard = INIT.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
     device.seed(seed);
-    init()
+    let built = init();
+    built.draw_parameters();
+    built
+}
+
+/// What [`seeded_init`] builds: a module, or a struct of modules, whose lazily
+/// initialised parameters can be drawn at once.
+pub trait Initialised {
+    /// Draws the values of every parameter not yet drawn.
+    fn draw_parameters(&self);
+}
+
+impl<M: Module> Initialised for M {
+    fn draw_parameters(&self) {
+        struct Draw;
+        impl ModuleVisitor for Draw {
+            fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+                param.val();
+            }
+            fn visit_int<const D: usize>(&mut self, param: &Param<Tensor<D, Int>>) {
+                param.val();
+            }
+            fn visit_bool<const D: usize>(&mut self, param: &Param<Tensor<D, Bool>>) {
+                param.val();
+            }
+        }
+        self.visit(&mut Draw);
+    }
 }
 
 /// A tensor's values as f32, row-major (converting from the device's float type).
@@ -117,4 +146,30 @@ pub fn polyak_update<M: Module>(target: M, online: &M, tau: f64) -> M {
         online: flat_params(online).into_iter(),
         tau,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn weights(mlp: &Mlp) -> Vec<f32> {
+        flat_params(mlp).into_iter().flat_map(to_f32_vec).collect()
+    }
+
+    /// burn draws a `Param` at its first use: if `seeded_init` returned the
+    /// module undrawn, the re-seed between building and reading (another
+    /// thread's fit, in the suite) would decide the weights.
+    #[test]
+    fn seeded_init_draws_the_weights_under_its_seed() {
+        let device = Device::flex();
+        let config = MlpConfig::new(3, vec![8], 2, Activation::Relu);
+        let built = seeded_init(&device, 7, || config.init(&device));
+        device.seed(99);
+        let _other = Tensor::<2>::random([4, 4], burn::tensor::Distribution::Default, &device);
+        let read_later = weights(&built);
+        let read_at_once = weights(&seeded_init(&device, 7, || config.init(&device)));
+        assert_eq!(read_later, read_at_once);
+        let other_seed = weights(&seeded_init(&device, 8, || config.init(&device)));
+        assert_ne!(read_later, other_seed);
+    }
 }
