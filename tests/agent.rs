@@ -13,7 +13,7 @@ use nuno::artifact::{
     collect_tensors, latest_checkpoint, load_checkpoint, load_dynamics, save_checkpoint,
 };
 use nuno::data::{Dataset, GenerateConfig, TransitionBatch, generate};
-use nuno::envs::{MujocoTask, ObservationLayout, TaskConfig, TaskName, TaskRules};
+use nuno::envs::{ForwardVelocity, MujocoTask, ObservationLayout, TaskConfig, TaskName, TaskRules};
 use nuno::infer::Kernel;
 use nuno::nn::{polyak_update, seeded_init, to_f32_vec};
 use nuno::sde::{BatchDynamics, DynamicsSpec, ModelStep};
@@ -514,6 +514,65 @@ fn hopper_context<'a>(model: &'a nuno::sde::NeuralSde, dataset: &'a Dataset) -> 
         // burn throughout, like the dynamics (the fused path: tests/infer.rs, the CLI test).
         kernel: Kernel::Burn,
     }
+}
+
+/// NUNO's code keeps 10× as many model transitions (D3): the buffer holds
+/// `model_buffer_factor` × rollout batch × h × particles × retained rollouts.
+#[test]
+fn the_model_buffer_holds_its_factor_of_rollouts() {
+    let (model, metadata) = shipped_model();
+    let dataset = small_dataset();
+    let ctx = hopper_context(&model, &dataset);
+    let held = |factor: usize| {
+        let mut config = tiny_config(0);
+        config.model_buffer_factor = factor;
+        // 64 starts × h = 5 × 1 particle × 5 rollouts = 1600 per factor.
+        let threshold = config
+            .threshold_from(metadata.provenance.thresholds.as_ref())
+            .unwrap();
+        let mut training = PolicyTraining::new(config, &ctx, threshold, &Device::flex()).unwrap();
+        let rows = 2500;
+        training.model_buffer.push(&TransitionBatch {
+            observations: vec![0.0; rows * 11],
+            actions: vec![0.0; rows * 3],
+            rewards: vec![0.0; rows],
+            next_observations: vec![0.0; rows * 11],
+            terminals: vec![0.0; rows],
+        });
+        training.model_buffer.len()
+    };
+    assert_eq!(held(1), 1600);
+    assert_eq!(held(2), 2500);
+}
+
+/// NUNO's code rewards the mean x-velocity over the step (D6); by hand on
+/// hopper's D4RL observation (x-velocity at index 5, healthy reward 1,
+/// control cost 1e-3·‖a‖²).
+#[test]
+fn the_known_reward_reads_the_velocity_it_is_told() {
+    let rules = TaskRules::of_task(TaskConfig::d4rl(TaskName::Hopper)).unwrap();
+    let mut obs = vec![0.0f32; 11];
+    obs[0] = 1.25;
+    obs[5] = 1.0;
+    let mut next = obs.clone();
+    next[5] = 3.0;
+    let action = [0.5f32, 0.0, 0.0];
+    let cost = 1e-3 * 0.25;
+    let after = rules.reward(&obs, &action, &next);
+    assert!((after - (3.0 + 1.0 - cost)).abs() < 1e-6, "{after}");
+    let mean = rules
+        .with_forward_velocity(ForwardVelocity::Mean)
+        .reward(&obs, &action, &next);
+    assert!((mean - (2.0 + 1.0 - cost)).abs() < 1e-6, "{mean}");
+    // Where root x is observed (NeoRL), the reward is its finite difference either way.
+    let neorl = TaskRules::of_task(TaskConfig::neorl(TaskName::Hopper)).unwrap();
+    let (mut x, mut x_next) = (vec![0.0f32; 12], vec![0.0f32; 12]);
+    (x[1], x_next[1], x_next[0]) = (1.25, 1.25, 0.016);
+    let moved = neorl.with_forward_velocity(ForwardVelocity::Mean);
+    assert_eq!(
+        moved.reward(&x, &action, &x_next),
+        neorl.reward(&x, &action, &x_next)
+    );
 }
 
 #[test]

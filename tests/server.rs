@@ -217,6 +217,9 @@ async fn models_are_listed_with_their_details() {
     );
     assert!(m.has_policy && !list.models[1].has_policy);
     assert!((m.dt - 0.008).abs() < 1e-12);
+    // The shipped model was saved before models recorded their sampling scale:
+    // it loads with the meaning it had, samples at the full Σ.
+    assert_eq!(m.sample_noise_scale, 1.0);
     let (status, body) = server.get(&format!("/v1/models/{MODEL}")).await;
     assert_eq!(status, StatusCode::OK);
     let detail: ModelDetail = serde_json::from_value(body).unwrap();
@@ -1504,4 +1507,73 @@ async fn a_gaussian_ensemble_is_served_by_the_same_routes() {
         body["error"]["message"].as_str().unwrap().contains("no ε"),
         "{body}"
     );
+}
+
+/// A model fitted with NUNO's code's convention samples at the scale its
+/// model.json records, and `step` and `rollout` say which scale they used.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn step_and_rollout_sample_at_the_models_recorded_scale() {
+    let models = tempfile::tempdir().unwrap();
+    let dir = models.path().join(MODEL);
+    copy_model(&dir);
+    let path = dir.join("model.json");
+    let mut json: Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    let scale = 0.008f32.sqrt();
+    json["model"]["sample_noise_scale"] = json!(scale);
+    std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
+    let (server, _) = Server::start_on(models, limits(), |_| {}).await;
+    let (_, detail) = server.get(&format!("/v1/models/{MODEL}")).await;
+    assert_eq!(
+        detail["sample_noise_scale"].as_f64().map(|v| v as f32),
+        Some(scale)
+    );
+
+    let states = vec![vec![1.25f32, 0.0, 0.0, 0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 0.0, 0.0]; 2];
+    let actions = vec![vec![0.1f32, -0.2, 0.3]; 2];
+    let step = |noise: Option<f32>| {
+        let mut body = json!({"states": states, "actions": actions, "particles": 2, "seed": 3});
+        if let Some(noise) = noise {
+            body["noise_scale"] = json!(noise);
+        }
+        let server = &server;
+        async move {
+            let (status, body) = server
+                .post(&format!("/v1/models/{MODEL}/step"), &body)
+                .await;
+            assert_eq!(status, StatusCode::OK, "{body}");
+            serde_json::from_value::<StepResponse>(body).unwrap()
+        }
+    };
+    let (default, calibrated) = (step(None).await, step(Some(1.0)).await);
+    assert_eq!(default.noise_scale, scale);
+    assert_eq!(calibrated.noise_scale, 1.0);
+    // Same seed, same ε: each sample's distance from the mean shrinks by the scale.
+    for b in 0..2 {
+        for p in 0..2 {
+            for i in 0..11 {
+                let small = default.next_states[b][p][i] - default.mean[b][i];
+                let full = calibrated.next_states[b][p][i] - calibrated.mean[b][i];
+                assert!(
+                    (small - scale * full).abs() < 1e-5 * (1.0 + full.abs()),
+                    "{small} vs {full}"
+                );
+            }
+        }
+    }
+    let rollout = |noise: Option<f32>| {
+        let mut body = json!({"states": states, "actions": [[[0.1, -0.2, 0.3]], [[0.1, -0.2, 0.3]]], "horizon": 1});
+        if let Some(noise) = noise {
+            body["noise_scale"] = json!(noise);
+        }
+        let server = &server;
+        async move {
+            let (status, body) = server
+                .post(&format!("/v1/models/{MODEL}/rollout"), &body)
+                .await;
+            assert_eq!(status, StatusCode::OK, "{body}");
+            serde_json::from_value::<RolloutResponse>(body).unwrap()
+        }
+    };
+    assert_eq!(rollout(None).await.noise_scale, scale);
+    assert_eq!(rollout(Some(0.5)).await.noise_scale, 0.5);
 }

@@ -25,9 +25,11 @@ use super::presets::Preset;
 use super::sac::{Sac, SacConfig, SacLosses};
 use super::{AgentError, BatchPolicy};
 use crate::data::{Dataset, StartStateSampler, TransitionBatch, TransitionSampler};
-use crate::envs::{EvaluationConfig, EvaluationReport, TaskConfig, TaskRules, evaluate};
+use crate::envs::{
+    EvaluationConfig, EvaluationReport, ForwardVelocity, TaskConfig, TaskRules, evaluate,
+};
 use crate::infer::Kernel;
-use crate::sde::ThresholdTable;
+use crate::sde::{CODE_MODEL_BUFFER_FACTOR, Recipe, ThresholdTable};
 use crate::shared::BatchDynamics;
 
 /// Every knob of the loop; defaults are Appendix C.2–C.3's.
@@ -55,6 +57,17 @@ pub struct PolicyLoopConfig {
     /// Rollouts the model buffer retains.
     #[config(default = 5)]
     pub retain_epochs: usize,
+    /// The model buffer holds this many times `rollout_batch · horizon ·
+    /// particles · retain_epochs` transitions: 1 in nuno's paper recipe, 10 in
+    /// NUNO's code (`train_tatu_modelbased.py`), where it keeps 10 × as much history.
+    /// Runs saved before this field used 1, and load so.
+    #[config(default = 1)]
+    pub model_buffer_factor: usize,
+    /// The velocity the known reward reads on D4RL observations: after the step
+    /// (nuno's paper recipe) or the mean over the step (NUNO's code). Runs saved
+    /// before this field used the one after, and load so.
+    #[config(default = "ForwardVelocity::Next")]
+    pub forward_velocity: ForwardVelocity,
     /// β, the fraction of each SAC batch drawn from the real data.
     #[config(default = 0.05)]
     pub real_ratio: f64,
@@ -75,6 +88,18 @@ pub struct PolicyLoopConfig {
 }
 
 impl PolicyLoopConfig {
+    /// These settings with `recipe`'s choices for the loop: NUNO's code keeps a
+    /// 10× model buffer and rewards the mean forward velocity over a step.
+    pub fn apply_recipe(&mut self, recipe: Recipe) {
+        let code = recipe == Recipe::Code;
+        self.model_buffer_factor = if code { CODE_MODEL_BUFFER_FACTOR } else { 1 };
+        self.forward_velocity = if code {
+            ForwardVelocity::Mean
+        } else {
+            ForwardVelocity::Next
+        };
+    }
+
     /// The loop with a preset's h, α and λ_pen.
     pub fn from_preset(preset: &Preset, sac: SacConfig) -> Self {
         Self::new(sac, preset.horizon, preset.cvar_alpha, preset.penalty)
@@ -100,13 +125,14 @@ impl PolicyLoopConfig {
         Ok(Some(threshold))
     }
 
-    fn rollout(&self, threshold: Option<f32>) -> RolloutConfig {
+    /// The rollouts' settings, sampling at the model's own `noise_scale`.
+    fn rollout(&self, threshold: Option<f32>, noise_scale: f32) -> RolloutConfig {
         RolloutConfig {
             horizon: self.horizon,
             particles: self.particles,
             penalty: self.penalty,
             threshold,
-            noise_scale: 1.0,
+            noise_scale,
         }
     }
 }
@@ -242,8 +268,11 @@ impl PolicyTraining {
         let sac = crate::nn::seeded_init(device, config.seed, || {
             Sac::new(actor, config.sac.clone(), device)
         });
-        let capacity =
-            config.rollout_batch * config.horizon * config.particles * config.retain_epochs;
+        let capacity = config.rollout_batch
+            * config.horizon
+            * config.particles
+            * config.retain_epochs
+            * config.model_buffer_factor;
         Ok(Self {
             model_buffer: ReplayBuffer::new(capacity, obs_dim, act_dim),
             rng: ChaCha8Rng::seed_from_u64(config.seed),
@@ -324,11 +353,14 @@ impl PolicyTraining {
         let starts =
             StartStateSampler::new(ctx.dataset).sample(self.config.rollout_batch, &mut self.rng);
         let policy = ctx.kernel.policy(self.policy(ActionMode::Sampled));
-        let config = self.config.rollout(self.threshold);
+        let config = self
+            .config
+            .rollout(self.threshold, ctx.dynamics.sample_noise_scale());
         let result = rollout_model(
             ctx.dynamics,
             RolloutActions::Policy(policy.as_ref()),
-            &ctx.rules,
+            &ctx.rules
+                .with_forward_velocity(self.config.forward_velocity),
             &starts,
             &config,
             &mut self.rng,

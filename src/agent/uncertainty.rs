@@ -12,7 +12,7 @@ use super::AgentError;
 use super::model_rollout::{RolloutActions, RolloutConfig, rollout_model};
 use crate::data::{Dataset, WindowSampler};
 use crate::envs::TaskRules;
-use crate::sde::{ThresholdConfig, cvar};
+use crate::sde::ThresholdConfig;
 use crate::shared::{BatchDynamics, BatchShape, ModelStep};
 
 /// NUNO^al (Appendix D): the model unchanged (its diffusion still σ + h(η)),
@@ -31,6 +31,10 @@ impl<'a> AleatoricAsEta<'a> {
 impl BatchDynamics for AleatoricAsEta<'_> {
     fn shape(&self) -> BatchShape {
         self.inner.shape()
+    }
+
+    fn sample_noise_scale(&self) -> f32 {
+        self.inner.sample_noise_scale()
     }
 
     fn noise_dim(&self) -> usize {
@@ -75,7 +79,7 @@ pub fn rollout_threshold(
         particles: config.particles,
         penalty: 0.0,
         threshold: None,
-        noise_scale: 1.0,
+        noise_scale: dynamics.sample_noise_scale(),
     };
     let mut totals = Vec::with_capacity(starts.len() * config.particles);
     for chunk in starts.chunks(config.chunk) {
@@ -96,7 +100,9 @@ pub fn rollout_threshold(
                 .map(|sums| sums.last().copied().unwrap_or(0.0)),
         );
     }
-    cvar(&totals, alpha).ok_or_else(|| AgentError::Threshold("the dataset gave no windows".into()))
+    config
+        .epsilon(&totals, alpha)
+        .ok_or_else(|| AgentError::Threshold("the dataset gave no windows".into()))
 }
 
 /// TATU's threshold: the largest truncation signal of `dynamics` over every

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::json_file::{read_checked_weights, read_versioned_json, write_json};
+use super::json_file::{read_checked_weights, read_versioned_json_filled, write_json};
 use super::sac_state::{
     RngState, SacFiles, read_sac, save_checkpoint_dir, write_sac, write_synced,
 };
@@ -21,6 +21,7 @@ use super::tensors::NamedTensors;
 use super::{ArtifactError, sha256_hex};
 use crate::agent::{EpochRecord, PolicyLoopConfig, PolicyTraining, ReplayBuffer};
 use crate::data::TransitionBatch;
+use crate::envs::ForwardVelocity;
 
 /// Version 2: Adam's moments by module path in `adam.safetensors` (version 1
 /// kept burn's optimiser records keyed by parameter id).
@@ -100,14 +101,31 @@ fn buffer_tensors(buffer: &ReplayBuffer) -> NamedTensors {
     ])
 }
 
+/// Fields of the `PolicyLoopConfig` at `pointer` that files written before
+/// them lack, with the meaning those runs had: a model buffer of 1 × its
+/// rollouts, the known reward on the velocity after the step.
+pub(super) fn fill_older_loop_fields(value: &mut serde_json::Value, pointer: &str) {
+    if let Some(fields) = value.pointer_mut(pointer).and_then(|v| v.as_object_mut()) {
+        fields
+            .entry("model_buffer_factor")
+            .or_insert(serde_json::json!(1));
+        fields
+            .entry("forward_velocity")
+            .or_insert(serde_json::json!(ForwardVelocity::Next));
+    }
+}
+
 /// Restores the state saved in checkpoint directory `checkpoint` into
 /// `training`, a fresh run built with the same configuration.
 pub fn load_checkpoint(
     checkpoint: &Path,
     training: &mut PolicyTraining,
 ) -> Result<(), ArtifactError> {
-    let state: CheckpointState =
-        read_versioned_json(&checkpoint.join(STATE), CHECKPOINT_SCHEMA_VERSION)?;
+    let state: CheckpointState = read_versioned_json_filled(
+        &checkpoint.join(STATE),
+        CHECKPOINT_SCHEMA_VERSION,
+        |value| fill_older_loop_fields(value, "/config"),
+    )?;
     // The run may be extended (more epochs); every other knob must match.
     let comparable = PolicyLoopConfig {
         epochs: training.config.epochs,

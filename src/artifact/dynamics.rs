@@ -128,23 +128,39 @@ pub fn save_dynamics(
     Ok(metadata)
 }
 
-/// Reads and validates `model.json` alone. Files written before
-/// `LossConfig::likelihood` existed were fitted on eq. 6's particle path, and
-/// say so once read.
+/// Reads and validates `model.json` alone, filling what older files lack with
+/// the meaning they were written under ([`fill_older_sde_fields`]).
 pub fn read_dynamics_metadata(dir: &Path) -> Result<DynamicsMetadata, ArtifactError> {
     read_versioned_json_filled(
         &dir.join(DYNAMICS_METADATA),
         DYNAMICS_SCHEMA_VERSION,
-        |value| {
-            if let Some(loss) = value.pointer_mut("/fit/loss")
-                && let Some(fields) = loss.as_object_mut()
-            {
-                fields
-                    .entry("likelihood")
-                    .or_insert_with(|| serde_json::json!(LikelihoodPath::Particle));
-            }
-        },
+        |value| fill_older_sde_fields(value, &["/model"], &["/fit"]),
     )
+}
+
+/// Fields of `SdeConfig` (at each of `models`) and `FitConfig` (at each of
+/// `fits`) that files written before them lack, with the meaning those files
+/// had: fitted on eq. 6's particle path, every window step weighed 1, samples
+/// drawn at the full Σ. Never reinterpreted: a file that names a field keeps it.
+pub(super) fn fill_older_sde_fields(value: &mut serde_json::Value, models: &[&str], fits: &[&str]) {
+    let mut fill = |pointer: String, field: &str, default: serde_json::Value| {
+        if let Some(fields) = value.pointer_mut(&pointer).and_then(|v| v.as_object_mut()) {
+            fields.entry(field).or_insert(default);
+        }
+    };
+    let fit_models = fits.iter().map(|fit| format!("{fit}/model"));
+    for model in models.iter().map(|m| m.to_string()).chain(fit_models) {
+        fill(model, "sample_noise_scale", serde_json::json!(1.0));
+    }
+    for fit in fits {
+        let loss = format!("{fit}/loss");
+        fill(
+            loss.clone(),
+            "likelihood",
+            serde_json::json!(LikelihoodPath::Particle),
+        );
+        fill(loss, "step_discount", serde_json::json!(1.0));
+    }
 }
 
 /// Loads the model in `dir` onto `device` (no autodiff).

@@ -10,7 +10,8 @@ use std::path::Path;
 use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
-use super::json_file::{read_checked_weights, read_versioned_json, write_json};
+use super::checkpoint::fill_older_loop_fields;
+use super::json_file::{read_checked_weights, read_versioned_json_filled, write_json};
 use super::safetensors_file::{safetensors_bytes, write_bytes};
 use super::tensors::{collect_tensors, load_tensors};
 use super::{ArtifactError, sha256_hex};
@@ -99,8 +100,11 @@ pub fn load_policy(
     stem: &str,
     device: &Device,
 ) -> Result<(Actor, PolicyMetadata), ArtifactError> {
-    let metadata: PolicyMetadata =
-        read_versioned_json(&dir.join(format!("{stem}.json")), POLICY_SCHEMA_VERSION)?;
+    let metadata: PolicyMetadata = read_versioned_json_filled(
+        &dir.join(format!("{stem}.json")),
+        POLICY_SCHEMA_VERSION,
+        |value| fill_older_loop_fields(value, "/training"),
+    )?;
     let a = &metadata.actor;
     if a.action_low.len() != a.act_dim || a.action_high.len() != a.act_dim {
         return Err(ArtifactError::Invalid(format!(

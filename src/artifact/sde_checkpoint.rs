@@ -12,8 +12,9 @@ use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
 use super::ArtifactError;
+use super::dynamics::fill_older_sde_fields;
 use super::fit_checkpoint::{FitFiles, read_fit_files, write_fit_files};
-use super::json_file::{read_versioned_json, write_json};
+use super::json_file::{read_versioned_json_filled, write_json};
 use super::sac_state::{RngState, save_checkpoint_dir};
 use super::tensors::{NamedTensors, load_tensors};
 use crate::nn::seeded_init;
@@ -81,8 +82,11 @@ pub fn load_sde_checkpoint(
     fit: &FitConfig,
     device: &Device,
 ) -> Result<SdeFitState, ArtifactError> {
-    let state: CheckpointState =
-        read_versioned_json(&checkpoint.join(STATE), SDE_CHECKPOINT_SCHEMA_VERSION)?;
+    let state: CheckpointState = read_versioned_json_filled(
+        &checkpoint.join(STATE),
+        SDE_CHECKPOINT_SCHEMA_VERSION,
+        |value| fill_older_sde_fields(value, &["/current_config", "/best_config"], &["/fit"]),
+    )?;
     let uncapped = |c: &FitConfig| FitConfig {
         max_steps: 0,
         ..c.clone()

@@ -10,7 +10,7 @@ mod task;
 
 pub use evaluator::{EvaluationConfig, EvaluationReport, evaluate, evaluate_or_cancel};
 pub use mujoco_task::{MujocoTask, TaskConfig, Transition};
-pub use rules::TaskRules;
+pub use rules::{ForwardVelocity, TaskRules};
 pub use score::ScoreReference;
 pub use task::{HealthRule, ObservationLayout, ResetNoise, StateSplit, TaskName, TaskSpec};
 

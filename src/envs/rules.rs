@@ -11,6 +11,21 @@ use super::EnvError;
 use super::mujoco_task::{MujocoTask, TaskConfig};
 use super::task::{ObservationLayout, StateSplit, TaskSpec};
 
+/// Which observed root x velocity stands in for the forward velocity where the
+/// observations omit root x (D4RL's layout).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ForwardVelocity {
+    /// The velocity after the step (nuno's paper recipe).
+    #[default]
+    Next,
+    /// The mean of the velocities before and after the step, as NUNO's code's
+    /// known rewards (`static_fns/hopper.py`, walker2d and halfcheetah alike).
+    Mean,
+}
+
+crate::shared::named_enum!(ForwardVelocity, "forward velocity", ForwardVelocity::Next => "next", ForwardVelocity::Mean => "mean");
+
 /// Reward and termination of one task variant, on observations.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TaskRules {
@@ -23,6 +38,8 @@ pub struct TaskRules {
     root_x: Option<usize>,
     /// The task's dt between observations.
     dt: f64,
+    /// The velocity the reward reads where root x is not observed.
+    forward_velocity: ForwardVelocity,
 }
 
 impl TaskRules {
@@ -51,6 +68,16 @@ impl TaskRules {
             x_velocity: split.velocities[0],
             root_x,
             dt,
+            forward_velocity: ForwardVelocity::Next,
+        }
+    }
+
+    /// These rules with the forward reward read from `velocity` (D4RL's layout;
+    /// where root x is observed the reward stays its finite difference).
+    pub fn with_forward_velocity(self, velocity: ForwardVelocity) -> Self {
+        Self {
+            forward_velocity: velocity,
+            ..self
         }
     }
 
@@ -59,9 +86,11 @@ impl TaskRules {
     pub fn reward(&self, obs: &[f32], action: &[f32], next_obs: &[f32]) -> f32 {
         let spec = self.spec;
         let control: f64 = action.iter().map(|&a| f64::from(a).powi(2)).sum();
-        let velocity = match self.root_x {
-            Some(x) => (f64::from(next_obs[x]) - f64::from(obs[x])) / self.dt,
-            None => f64::from(next_obs[self.x_velocity]),
+        let after = f64::from(next_obs[self.x_velocity]);
+        let velocity = match (self.root_x, self.forward_velocity) {
+            (Some(x), _) => (f64::from(next_obs[x]) - f64::from(obs[x])) / self.dt,
+            (None, ForwardVelocity::Next) => after,
+            (None, ForwardVelocity::Mean) => 0.5 * (f64::from(obs[self.x_velocity]) + after),
         };
         let forward = spec.forward_reward_weight * velocity;
         (forward + spec.healthy_reward - spec.ctrl_cost_weight * control) as f32

@@ -81,7 +81,7 @@ pub fn prediction_error(
             particles: config.particles,
             penalty: 0.0,
             threshold: None,
-            noise_scale: 1.0,
+            noise_scale: dynamics.sample_noise_scale(),
         },
         &mut rng,
     );
@@ -268,7 +268,7 @@ pub fn exploitation(
             particles: 1,
             penalty: config.penalty,
             threshold: None,
-            noise_scale: 1.0,
+            noise_scale: dynamics.sample_noise_scale(),
         },
         &mut rng,
     );

@@ -6,6 +6,11 @@
 //! [budget]
 //! model_steps = 5000        # fit-model's --max-steps
 //! model_likelihood = "data" # fit-model's --likelihood (optional; default "particle")
+//! recipe = "code"           # fit-model's and NUNO's fit-policy's --recipe (optional; default "paper")
+//! model_sample_noise = "sqrt-dt"  # fit-model's --sample-noise (optional; default: the recipe's)
+//! model_step_discount = 0.9 # fit-model's --step-discount (optional; default: the recipe's)
+//! model_buffer_factor = 10  # fit-policy's --model-buffer-factor (optional; default: the recipe's)
+//! forward_velocity = "mean" # NUNO's fit-policy --forward-velocity (optional; default: the recipe's)
 //! ensemble_max_epochs = 100 # fit-ensemble's --max-epochs (optional)
 //! policy_steps = 100000     # fit-policy's --steps (the same for every method)
 //! steps_per_epoch = 1000
@@ -28,8 +33,9 @@ use serde::{Deserialize, Serialize};
 
 use super::ExperimentError;
 use crate::agent::preset;
-use crate::envs::{ObservationLayout, TaskName};
-use crate::sde::LikelihoodPath;
+
+use crate::envs::{ForwardVelocity, ObservationLayout, TaskName};
+use crate::sde::{LikelihoodPath, Recipe, SampleNoise};
 
 /// A policy-learning method a cell runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -114,6 +120,22 @@ pub struct Budget {
     /// particle, the default, or the recorded data).
     #[serde(default = "default_likelihood")]
     pub model_likelihood: LikelihoodPath,
+    /// `--recipe` of fit-model and of the SDE methods' fit-policy: the paper's
+    /// settings (the default) or NUNO's code's.
+    #[serde(default)]
+    pub recipe: Recipe,
+    /// fit-model's `--sample-noise` (default: the recipe's).
+    #[serde(default)]
+    pub model_sample_noise: Option<SampleNoise>,
+    /// fit-model's `--step-discount` (default: the recipe's).
+    #[serde(default)]
+    pub model_step_discount: Option<f32>,
+    /// fit-policy's `--model-buffer-factor` (default: the recipe's).
+    #[serde(default)]
+    pub model_buffer_factor: Option<usize>,
+    /// The SDE methods' fit-policy `--forward-velocity` (default: the recipe's).
+    #[serde(default)]
+    pub forward_velocity: Option<ForwardVelocity>,
     /// A cap on fit-ensemble's epochs (MOPO; default: until its early stop).
     #[serde(default)]
     pub ensemble_max_epochs: Option<usize>,
@@ -306,6 +328,16 @@ impl Grid {
         }
         if b.hidden.is_empty() || b.hidden.contains(&0) {
             return Err("budget: hidden needs positive layer sizes".into());
+        }
+        if let Some(d) = b.model_step_discount
+            && !(d > 0.0 && d <= 1.0)
+        {
+            return Err(format!(
+                "budget: model_step_discount = {d} must lie in (0, 1]"
+            ));
+        }
+        if b.model_buffer_factor == Some(0) {
+            return Err("budget: model_buffer_factor = 0 must be at least 1".into());
         }
         if self.datasets.is_empty() {
             return Err("the grid names no dataset".into());

@@ -12,6 +12,10 @@ impl BatchDynamics for NeuralSde {
         self.constants.batch_shape()
     }
 
+    fn sample_noise_scale(&self) -> f32 {
+        self.constants.config.sample_noise_scale
+    }
+
     fn step(&self, states: &[f32], actions: &[f32], noise: &[f32]) -> ModelStep {
         let device = self.sigma_net.layers[0].weight.val().device();
         let batch = step_batch(self, states, actions, noise);

@@ -134,7 +134,7 @@ pub struct CalibrationReport {
     pub diffusion: Vec<DiffusionAt>,
     /// Mean η at real next states, with the dataset's next action.
     pub eta_next_real: f32,
-    /// Mean η at model-sampled next states, with the same action.
+    /// Mean η at model-sampled next states (at the model's `sample_noise_scale`), with the same action.
     pub eta_next_model: f32,
     /// One entry per horizon of the threshold table with held-out windows of that length.
     pub horizons: Vec<HorizonCalibration>,
@@ -324,8 +324,13 @@ pub fn calibration_report(
         });
     }
 
-    // η one step ahead: at the real next state and at a model sample.
-    let noise = standard_normal(n * state_dim, &mut rng);
+    // η one step ahead: at the real next state and at a model sample, drawn at
+    // the scale the model's rollouts sample at.
+    let scale = model.sample_noise_scale();
+    let noise: Vec<f32> = standard_normal(n * state_dim, &mut rng)
+        .into_iter()
+        .map(|e| e * scale)
+        .collect();
     let sampled = BatchDynamics::step(model, &states, &actions, &noise).next_states;
     let eta_next_real = mean(&terms_at(model, &targets, &next_actions).eta);
     let eta_next_model = mean(&terms_at(model, &sampled, &next_actions).eta);

@@ -55,6 +55,16 @@ pub struct SdeConfig {
     /// Smallest σ_ϕ, as a fraction of each dimension's diffusion scale.
     #[config(default = 1e-3)]
     pub sigma_min: f32,
+    /// The scale of ε at which the model samples: s' = mean + c·(σ + h(η))·sqrt(dt)·ε
+    /// on L_data's particle path, in the threshold rollouts, in policy rollouts
+    /// and (by default) in the server's answers. Σ itself stays the calibrated
+    /// one-step uncertainty whatever c is. 1 is eq. 5 as written (the paper
+    /// recipe); NUNO's code fits its diffusion without dt (variance = diffusion²,
+    /// so it matches the one-step error) yet samples diffusion·sqrt(dt)·ε, which is
+    /// c = sqrt(dt) here (≈ 0.09 on hopper: `Recipe::Code`). Models saved before
+    /// this field sampled at 1, and load so.
+    #[config(default = 1.0)]
+    pub sample_noise_scale: f32,
 }
 
 impl SdeConfig {
@@ -95,6 +105,12 @@ impl SdeConfig {
         if !(self.sigma_min.is_finite() && self.sigma_min > 0.0) {
             return Err(bad(format!("sigma_min = {}: must be > 0", self.sigma_min)));
         }
+        if !(self.sample_noise_scale.is_finite() && self.sample_noise_scale >= 0.0) {
+            return Err(bad(format!(
+                "sample_noise_scale = {}: must be finite and >= 0",
+                self.sample_noise_scale
+            )));
+        }
         Ok(())
     }
 
@@ -123,28 +139,7 @@ pub enum LikelihoodPath {
     Data,
 }
 
-impl std::str::FromStr for LikelihoodPath {
-    type Err = String;
-
-    fn from_str(name: &str) -> Result<Self, Self::Err> {
-        match name {
-            "data" => Ok(Self::Data),
-            "particle" => Ok(Self::Particle),
-            other => Err(format!(
-                "unknown likelihood path {other:?}: use data or particle"
-            )),
-        }
-    }
-}
-
-impl std::fmt::Display for LikelihoodPath {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Self::Data => "data",
-            Self::Particle => "particle",
-        })
-    }
-}
+crate::shared::named_enum!(LikelihoodPath, "likelihood path", LikelihoodPath::Data => "data", LikelihoodPath::Particle => "particle");
 
 /// Weights and sampling of the loss terms (eq. 3, 4, 6, 7; Appendix C.4).
 #[derive(Config, Debug, PartialEq)]
@@ -155,6 +150,11 @@ pub struct LossConfig {
     /// λ_data, weight of L_data (eq. 6, 7).
     #[config(default = 1.0)]
     pub lambda_data: f32,
+    /// L_data's weight of window step t is `step_discount`^(t − 1): 1 is eq. 6 (every
+    /// step alike); NUNO's code weighs them 0.9^(t − 1) (`losses_trajectories.py`).
+    /// Fits saved before this field weighed every step 1, and load so.
+    #[config(default = 1.0)]
+    pub step_discount: f32,
     /// λ_sc, weight of the strong-convexity hinge L_sc (eq. 3); the paper's "strong convexity coefficient of 1".
     #[config(default = 1.0)]
     pub lambda_sc: f32,
@@ -213,6 +213,15 @@ impl LossConfig {
                     "{name} = {value}: must be finite and >= 0"
                 )));
             }
+        }
+        if !(self.step_discount.is_finite()
+            && self.step_discount > 0.0
+            && self.step_discount <= 1.0)
+        {
+            return Err(invalid(format!(
+                "step_discount = {}: must lie in (0, 1]",
+                self.step_discount
+            )));
         }
         if !(self.radius.is_finite() && self.radius > 0.0) {
             return Err(invalid(format!("radius = {}: must be > 0", self.radius)));

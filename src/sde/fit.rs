@@ -14,7 +14,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::SdeError;
-use super::config::{FitConfig, LikelihoodPath};
+use super::config::{FitConfig, LossConfig};
 use super::eta::FarField;
 use super::losses::WindowTensors;
 use super::model::NeuralSde;
@@ -91,7 +91,7 @@ pub fn validation_nll(
     model: &NeuralSde,
     windows: &WindowSampler,
     starts: &[usize],
-    path: LikelihoodPath,
+    loss: &LossConfig,
     seed: u64,
     device: &Device,
 ) -> f32 {
@@ -108,7 +108,7 @@ pub fn validation_nll(
             device,
         );
         let noise = normal([chunk.len(), batch.horizon, state_dim], &mut rng, device);
-        let (nll, _) = model.data_nll(&tensors, noise, path);
+        let (nll, _) = model.data_nll(&tensors, noise, loss.likelihood, loss.step_discount);
         total += nll.into_scalar::<f32>() * chunk.len() as f32;
     }
     total / starts.len() as f32
@@ -221,7 +221,7 @@ pub fn fit_from(
         &best,
         &valid_windows,
         &valid_starts,
-        config.loss.likelihood,
+        &config.loss,
         config.seed,
         device,
     );
@@ -295,7 +295,7 @@ pub fn fit_from(
                     current,
                     &valid_windows,
                     &valid_starts,
-                    config.loss.likelihood,
+                    &config.loss,
                     config.seed,
                     device,
                 );

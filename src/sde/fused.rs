@@ -288,6 +288,10 @@ impl BatchDynamics for FusedSde {
         self.constants.batch_shape()
     }
 
+    fn sample_noise_scale(&self) -> f32 {
+        self.constants.config.sample_noise_scale
+    }
+
     fn step(&self, states: &[f32], actions: &[f32], noise: &[f32]) -> ModelStep {
         let batch = step_batch(self, states, actions, noise);
         let (state_dim, act_dim) = (self.state_dim(), self.constants.spec.act_dim);

@@ -35,9 +35,11 @@ pub struct LossTerms {
 
 impl NeuralSde {
     /// L_data (eq. 6): the Gaussian NLL of the window under Euler–Maruyama
-    /// transitions, each step started where `path` says, summed over steps and
-    /// dimensions, averaged over the batch; errors are measured in normalised
-    /// units. Also returns the mean squared residual drift along the way.
+    /// transitions, each step started where `path` says (a particle drawn at the
+    /// model's `sample_noise_scale`), step t weighted `step_discount`^(t − 1),
+    /// summed over steps and dimensions, averaged over the batch; errors are
+    /// measured in normalised units. Also returns the mean squared residual drift
+    /// along the way.
     ///
     /// # Shapes
     /// - `noise` (ε of each step's particle, read on the particle path):
@@ -47,6 +49,7 @@ impl NeuralSde {
         windows: &WindowTensors,
         noise: Tensor<3>,
         path: LikelihoodPath,
+        step_discount: f32,
     ) -> (Tensor<1>, Tensor<1>) {
         let [batch, steps_plus_one, state_dim] = windows.states.dims();
         let horizon = steps_plus_one - 1;
@@ -66,6 +69,7 @@ impl NeuralSde {
         let mut start = at(&windows.states, 0, state_dim);
         let mut nll = Tensor::<1>::zeros([1], &device);
         let mut residual = Tensor::<1>::zeros([1], &device);
+        let mut weight = 1.0;
         for k in 0..horizon {
             let action = at(&windows.actions, k, act_dim);
             let terms = self.terms(start, action);
@@ -75,11 +79,15 @@ impl NeuralSde {
             // Normalised units: error² / var is unchanged, log var shifts by a constant.
             let variance_hat = variance.clone() * inv_scale2.clone();
             let term = error.square() / variance.clone() + variance_hat.log();
-            nll = nll + term.sum().div_scalar(batch as f32);
+            nll = nll + term.sum().mul_scalar(weight / batch as f32);
+            weight *= step_discount;
             residual = residual + terms.residual.square().sum_dim(1).mean();
             start = match path {
                 LikelihoodPath::Data => next,
-                LikelihoodPath::Particle => terms.mean + variance.sqrt() * at(&noise, k, state_dim),
+                LikelihoodPath::Particle => {
+                    let spread = variance.sqrt().mul_scalar(c.config.sample_noise_scale);
+                    terms.mean + spread * at(&noise, k, state_dim)
+                }
             };
         }
         (nll, residual.div_scalar(horizon as f32))
@@ -100,7 +108,8 @@ impl NeuralSde {
     ) -> LossTerms {
         let [batch, _, state_dim] = windows.states.dims();
         let act_dim = windows.actions.dims()[2];
-        let (data, residual) = self.data_nll(windows, step_noise, config.likelihood);
+        let (data, residual) =
+            self.data_nll(windows, step_noise, config.likelihood, config.step_discount);
         let first_state = windows
             .states
             .clone()

@@ -13,6 +13,7 @@ mod fit;
 mod fused;
 mod losses;
 mod model;
+mod recipe;
 mod rollout;
 mod spec;
 mod threshold;
@@ -36,6 +37,9 @@ pub use fit::{
 pub use fused::FusedSde;
 pub use losses::{LossTerms, WindowTensors};
 pub use model::{NeuralSde, SdeConstants, SdeTerms};
+pub use recipe::{
+    CODE_MAX_MARGIN, CODE_MODEL_BUFFER_FACTOR, CODE_STEP_DISCOUNT, Recipe, SampleNoise,
+};
 pub use rollout::{OpenLoop, OpenLoopRollout};
 pub use spec::{DynamicsSpec, PhysicalScales};
 pub use threshold::{

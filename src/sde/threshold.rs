@@ -38,6 +38,10 @@ pub struct ThresholdConfig {
     pub chunk: usize,
     #[config(default = 0)]
     pub seed: u64,
+    /// ε(h, α ≥ 1) is this multiple of the largest accumulated η: 1 takes the
+    /// maximum (nuno's paper recipe); NUNO's code takes 1.1 × it (`Recipe::Code`).
+    #[config(default = 1.0)]
+    pub max_margin: f32,
 }
 
 /// ε(h, α) for every horizon and level.
@@ -53,6 +57,17 @@ pub struct ThresholdTable {
 }
 
 impl ThresholdConfig {
+    /// ε at level `alpha` over accumulated-η `totals`: their CVaR, or
+    /// `max_margin` × their maximum for α ≥ 1.
+    pub fn epsilon(&self, totals: &[f32], alpha: f64) -> Option<f32> {
+        let tail = cvar(totals, alpha)?;
+        Some(if alpha >= 1.0 {
+            tail * self.max_margin
+        } else {
+            tail
+        })
+    }
+
     /// Refuses settings no threshold can be computed from, naming the field.
     pub fn validate(&self) -> Result<(), SdeError> {
         let bad = |message: String| SdeError::Config(format!("threshold config: {message}"));
@@ -76,6 +91,12 @@ impl ThresholdConfig {
             if value == 0 {
                 return Err(bad(format!("{name} = 0: must be at least 1")));
             }
+        }
+        if !(self.max_margin.is_finite() && self.max_margin >= 1.0) {
+            return Err(bad(format!(
+                "max_margin = {}: must be finite and >= 1",
+                self.max_margin
+            )));
         }
         Ok(())
     }
@@ -163,7 +184,7 @@ pub fn accumulated_eta_along(
     let plan = OpenLoop {
         horizon,
         particles: config.particles,
-        noise_scale: 1.0,
+        noise_scale: model.constants.config.sample_noise_scale,
     };
     let mut totals = Vec::with_capacity(initial.len() / state_dim * config.particles);
     for (starts, actions) in initial
@@ -200,7 +221,13 @@ pub fn compute_thresholds(
         };
         let starts = sampler.draw_distinct(config.max_windows, &mut rng);
         let totals = accumulated_eta(model, dataset, &starts, h, config, &mut rng, device);
-        values.push(config.alphas.iter().map(|&a| cvar(&totals, a)).collect());
+        values.push(
+            config
+                .alphas
+                .iter()
+                .map(|&a| config.epsilon(&totals, a))
+                .collect(),
+        );
         windows.push(starts.len());
     }
     Ok(ThresholdTable {

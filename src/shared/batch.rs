@@ -97,6 +97,13 @@ pub trait BatchDynamics: Sync {
         self.shape().learns_reward
     }
 
+    /// The scale of ε at which this model's own rollouts sample unless told
+    /// otherwise: 1 samples at the full Σ; a neural SDE fitted with NUNO's code's
+    /// convention records sqrt(dt) (`SdeConfig::sample_noise_scale`).
+    fn sample_noise_scale(&self) -> f32 {
+        1.0
+    }
+
     /// State rows for observation rows (`[batch, obs_dim]`): NUNO^R's cumulative
     /// reward r_c starts at 0, so its increment over a step is that step's reward.
     fn states_from_observations(&self, observations: &[f32]) -> Vec<f32> {
@@ -123,6 +130,10 @@ impl<T: BatchDynamics + ?Sized> BatchDynamics for &T {
 
     fn noise_dim(&self) -> usize {
         (**self).noise_dim()
+    }
+
+    fn sample_noise_scale(&self) -> f32 {
+        (**self).sample_noise_scale()
     }
 }
 

@@ -1,9 +1,11 @@
 //! What every concern may import, and which imports none of them: the batch
-//! interfaces, the cancellation flag and the atomic file writer.
+//! interfaces, the cancellation flag, the atomic file writer and the names of
+//! field-less enums.
 
 pub mod atomic;
 pub mod batch;
 pub mod cancel;
+mod named_enum;
 
 pub use atomic::write_atomically;
 pub use batch::{
@@ -11,3 +13,4 @@ pub use batch::{
     euler_maruyama, scaled_noise, step_batch,
 };
 pub use cancel::{Cancel, CancelOnDrop, Cancelled};
+pub(crate) use named_enum::named_enum;

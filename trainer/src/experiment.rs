@@ -384,7 +384,15 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
                 b.model_steps.to_string(),
                 "--likelihood".into(),
                 b.model_likelihood.to_string(),
+                "--recipe".into(),
+                b.recipe.to_string(),
             ]);
+            if let Some(noise) = b.model_sample_noise {
+                fit.extend(["--sample-noise".into(), noise.to_string()]);
+            }
+            if let Some(discount) = b.model_step_discount {
+                fit.extend(["--step-discount".into(), discount.to_string()]);
+            }
             if cell.method == Method::NunoR {
                 fit.push("--reward-model".into());
             }
@@ -393,7 +401,7 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
     }
     drop(lock);
     let hidden: Vec<String> = b.hidden.iter().map(usize::to_string).collect();
-    trainer(vec![
+    let mut fit_policy = vec![
         "fit-policy".into(),
         "--model".into(),
         path(&model),
@@ -420,7 +428,18 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         "--algo".into(),
         cell.method.as_str().into(),
         "--resume".into(),
-    ])?;
+    ];
+    if let Some(factor) = b.model_buffer_factor {
+        fit_policy.extend(["--model-buffer-factor".into(), factor.to_string()]);
+    }
+    // The recipe and the reward's velocity are NUNO's loop; an ensemble learns its rewards.
+    if !cell.method.uses_ensemble() {
+        fit_policy.extend(["--recipe".into(), b.recipe.to_string()]);
+        if let Some(velocity) = b.forward_velocity {
+            fit_policy.extend(["--forward-velocity".into(), velocity.to_string()]);
+        }
+    }
+    trainer(fit_policy)?;
     let result = summarize_run(cell, &grid.budget, &policy.join("metrics.jsonl"))?;
     write_result(root, &result)?;
     println!(

@@ -17,9 +17,9 @@ use nuno::artifact::{
 };
 use nuno::data::{DatasetFormat, read_dataset};
 use nuno::ensemble::{EnsembleDynamics, EnsembleUncertainty};
-use nuno::envs::{TaskConfig, TaskRules};
+use nuno::envs::{ForwardVelocity, TaskConfig, TaskRules};
 use nuno::infer::Kernel;
-use nuno::sde::{ComputeDevice, NeuralSde, ThresholdConfig, ThresholdTable};
+use nuno::sde::{ComputeDevice, NeuralSde, Recipe, ThresholdConfig, ThresholdTable};
 use nuno::shared::BatchDynamics;
 
 use crate::output::write_text;
@@ -96,6 +96,18 @@ pub struct Args {
     /// SDE trajectories per start state.
     #[arg(long, default_value_t = 1)]
     particles: usize,
+    /// paper, or code: NUNO's code's loop (a 10× model buffer, the known reward on
+    /// the mean forward velocity over a step); the flags below override single settings.
+    #[arg(long, default_value_t = Recipe::Paper)]
+    recipe: Recipe,
+    /// The model buffer holds this many times rollout batch × h × particles × 5
+    /// rollouts (default: the recipe's: paper 1, code 10).
+    #[arg(long)]
+    model_buffer_factor: Option<usize>,
+    /// The velocity the known reward reads on D4RL observations: next (after the
+    /// step) or mean (over the step, NUNO's code) (default: the recipe's).
+    #[arg(long)]
+    forward_velocity: Option<ForwardVelocity>,
     /// β, the real-data fraction of each SAC batch.
     #[arg(long, default_value_t = 0.05)]
     real_ratio: f64,
@@ -164,6 +176,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.pessimism.is_none() || args.algo == Algo::TatuMopo,
         "--pessimism is TATU's coefficient: it needs --algo tatu-mopo"
     );
+    anyhow::ensure!(
+        !args.algo.uses_ensemble()
+            || (args.recipe == Recipe::Paper && args.forward_velocity.is_none()),
+        "--recipe and --forward-velocity set NUNO's loop: mopo and tatu-mopo roll an ensemble that learns its rewards"
+    );
+    anyhow::ensure!(
+        args.model_buffer_factor != Some(0),
+        "--model-buffer-factor must be at least 1"
+    );
     if let Some(p) = args.pessimism {
         anyhow::ensure!(
             p.is_finite() && p > 0.0,
@@ -204,6 +225,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     config.rollout_freq = args.rollout_freq;
     config.rollout_batch = args.rollout_batch;
     config.particles = args.particles;
+    config.apply_recipe(args.recipe);
+    config.model_buffer_factor = args
+        .model_buffer_factor
+        .unwrap_or(config.model_buffer_factor);
+    config.forward_velocity = args.forward_velocity.unwrap_or(config.forward_velocity);
     config.real_ratio = args.real_ratio;
     config.steps_per_epoch = args.steps_per_epoch;
     config.epochs = args.steps.div_ceil(args.steps_per_epoch);

@@ -221,6 +221,26 @@ fn bad_grids_are_refused_before_anything_runs() {
         "{error}"
     );
     assert!(!dir.join("out").exists(), "nothing ran");
+    for (i, (line, named)) in [
+        ("recipe = \"codes\"", "recipe"),
+        ("forward_velocity = \"sideways\"", "forward_velocity"),
+        ("model_buffer_factor = 0", "model_buffer_factor = 0"),
+        ("model_sample_noise = \"loud\"", "model_sample_noise"),
+        ("model_step_discount = 0.0", "model_step_discount = 0"),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let grid = write_grid(
+            dir,
+            &format!("grid-recipe-{i}.toml"),
+            std::slice::from_ref(&good_row),
+        );
+        add_to_budget(&grid, line);
+        let error = fails(&["experiment", "run", "--grid", &s(&grid), "--out", &out]);
+        assert!(error.contains(named), "{line}: {error}");
+        assert!(!dir.join("out").exists(), "nothing ran");
+    }
 
     // --executor slurm without Slurm's client.
     let grid = s(&write_grid(dir, "grid.toml", &[good_row]));

@@ -18,6 +18,11 @@ fn fit_model_names_unusable_loss_flags_before_reading_anything() {
         ("--w-max", "1,2", "w_max has 2 values"),
         ("--w-max", "0", "w_max value 0"),
         ("--threshold-windows", "0", "max_windows = 0"),
+        ("--threshold-max-margin", "0.5", "max_margin = 0.5"),
+        ("--step-discount", "0", "step_discount = 0"),
+        ("--step-discount", "1.5", "step_discount = 1.5"),
+        ("--recipe", "codes", "unknown recipe \"codes\""),
+        ("--sample-noise", "full", "unknown sample noise \"full\""),
         (
             "--likelihood",
             "teacher",

@@ -116,6 +116,13 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
     );
     let err = fails(&fit(20, &["--real-ratio", "1.5"]));
     assert!(err.contains("--real-ratio"), "{err}");
+    let err = fails(&fit(20, &["--model-buffer-factor", "0"]));
+    assert!(err.contains("--model-buffer-factor"), "{err}");
+    let err = fails(&fit(20, &["--forward-velocity", "sideways"]));
+    assert!(
+        err.contains("unknown forward velocity \"sideways\""),
+        "{err}"
+    );
     let err = fails(&["evaluate", "--policy", dataset_s, "--episodes", "1"]);
     assert!(err.contains("loading policy"), "{err}");
 }
@@ -237,6 +244,29 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
         &s(&tmp.path().join("x")),
     ]);
     assert!(error.contains("--pessimism"), "{error}");
+    // NUNO's code's loop settings are refused for MOPO's ensemble, by name.
+    let (model_s, dataset_s, out) = (s(&model), s(&dataset), s(&tmp.path().join("y")));
+    for extra in [["--recipe", "code"], ["--forward-velocity", "mean"]] {
+        let mut args = vec![
+            "fit-policy",
+            "--algo",
+            "mopo",
+            "--model",
+            &model_s,
+            "--dataset",
+            &dataset_s,
+            "--preset",
+            "hopper-medium",
+            "--out",
+            &out,
+        ];
+        args.extend(extra);
+        let error = fails(&args);
+        assert!(
+            error.contains(extra[0]) && error.contains("ensemble"),
+            "{error}"
+        );
+    }
     // The neural SDE's run needs its own model.
     let error = fails(&[
         "fit-policy",

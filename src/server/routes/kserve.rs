@@ -391,7 +391,10 @@ pub async fn infer(
     let config = ParticleConfig {
         particles: 1,
         penalty: number("penalty", 1.0)?,
-        noise_scale: number("noise_scale", 1.0)? as f32,
+        noise_scale: number(
+            "noise_scale",
+            f64::from(model.batch_dynamics().sample_noise_scale()),
+        )? as f32,
     };
     state.metrics.batch("infer", &id, batch);
     let worker = model.clone();

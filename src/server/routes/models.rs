@@ -23,6 +23,10 @@ pub struct ModelSummary {
     pub dt: f64,
     /// Rewards come from the model (NUNO^R, the ensemble).
     pub reward_model: bool,
+    /// The scale of ε the model samples at unless a request gives `noise_scale`:
+    /// 1 is the calibrated Σ; a neural SDE fitted with NUNO's code's convention
+    /// records sqrt(dt).
+    pub sample_noise_scale: f32,
     pub has_policy: bool,
 }
 
@@ -70,6 +74,7 @@ pub(crate) fn summary(model: &LoadedModel) -> ModelSummary {
         act_dim: model.act_dim(),
         dt: model.step_seconds,
         reward_model: model.reward_model(),
+        sample_noise_scale: model.batch_dynamics().sample_noise_scale(),
         has_policy: model.policy.is_some(),
     }
 }

@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use super::fields::{integer, one, unit, unit_f32};
+use super::fields::{integer, one, unit};
 use crate::agent::{
     ActionMode, RolloutActions, RolloutConfig, RolloutTrace, StepOutcome, penalized_reward,
     rollout_model_or_cancel,
@@ -64,10 +64,12 @@ pub struct RolloutRequest {
     /// An explicit truncation threshold instead of α (give one of the two).
     #[serde(default)]
     pub threshold: Option<f32>,
-    /// Multiplies ε (default 1; 0 follows the drift).
-    #[serde(default = "unit_f32")]
+    /// Multiplies ε (default: the model's own `sample_noise_scale`, in
+    /// `GET /v1/models/{id}`: 1 samples at the calibrated Σ; a model fitted with
+    /// NUNO's code's convention samples at sqrt(dt); 0 follows the drift).
+    #[serde(default)]
     #[schema(minimum = 0)]
-    pub noise_scale: f32,
+    pub noise_scale: Option<f32>,
 }
 
 /// One trajectory; arrays stop where it ended.
@@ -107,6 +109,9 @@ pub struct RolloutResponse {
     pub particles: usize,
     /// The truncation threshold used, if any.
     pub threshold: Option<f32>,
+    /// The scale of ε the samples were drawn at: the request's `noise_scale`,
+    /// else the model's own.
+    pub noise_scale: f32,
     /// Start `b`'s particle `p` is entry `b·particles + p`.
     pub trajectories: Vec<Trajectory>,
 }
@@ -117,7 +122,7 @@ pub struct RolloutResponse {
 /// `eta`, `accumulated_eta`, `rewards`, `penalized_rewards` `[rows, horizon]`
 /// (NaN past each trajectory's steps taken), `length` `[rows]` (steps kept) and
 /// `outcome` `[rows]` (0 ran to h, 1 terminal, 2 truncated, 3 diverged); row
-/// `b·particles + p` is start `b`'s particle `p`.
+/// `b·particles + p` is start `b`'s particle `p`; `noise_scale` used in its metadata.
 #[utoipa::path(post, path = "/v1/models/{id}/rollout", tag = "models",
     params(("id" = String, Path, description = "Model id")),
     request_body = RolloutRequest,
@@ -150,7 +155,10 @@ pub async fn rollout(
         limits.max_rollout_steps,
     )?;
     non_negative("penalty", r.penalty)?;
-    non_negative("noise_scale", f64::from(r.noise_scale))?;
+    let noise_scale = r
+        .noise_scale
+        .unwrap_or_else(|| model.batch_dynamics().sample_noise_scale());
+    non_negative("noise_scale", f64::from(noise_scale))?;
     let rows = batch * r.particles;
     answer_within(
         "batch × particles × ((horizon + 1)·obs_dim + horizon·(act_dim + 4) + 2)",
@@ -220,7 +228,7 @@ pub async fn rollout(
         particles: r.particles,
         penalty: r.penalty,
         threshold,
-        noise_scale: r.noise_scale,
+        noise_scale,
     };
     let (seed, mode) = (r.seed, r.policy_mode);
     let worker = model.clone();
@@ -245,11 +253,10 @@ pub async fn rollout(
                 cancel,
             )?;
             if answer == Format::Binary {
-                return tensors_response(&binary_rollout(
-                    &out.trace,
-                    r.penalty,
-                    (obs_dim, act_dim),
-                ));
+                return tensors_response(
+                    &binary_rollout(&out.trace, r.penalty, (obs_dim, act_dim)),
+                    noise_scale,
+                );
             }
             let t = &out.trace;
             let trajectories = (0..t.rows)
@@ -281,6 +288,7 @@ pub async fn rollout(
                 horizon: r.horizon,
                 particles: r.particles,
                 threshold,
+                noise_scale,
                 trajectories,
             })
         })

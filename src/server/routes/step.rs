@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use super::fields::{integer, one, unit, unit_f32};
+use super::fields::{integer, one, unit};
 use crate::agent::{ParticleConfig, ParticleStep, step_particles};
 use crate::artifact::NamedTensors;
 use crate::server::body::{Format, RawBody, TensorBytes, json_response, tensors_response};
@@ -43,10 +43,12 @@ pub struct StepRequest {
     #[serde(default = "unit")]
     #[schema(minimum = 0)]
     pub penalty: f64,
-    /// Multiplies ε (default 1; 0 follows the drift).
-    #[serde(default = "unit_f32")]
+    /// Multiplies ε (default: the model's own `sample_noise_scale`, in
+    /// `GET /v1/models/{id}`: 1 samples at the calibrated Σ; a model fitted with
+    /// NUNO's code's convention samples at sqrt(dt); 0 follows the drift).
+    #[serde(default)]
     #[schema(minimum = 0)]
-    pub noise_scale: f32,
+    pub noise_scale: Option<f32>,
 }
 
 /// Per item: the SDE's terms; per item and particle: the sampled step.
@@ -55,6 +57,9 @@ pub struct StepResponse {
     pub model: String,
     pub batch: usize,
     pub particles: usize,
+    /// The scale of ε the samples were drawn at: the request's `noise_scale`,
+    /// else the model's own.
+    pub noise_scale: f32,
     /// s + f(s, a)·dt, the drift mean: `[batch][obs_dim]`.
     pub mean: Vec<Vec<f32>>,
     /// Aleatoric diffusion σ(s, a): `[batch][obs_dim]`.
@@ -76,7 +81,7 @@ pub struct StepResponse {
 /// Samples one EM step. Binary bodies: a safetensors file with `states`
 /// `[batch, obs_dim]` and `actions` `[batch, act_dim]` (f32), the options as
 /// string metadata (`particles`, `seed`, `penalty`, `noise_scale`); the answer
-/// is a safetensors file with `mean`, `sigma`, `h_eta` `[batch, obs_dim]`,
+/// is a safetensors file (`noise_scale` used in its metadata) with `mean`, `sigma`, `h_eta` `[batch, obs_dim]`,
 /// `eta` `[batch]`, `next_states` `[batch, particles, obs_dim]`, `rewards`,
 /// `penalized_rewards`, `terminals` (0/1) `[batch, particles]`.
 #[utoipa::path(post, path = "/v1/models/{id}/step", tag = "models",
@@ -119,7 +124,10 @@ pub async fn step(
     within("batch (rows of states)", batch, limits.max_batch)?;
     within("particles", request.particles, limits.max_particles)?;
     non_negative("penalty", request.penalty)?;
-    non_negative("noise_scale", f64::from(request.noise_scale))?;
+    let noise_scale = request
+        .noise_scale
+        .unwrap_or_else(|| model.batch_dynamics().sample_noise_scale());
+    non_negative("noise_scale", f64::from(noise_scale))?;
     let rows = batch * request.particles;
     answer_within(
         "batch × (3·obs_dim + 1) + batch × particles × (obs_dim + 3)",
@@ -132,7 +140,7 @@ pub async fn step(
     let config = ParticleConfig {
         particles: request.particles,
         penalty: request.penalty,
-        noise_scale: request.noise_scale,
+        noise_scale,
     };
     let worker = model.clone();
     let format = body.format;
@@ -150,8 +158,8 @@ pub async fn step(
                 &mut rng,
             );
             match format {
-                Format::Json => json_response(&step_response(&id, &result)),
-                Format::Binary => tensors_response(&binary_response(result)),
+                Format::Json => json_response(&step_response(&id, &result, noise_scale)),
+                Format::Binary => tensors_response(&binary_response(result), noise_scale),
             }
         })
         .await
@@ -183,7 +191,10 @@ fn binary_request(
         particles: option(&metadata, "particles", 1)?,
         seed: option(&metadata, "seed", 0)?,
         penalty: option(&metadata, "penalty", 1.0)?,
-        noise_scale: option(&metadata, "noise_scale", 1.0)?,
+        noise_scale: metadata
+            .contains_key("noise_scale")
+            .then(|| option(&metadata, "noise_scale", 1.0))
+            .transpose()?,
     };
     Ok((states, actions, request))
 }
@@ -202,12 +213,13 @@ fn option<T: std::str::FromStr>(
     }
 }
 
-fn step_response(id: &str, s: &ParticleStep) -> StepResponse {
+fn step_response(id: &str, s: &ParticleStep, noise_scale: f32) -> StepResponse {
     let (p, d) = (s.particles, s.obs_dim);
     StepResponse {
         model: id.to_string(),
         batch: s.batch,
         particles: p,
+        noise_scale,
         mean: rows(&s.mean, d),
         sigma: rows(&s.sigma, d),
         h_eta: rows(&s.h_eta, d),
