@@ -5,7 +5,7 @@
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 use nuno::agent::{
-    ActorConfig, BatchPolicy, LoopContext, PRESETS, PolicyLoopConfig, PolicyTraining,
+    ActorConfig, BatchPolicy, LoopContext, MopoSettings, PRESETS, PolicyLoopConfig, PolicyTraining,
     RandomNetworkPolicy, RolloutActions, RolloutConfig, Sac, SacConfig, StepOutcome, preset,
     rollout_model,
 };
@@ -573,6 +573,26 @@ fn the_known_reward_reads_the_velocity_it_is_told() {
         moved.reward(&x, &action, &x_next),
         neorl.reward(&x, &action, &x_next)
     );
+}
+
+/// OfflineRL-Kit's MOPO: actor and α at 1e-4, the actor's rate cosine-annealed
+/// per epoch (PyTorch's `CosineAnnealingLR(T_max = epochs)`, by hand), 50 000 starts.
+#[test]
+fn mopo_follows_offlinerl_kits_settings_unless_told_nuno() {
+    let mut config = tiny_config(0);
+    config.epochs = 4;
+    config.apply_mopo_settings(MopoSettings::OfflinerlKit);
+    assert_eq!((config.sac.actor_lr, config.sac.alpha_lr), (1e-4, 1e-4));
+    assert_eq!(config.rollout_batch, 50_000);
+    let lr: Vec<f64> = (0..4).map(|e| config.actor_lr_at(e)).collect();
+    let by_hand = [1e-4, 0.853_553_4e-4, 0.5e-4, 0.146_446_6e-4];
+    for (got, want) in lr.iter().zip(by_hand) {
+        assert!((got - want).abs() < 1e-11, "{lr:?}");
+    }
+    config.apply_mopo_settings(MopoSettings::Nuno);
+    assert_eq!((config.sac.actor_lr, config.sac.alpha_lr), (3e-4, 3e-4));
+    assert_eq!((config.actor_lr_at(0), config.actor_lr_at(3)), (3e-4, 3e-4));
+    assert_eq!(config.rollout_batch, 5000);
 }
 
 #[test]

@@ -34,7 +34,8 @@ pub use model_step::{ParticleConfig, ParticleStep, penalized_reward, step_partic
 pub use online_sac::{OnlineRecord, OnlineSac, OnlineSacConfig, OnlineSeconds};
 pub use policy::RandomPolicy;
 pub use policy_loop::{
-    EpochRecord, EtaProbe, EvalSummary, LoopContext, PhaseSeconds, PolicyLoopConfig, PolicyTraining,
+    ActorLrDecay, EpochRecord, EtaProbe, EvalSummary, LoopContext, MopoSettings, PhaseSeconds,
+    PolicyLoopConfig, PolicyTraining,
 };
 pub use presets::{
     MOPO_PRESETS, PRESETS, Preset, TATU_DEFAULT_PESSIMISM, TATU_PESSIMISM, mopo_preset, preset,

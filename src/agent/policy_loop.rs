@@ -32,6 +32,37 @@ use crate::infer::Kernel;
 use crate::sde::{CODE_MODEL_BUFFER_FACTOR, Recipe, ThresholdTable};
 use crate::shared::BatchDynamics;
 
+/// How the actor's learning rate moves over a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ActorLrDecay {
+    /// NUNO's code and its SAC.
+    Constant,
+    /// lr·(1 + cos(π·e/epochs))/2 in epoch e, stepped once per epoch: OfflineRL-Kit's
+    /// `CosineAnnealingLR(T_max = epochs)` for MOPO's actor. A run extended on
+    /// resume anneals over its new length from there on.
+    Cosine,
+}
+
+crate::shared::named_enum!(ActorLrDecay, "actor learning-rate decay", ActorLrDecay::Constant => "constant", ActorLrDecay::Cosine => "cosine");
+
+/// Which SAC settings MOPO's (and TATU+MOPO's) policy step runs with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MopoSettings {
+    /// OfflineRL-Kit's `run_mopo.py`, the published baseline: actor lr 1e-4 with
+    /// cosine decay, α lr 1e-4, rollouts of 50 000 starts (`KIT_MOPO`).
+    OfflinerlKit,
+    /// NUNO's SAC settings (3e-4 everywhere, constant, 5000 starts): what nuno's
+    /// MOPO ran before it followed OfflineRL-Kit, kept for ablations.
+    Nuno,
+}
+
+crate::shared::named_enum!(MopoSettings, "MOPO settings", MopoSettings::OfflinerlKit => "offlinerl-kit", MopoSettings::Nuno => "nuno");
+
+/// OfflineRL-Kit's MOPO (`run_mopo.py`): actor lr, α lr, the actor's decay, rollout starts.
+const KIT_MOPO: (f64, f64, ActorLrDecay, usize) = (1e-4, 1e-4, ActorLrDecay::Cosine, 50_000);
+
 /// Every knob of the loop; defaults are Appendix C.2–C.3's.
 #[derive(Config, Debug, PartialEq)]
 pub struct PolicyLoopConfig {
@@ -68,6 +99,10 @@ pub struct PolicyLoopConfig {
     /// before this field used the one after, and load so.
     #[config(default = "ForwardVelocity::Next")]
     pub forward_velocity: ForwardVelocity,
+    /// How the actor's learning rate moves over the run (`sac.actor_lr` at the
+    /// first epoch). Runs saved before this field kept it constant, and load so.
+    #[config(default = "ActorLrDecay::Constant")]
+    pub actor_lr_decay: ActorLrDecay,
     /// β, the fraction of each SAC batch drawn from the real data.
     #[config(default = 0.05)]
     pub real_ratio: f64,
@@ -98,6 +133,37 @@ impl PolicyLoopConfig {
         } else {
             ForwardVelocity::Next
         };
+    }
+
+    /// The settings MOPO's policy step runs with (`--algo mopo|tatu-mopo`).
+    pub fn apply_mopo_settings(&mut self, settings: MopoSettings) {
+        let (actor_lr, alpha_lr, decay, rollout_batch) = match settings {
+            MopoSettings::OfflinerlKit => KIT_MOPO,
+            MopoSettings::Nuno => {
+                let nuno = Self::new(SacConfig::new(), 0, 0.0, 0.0);
+                (
+                    nuno.sac.actor_lr,
+                    nuno.sac.alpha_lr,
+                    nuno.actor_lr_decay,
+                    nuno.rollout_batch,
+                )
+            }
+        };
+        self.sac.actor_lr = actor_lr;
+        self.sac.alpha_lr = alpha_lr;
+        self.actor_lr_decay = decay;
+        self.rollout_batch = rollout_batch;
+    }
+
+    /// The actor's learning rate during epoch `epoch` (from 0).
+    pub fn actor_lr_at(&self, epoch: usize) -> f64 {
+        match self.actor_lr_decay {
+            ActorLrDecay::Constant => self.sac.actor_lr,
+            ActorLrDecay::Cosine => {
+                let progress = epoch as f64 / self.epochs.max(1) as f64;
+                self.sac.actor_lr * 0.5 * (1.0 + (std::f64::consts::PI * progress).cos())
+            }
+        }
     }
 
     /// The loop with a preset's h, α and λ_pen.
@@ -302,6 +368,7 @@ impl PolicyTraining {
         let mut rollout = RolloutStats::default();
         // The fused kernel trains on host buffers for the epoch and hands the
         // agent back to `self.sac` for rollouts, evaluation and checkpoints.
+        self.sac.config.actor_lr = self.config.actor_lr_at(self.epoch);
         let mut fused = (ctx.kernel == Kernel::Fused).then(|| FusedSac::from_sac(&self.sac));
         for _ in 0..self.config.steps_per_epoch {
             if self.step.is_multiple_of(self.config.rollout_freq.max(1)) {

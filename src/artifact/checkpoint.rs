@@ -19,7 +19,7 @@ use super::sac_state::{
 use super::safetensors_file::safetensors_bytes;
 use super::tensors::NamedTensors;
 use super::{ArtifactError, sha256_hex};
-use crate::agent::{EpochRecord, PolicyLoopConfig, PolicyTraining, ReplayBuffer};
+use crate::agent::{ActorLrDecay, EpochRecord, PolicyLoopConfig, PolicyTraining, ReplayBuffer};
 use crate::data::TransitionBatch;
 use crate::envs::ForwardVelocity;
 
@@ -103,7 +103,8 @@ fn buffer_tensors(buffer: &ReplayBuffer) -> NamedTensors {
 
 /// Fields of the `PolicyLoopConfig` at `pointer` that files written before
 /// them lack, with the meaning those runs had: a model buffer of 1 × its
-/// rollouts, the known reward on the velocity after the step.
+/// rollouts, the known reward on the velocity after the step, a constant actor
+/// learning rate.
 pub(super) fn fill_older_loop_fields(value: &mut serde_json::Value, pointer: &str) {
     if let Some(fields) = value.pointer_mut(pointer).and_then(|v| v.as_object_mut()) {
         fields
@@ -112,6 +113,9 @@ pub(super) fn fill_older_loop_fields(value: &mut serde_json::Value, pointer: &st
         fields
             .entry("forward_velocity")
             .or_insert(serde_json::json!(ForwardVelocity::Next));
+        fields
+            .entry("actor_lr_decay")
+            .or_insert(serde_json::json!(ActorLrDecay::Constant));
     }
 }
 

@@ -37,7 +37,9 @@ pub use ensemble_checkpoint::{
     ENSEMBLE_CHECKPOINT_SCHEMA_VERSION, EnsembleFitShape, load_ensemble_checkpoint,
     save_ensemble_checkpoint,
 };
-pub use json_file::{read_checked_weights, read_versioned_json, write_json};
+pub use json_file::{
+    read_checked_weights, read_versioned_json, read_versioned_json_filled, write_json,
+};
 pub use online_run::{
     ONLINE_RUN_SCHEMA_VERSION, OnlineRunInfo, RunPolicy, load_online_checkpoint, read_online_run,
     read_run_transitions, run_policies, save_online_checkpoint, start_online_run,

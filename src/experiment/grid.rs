@@ -11,6 +11,8 @@
 //! model_step_discount = 0.9 # fit-model's --step-discount (optional; default: the recipe's)
 //! model_buffer_factor = 10  # fit-policy's --model-buffer-factor (optional; default: the recipe's)
 //! forward_velocity = "mean" # NUNO's fit-policy --forward-velocity (optional; default: the recipe's)
+//! rollout_batch = 5000      # fit-policy's --rollout-batch, every method (optional; default: each method's)
+//! mopo_settings = "nuno"    # MOPO's fit-policy --mopo-settings (optional; default "offlinerl-kit")
 //! ensemble_max_epochs = 100 # fit-ensemble's --max-epochs (optional)
 //! policy_steps = 100000     # fit-policy's --steps (the same for every method)
 //! steps_per_epoch = 1000
@@ -32,7 +34,7 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 use super::ExperimentError;
-use crate::agent::preset;
+use crate::agent::{MopoSettings, preset};
 
 use crate::envs::{ForwardVelocity, ObservationLayout, TaskName};
 use crate::sde::{LikelihoodPath, Recipe, SampleNoise};
@@ -144,12 +146,39 @@ pub struct Budget {
     pub steps_per_epoch: usize,
     #[serde(default = "default_eval_episodes")]
     pub eval_episodes: usize,
-    /// fit-policy's rollout batch (NUNO's scripts: 5000).
-    #[serde(default = "default_rollout_batch")]
-    pub rollout_batch: usize,
+    /// fit-policy's `--rollout-batch`, for every method (default: each method's own,
+    /// NUNO's 5000 and MOPO's by its `mopo_settings`).
+    #[serde(default)]
+    pub rollout_batch: Option<usize>,
+    /// MOPO's and TATU+MOPO's fit-policy `--mopo-settings` (default: fit-policy's,
+    /// OfflineRL-Kit's). The grids run before it existed name "nuno".
+    #[serde(default)]
+    pub mopo_settings: Option<MopoSettings>,
     /// Hidden sizes of SAC's networks.
     #[serde(default = "default_hidden")]
     pub hidden: Vec<usize>,
+}
+
+impl Budget {
+    /// This budget as `method` runs it: the settings of the other kind of method
+    /// at their defaults (an ensemble method fits no SDE and runs no NUNO loop;
+    /// NUNO's methods run no MOPO), so a grid may change those without touching
+    /// this method's finished cells.
+    pub fn for_method(&self, method: Method) -> Budget {
+        let mut budget = self.clone();
+        if method.uses_ensemble() {
+            budget.model_steps = 0;
+            budget.model_likelihood = default_likelihood();
+            budget.recipe = Recipe::default();
+            budget.model_sample_noise = None;
+            budget.model_step_discount = None;
+            budget.forward_velocity = None;
+        } else {
+            budget.ensemble_max_epochs = None;
+            budget.mopo_settings = None;
+        }
+        budget
+    }
 }
 
 fn default_likelihood() -> LikelihoodPath {
@@ -160,9 +189,6 @@ fn default_steps_per_epoch() -> usize {
 }
 fn default_eval_episodes() -> usize {
     10
-}
-fn default_rollout_batch() -> usize {
-    5000
 }
 fn default_hidden() -> Vec<usize> {
     vec![256, 256]
@@ -322,7 +348,7 @@ impl Grid {
         if b.model_steps == 0
             || b.policy_steps == 0
             || b.steps_per_epoch == 0
-            || b.rollout_batch == 0
+            || b.rollout_batch == Some(0)
         {
             return Err("budget: model_steps, policy_steps, steps_per_epoch and rollout_batch must be at least 1".into());
         }

@@ -12,7 +12,8 @@ use serde::{Deserialize, Serialize};
 use super::ExperimentError;
 use super::grid::{Budget, Cell, Method};
 use crate::agent::EpochRecord;
-use crate::artifact::{latest_checkpoint, read_versioned_json, write_json};
+use crate::agent::MopoSettings;
+use crate::artifact::{latest_checkpoint, read_versioned_json_filled, write_json};
 
 pub const RESULT_SCHEMA_VERSION: u32 = 1;
 const RESULT: &str = "result.json";
@@ -105,6 +106,15 @@ pub fn write_result(root: &Path, result: &CellResult) -> Result<(), ExperimentEr
     )?)
 }
 
+/// A budget recorded before `mopo_settings` existed ran MOPO on NUNO's SAC settings.
+fn fill_older_budget(value: &mut serde_json::Value) {
+    if let Some(budget) = value.get_mut("budget").and_then(|b| b.as_object_mut()) {
+        budget
+            .entry("mopo_settings")
+            .or_insert(serde_json::json!(MopoSettings::Nuno));
+    }
+}
+
 /// Where `cell` stands under `root` with the grid's `budget`. A cell finished
 /// at fewer policy steps (the budget has since grown) is partial, to be
 /// continued from its last checkpoint; one finished under any other budget
@@ -117,7 +127,8 @@ pub fn cell_status(
     let dir = cell_dir(root, cell);
     let result = dir.join(RESULT);
     if result.is_file() {
-        let mut result: CellResult = read_versioned_json(&result, RESULT_SCHEMA_VERSION)?;
+        let mut result: CellResult =
+            read_versioned_json_filled(&result, RESULT_SCHEMA_VERSION, fill_older_budget)?;
         if !result.cell.is_same_cell_as(cell) {
             let old = &result.cell;
             return Err(ExperimentError::Invalid(format!(
@@ -128,7 +139,8 @@ pub fn cell_status(
             )));
         }
         if let Some(then) = &result.budget {
-            let changed = budget_changes(then, budget);
+            let method = cell.method;
+            let changed = budget_changes(&then.for_method(method), &budget.for_method(method));
             if !changed.is_empty() {
                 return Err(ExperimentError::Invalid(format!(
                     "{}: finished under another budget ({}); give the grid another --out, or move this folder away",
@@ -415,6 +427,35 @@ mod tests {
                 "model_steps: 20 then, 30 now"
             ]
         );
+    }
+
+    /// A setting only the other kind of method reads changes nothing for a
+    /// cell; an older result's MOPO ran on NUNO's settings.
+    #[test]
+    fn only_the_methods_own_settings_count_as_a_budget_change() {
+        let with = |text: &str| -> Budget { toml::from_str(text).unwrap() };
+        let plain = with("model_steps = 20\npolicy_steps = 100");
+        let kit = with("model_steps = 20\npolicy_steps = 100\nmopo_settings = \"offlinerl-kit\"");
+        let code = with("model_steps = 20\npolicy_steps = 100\nrecipe = \"code\"");
+        let changes = |then: &Budget, now: &Budget, method| {
+            budget_changes(&then.for_method(method), &now.for_method(method))
+        };
+        assert!(changes(&plain, &kit, Method::Nuno).is_empty());
+        assert!(changes(&plain, &code, Method::Mopo).is_empty());
+        assert_eq!(
+            changes(&plain, &kit, Method::Mopo),
+            ["mopo_settings: null then, \"offlinerl-kit\" now"]
+        );
+        assert_eq!(
+            changes(&plain, &code, Method::NunoAl),
+            ["recipe: \"paper\" then, \"code\" now"]
+        );
+        let mut old = serde_json::json!({"budget": {"model_steps": 20, "policy_steps": 100}});
+        fill_older_budget(&mut old);
+        let old: Budget = serde_json::from_value(old["budget"].clone()).unwrap();
+        let nuno = with("model_steps = 20\npolicy_steps = 100\nmopo_settings = \"nuno\"");
+        assert!(changes(&old, &nuno, Method::Mopo).is_empty());
+        assert!(!changes(&old, &kit, Method::TatuMopo).is_empty());
     }
 
     #[test]

@@ -415,8 +415,6 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         b.steps_per_epoch.to_string(),
         "--eval-episodes".into(),
         b.eval_episodes.to_string(),
-        "--rollout-batch".into(),
-        b.rollout_batch.to_string(),
         "--hidden".into(),
         hidden.join(","),
         "--seed".into(),
@@ -429,6 +427,12 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         cell.method.as_str().into(),
         "--resume".into(),
     ];
+    if let Some(batch) = b.rollout_batch {
+        fit_policy.extend(["--rollout-batch".into(), batch.to_string()]);
+    }
+    if let Some(settings) = b.mopo_settings.filter(|_| cell.method.uses_ensemble()) {
+        fit_policy.extend(["--mopo-settings".into(), settings.to_string()]);
+    }
     if let Some(factor) = b.model_buffer_factor {
         fit_policy.extend(["--model-buffer-factor".into(), factor.to_string()]);
     }

@@ -8,8 +8,9 @@ use anyhow::Context;
 use burn::tensor::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{
-    AleatoricAsEta, EpochRecord, LoopContext, PolicyLoopConfig, PolicyTraining, Preset, SacConfig,
-    dataset_max_threshold, mopo_preset, preset, rollout_threshold, tatu_pessimism,
+    AleatoricAsEta, EpochRecord, LoopContext, MopoSettings, PolicyLoopConfig, PolicyTraining,
+    Preset, SacConfig, dataset_max_threshold, mopo_preset, preset, rollout_threshold,
+    tatu_pessimism,
 };
 use nuno::artifact::{
     BEST_POLICY, LAST_POLICY, PolicyProvenance, latest_checkpoint, load_checkpoint, load_dynamics,
@@ -90,9 +91,15 @@ pub struct Args {
     /// Gradient steps between model rollouts.
     #[arg(long, default_value_t = 1000)]
     rollout_freq: usize,
-    /// Start states per model rollout (NUNO's scripts: 5000; TATU+MOPO: 50000).
-    #[arg(long, default_value_t = PolicyLoopConfig::new(SacConfig::new(), 0, 0.0, 0.0).rollout_batch)]
-    rollout_batch: usize,
+    /// Start states per model rollout (default: NUNO's scripts' 5000; mopo and
+    /// tatu-mopo: their --mopo-settings', OfflineRL-Kit's 50 000).
+    #[arg(long)]
+    rollout_batch: Option<usize>,
+    /// mopo and tatu-mopo: offlinerl-kit (the published baseline: actor lr 1e-4
+    /// with cosine decay, α lr 1e-4, 50 000 rollout starts) or nuno (NUNO's SAC
+    /// settings, for ablations) [default: offlinerl-kit].
+    #[arg(long)]
+    mopo_settings: Option<MopoSettings>,
     /// SDE trajectories per start state.
     #[arg(long, default_value_t = 1)]
     particles: usize,
@@ -160,7 +167,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.steps_per_epoch > 0,
         "--steps-per-epoch must be at least 1"
     );
-    anyhow::ensure!(args.rollout_batch > 0, "--rollout-batch must be at least 1");
+    anyhow::ensure!(
+        args.rollout_batch != Some(0),
+        "--rollout-batch must be at least 1"
+    );
+    anyhow::ensure!(
+        args.mopo_settings.is_none() || args.algo.uses_ensemble(),
+        "--mopo-settings sets MOPO's policy step: it needs --algo mopo or tatu-mopo"
+    );
     anyhow::ensure!(args.particles > 0, "--particles must be at least 1");
     anyhow::ensure!(args.batch_size > 0, "--batch-size must be at least 1");
     anyhow::ensure!(
@@ -217,13 +231,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         // adds its truncation to MOPO's, MOPO alone has none.
         (config.horizon, config.penalty) = mopo_preset(&args.preset)?;
         config.truncate = args.algo == Algo::TatuMopo;
+        config.apply_mopo_settings(args.mopo_settings.unwrap_or(MopoSettings::OfflinerlKit));
     }
     config.horizon = args.horizon.unwrap_or(config.horizon);
     config.cvar_alpha = args.cvar_alpha.unwrap_or(config.cvar_alpha);
     config.penalty = args.penalty.unwrap_or(config.penalty);
     config.truncate &= !args.no_truncation;
     config.rollout_freq = args.rollout_freq;
-    config.rollout_batch = args.rollout_batch;
+    config.rollout_batch = args.rollout_batch.unwrap_or(config.rollout_batch);
     config.particles = args.particles;
     config.apply_recipe(args.recipe);
     config.model_buffer_factor = args

@@ -116,6 +116,11 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
     );
     let err = fails(&fit(20, &["--real-ratio", "1.5"]));
     assert!(err.contains("--real-ratio"), "{err}");
+    let err = fails(&fit(20, &["--mopo-settings", "nuno"]));
+    assert!(
+        err.contains("--mopo-settings") && err.contains("--algo mopo"),
+        "{err}"
+    );
     let err = fails(&fit(20, &["--model-buffer-factor", "0"]));
     assert!(err.contains("--model-buffer-factor"), "{err}");
     let err = fails(&fit(20, &["--forward-velocity", "sideways"]));
@@ -173,6 +178,15 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
     assert_eq!(policy["dynamics_sha256"], ensemble["weights_sha256"]);
     assert_eq!(policy["training"]["penalty"], 5.0);
     assert_eq!(policy["training"]["truncate"], false);
+    // OfflineRL-Kit's MOPO by default: actor and α at 1e-4, the actor cosine-annealed
+    // (the given --rollout-batch kept over the settings' 50 000).
+    let training = &policy["training"];
+    assert_eq!(
+        (&training["sac"]["actor_lr"], &training["sac"]["alpha_lr"]),
+        (&serde_json::json!(1e-4), &serde_json::json!(1e-4))
+    );
+    assert_eq!(training["actor_lr_decay"], "cosine");
+    assert_eq!(training["rollout_batch"], 32);
     // TATU+MOPO on the same ensemble: MOPO's penalty, truncation at the
     // largest disagreement on the dataset / pessimism, kept for a resume.
     let tatu = |out: &Path, steps: usize, extra: &[&str]| {
