@@ -15,7 +15,7 @@ use clap::{Subcommand, ValueEnum};
 use nuno::data::read_dataset;
 use nuno::envs::{ObservationLayout, TaskConfig};
 use nuno::experiment::{
-    Cell, CellResult, CellSelection, CellStatus, Grid, Method, cell_dir, cell_status,
+    Budget, Cell, CellResult, CellSelection, CellStatus, Grid, Method, cell_dir, cell_status,
     markdown_table, policy_time_left, results_csv, summarize, summarize_run, write_result,
 };
 
@@ -374,29 +374,7 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         }
         // A killed fit continues from its last checkpoint.
         fit.push("--resume".into());
-        if cell.method.uses_ensemble() {
-            if let Some(epochs) = b.ensemble_max_epochs {
-                fit.extend(["--max-epochs".into(), epochs.to_string()]);
-            }
-        } else {
-            fit.extend([
-                "--max-steps".into(),
-                b.model_steps.to_string(),
-                "--likelihood".into(),
-                b.model_likelihood.to_string(),
-                "--recipe".into(),
-                b.recipe.to_string(),
-            ]);
-            if let Some(noise) = b.model_sample_noise {
-                fit.extend(["--sample-noise".into(), noise.to_string()]);
-            }
-            if let Some(discount) = b.model_step_discount {
-                fit.extend(["--step-discount".into(), discount.to_string()]);
-            }
-            if cell.method == Method::NunoR {
-                fit.push("--reward-model".into());
-            }
-        }
+        fit.extend(model_fit_options(b, cell.method));
         trainer(fit)?;
     }
     drop(lock);
@@ -427,22 +405,7 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         cell.method.as_str().into(),
         "--resume".into(),
     ];
-    if let Some(batch) = b.rollout_batch {
-        fit_policy.extend(["--rollout-batch".into(), batch.to_string()]);
-    }
-    if let Some(settings) = b.mopo_settings.filter(|_| cell.method.uses_ensemble()) {
-        fit_policy.extend(["--mopo-settings".into(), settings.to_string()]);
-    }
-    if let Some(factor) = b.model_buffer_factor {
-        fit_policy.extend(["--model-buffer-factor".into(), factor.to_string()]);
-    }
-    // The recipe and the reward's velocity are NUNO's loop; an ensemble learns its rewards.
-    if !cell.method.uses_ensemble() {
-        fit_policy.extend(["--recipe".into(), b.recipe.to_string()]);
-        if let Some(velocity) = b.forward_velocity {
-            fit_policy.extend(["--forward-velocity".into(), velocity.to_string()]);
-        }
-    }
+    fit_policy.extend(policy_options(b, cell.method));
     trainer(fit_policy)?;
     let result = summarize_run(cell, &grid.budget, &policy.join("metrics.jsonl"))?;
     write_result(root, &result)?;
@@ -454,6 +417,49 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         result.final_score
     );
     Ok(())
+}
+
+/// `flag value` when the budget gives a value, nothing otherwise.
+fn option(flag: &str, value: Option<impl ToString>) -> Vec<String> {
+    value.map_or_else(Vec::new, |v| vec![flag.to_string(), v.to_string()])
+}
+
+/// The budget's options of `method`'s model fit (fit-model or fit-ensemble).
+fn model_fit_options(b: &Budget, method: Method) -> Vec<String> {
+    if method.uses_ensemble() {
+        return option("--max-epochs", b.ensemble_max_epochs);
+    }
+    let mut options = [
+        option("--max-steps", Some(b.model_steps)),
+        option("--likelihood", Some(b.model_likelihood)),
+        option("--recipe", Some(b.recipe)),
+        option("--sample-noise", b.model_sample_noise),
+        option("--step-discount", b.model_step_discount),
+    ]
+    .concat();
+    if method == Method::NunoR {
+        options.push("--reward-model".into());
+    }
+    options
+}
+
+/// The budget's optional fit-policy options for `method`: the recipe and the
+/// reward's velocity are NUNO's loop (an ensemble learns its rewards), the
+/// MOPO settings MOPO's.
+fn policy_options(b: &Budget, method: Method) -> Vec<String> {
+    let shared = [
+        option("--rollout-batch", b.rollout_batch),
+        option("--model-buffer-factor", b.model_buffer_factor),
+    ];
+    let own = if method.uses_ensemble() {
+        [option("--mopo-settings", b.mopo_settings), Vec::new()]
+    } else {
+        [
+            option("--recipe", Some(b.recipe)),
+            option("--forward-velocity", b.forward_velocity),
+        ]
+    };
+    [shared, own].concat().concat()
 }
 
 fn status(args: StatusArgs) -> anyhow::Result<()> {
