@@ -93,8 +93,10 @@ pub struct Args {
     resume: bool,
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
-    // Every setting is checked before the data is read or any work starts.
+/// The validated settings of a fit: the task (its simulator, for the action box),
+/// the model's spec, the fit and the threshold configurations (the recipe's, with
+/// single flags over it).
+fn fit_plan(args: &Args) -> anyhow::Result<(MujocoTask, DynamicsSpec, FitConfig, ThresholdConfig)> {
     let mut loss = LossConfig::new();
     loss.radius = args.radius.unwrap_or(loss.radius);
     loss.lambda_grad = args.lambda_grad.unwrap_or(loss.lambda_grad);
@@ -148,6 +150,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     threshold_config
         .validate()
         .context("check --threshold-windows and --threshold-max-margin")?;
+    Ok((probe, spec, config, threshold_config))
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    // Every setting is checked before the data is read or any work starts.
+    let (probe, spec, config, threshold_config) = fit_plan(&args)?;
+    let task = args.data.task_config();
     let dataset = args.data.read()?;
     let (train, valid) = dataset.split_by_trajectory(config.valid_fraction, config.seed);
     std::fs::create_dir_all(&args.out)

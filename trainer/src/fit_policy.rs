@@ -161,7 +161,8 @@ pub struct Args {
     kernel: Option<Kernel>,
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
+/// Refuses flags no run can use, or that do not fit `--algo`, before anything is read.
+fn check_flags(args: &Args) -> anyhow::Result<()> {
     anyhow::ensure!(args.steps > 0, "--steps must be at least 1");
     anyhow::ensure!(
         args.steps_per_epoch > 0,
@@ -205,6 +206,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "--pessimism must be positive, got {p}"
         );
     }
+    Ok(())
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    check_flags(&args)?;
     let preset = preset(&args.preset)?;
     let device = args.device.device().map_err(anyhow::Error::msg)?;
     let model = load_model(&args, preset, &device)?;
