@@ -21,6 +21,7 @@ use super::json_file::{read_checked_weights, read_versioned_json_filled, write_j
 use super::safetensors_file::{safetensors_bytes, write_bytes};
 use super::tensors::{collect_tensors, load_tensors};
 use crate::envs::TaskConfig;
+use crate::infer::Kernel;
 use crate::nn::seeded_init;
 use crate::sde::{
     CalibrationReport, DynamicsSpec, FitConfig, FitSummary, LikelihoodPath, NeuralSde,
@@ -160,6 +161,7 @@ pub(super) fn fill_older_sde_fields(value: &mut serde_json::Value, models: &[&st
             serde_json::json!(LikelihoodPath::Particle),
         );
         fill(loss, "step_discount", serde_json::json!(1.0));
+        fill(fit.to_string(), "kernel", serde_json::json!(Kernel::Burn));
     }
 }
 

@@ -17,6 +17,7 @@ use super::fit_checkpoint::{FitFiles, read_fit_files, write_fit_files};
 use super::json_file::{read_versioned_json_filled, write_json};
 use super::sac_state::{RngState, save_checkpoint_dir};
 use super::tensors::{NamedTensors, load_tensors};
+use crate::infer::Kernel;
 use crate::nn::seeded_init;
 use crate::sde::{
     DynamicsSpec, FitConfig, FitRecord, NeuralSde, PhysicalScales, SdeConfig, SdeFitState,
@@ -87,8 +88,10 @@ pub fn load_sde_checkpoint(
         SDE_CHECKPOINT_SCHEMA_VERSION,
         |value| fill_older_sde_fields(value, &["/current_config", "/best_config"], &["/fit"]),
     )?;
+    // Either kernel continues the other's fit: the same loss, draws and Adam.
     let uncapped = |c: &FitConfig| FitConfig {
         max_steps: 0,
+        kernel: Kernel::Fused,
         ..c.clone()
     };
     if uncapped(&state.fit) != uncapped(fit) {

@@ -121,10 +121,22 @@ impl Dense {
 /// `dst = lhs·rhs` for `(m, n, k)`: dst row-major `[m, n]`, overwritten;
 /// `lhs` `[m, k]` and `rhs` `[k, n]` given as (values, row stride, column stride).
 pub(super) fn product(
+    dims: (usize, usize, usize),
+    dst: &mut [f32],
+    lhs: (&[f32], isize, isize),
+    rhs: (&[f32], isize, isize),
+) {
+    product_into(dims, dst, lhs, rhs, false)
+}
+
+/// [`product`], adding `lhs·rhs` to `dst` when `accumulate` (a sum of two
+/// products, as a weight's gradient through a tangent pass is).
+fn product_into(
     (m, n, k): (usize, usize, usize),
     dst: &mut [f32],
     lhs: (&[f32], isize, isize),
     rhs: (&[f32], isize, isize),
+    accumulate: bool,
 ) {
     assert_eq!(dst.len(), m * n, "product: destination size");
     let last = |(values, rs, cs): (&[f32], isize, isize), r: usize, c: usize| {
@@ -135,7 +147,9 @@ pub(super) fn product(
         return;
     }
     if k == 0 {
-        dst.fill(0.0);
+        if !accumulate {
+            dst.fill(0.0);
+        }
         return;
     }
     last(lhs, m, k);
@@ -151,7 +165,7 @@ pub(super) fn product(
             dst.as_mut_ptr(),
             1,
             n as isize,
-            false,
+            accumulate,
             lhs.0.as_ptr(),
             lhs.2,
             lhs.1,
@@ -172,13 +186,25 @@ pub(super) fn product(
 /// at least [`SPLIT_MIN_ROWS`] rows so that it pays for its own packing of `rhs`.
 pub(super) fn product_on_cores(
     cores: usize,
-    (m, n, k): (usize, usize, usize),
+    dims: (usize, usize, usize),
     dst: &mut [f32],
     lhs: (&[f32], isize, isize),
     rhs: (&[f32], isize, isize),
 ) {
+    product_on_cores_into(cores, dims, dst, lhs, rhs, false)
+}
+
+/// [`product_on_cores`], adding to `dst` when `accumulate`.
+pub(super) fn product_on_cores_into(
+    cores: usize,
+    (m, n, k): (usize, usize, usize),
+    dst: &mut [f32],
+    lhs: (&[f32], isize, isize),
+    rhs: (&[f32], isize, isize),
+    accumulate: bool,
+) {
     if cores < 2 || m < 2 * SPLIT_MIN_ROWS {
-        return product((m, n, k), dst, lhs, rhs);
+        return product_into((m, n, k), dst, lhs, rhs, accumulate);
     }
     // The top part gets its share of the cores, the bottom the rest.
     let top_cores = cores / 2;
@@ -186,14 +212,15 @@ pub(super) fn product_on_cores(
     let (dst_top, dst_bottom) = dst.split_at_mut(top * n);
     let lhs_bottom = (&lhs.0[top * lhs.1 as usize..], lhs.1, lhs.2);
     rayon::join(
-        || product_on_cores(top_cores, (top, n, k), dst_top, lhs, rhs),
+        || product_on_cores_into(top_cores, (top, n, k), dst_top, lhs, rhs, accumulate),
         || {
-            product_on_cores(
+            product_on_cores_into(
                 cores - top_cores,
                 (m - top, n, k),
                 dst_bottom,
                 lhs_bottom,
                 rhs,
+                accumulate,
             )
         },
     );

@@ -9,8 +9,10 @@
 use burn::module::{Module, ModuleMapper, Param};
 use burn::tensor::{Tensor, TensorData};
 
-use super::dense::product_on_cores;
-use super::vector_math::{activate, activation_gradient, bias_then_activate, column_sums};
+use super::dense::{product_on_cores, product_on_cores_into};
+use super::vector_math::{
+    activate, activation_gradient, activation_slopes, bias_then_activate, column_sums,
+};
 use crate::nn::{Activation, Mlp, to_f32_vec};
 
 /// One dense layer `y = x·W + b`, W row-major `[d_in, d_out]` (burn's layout).
@@ -46,6 +48,16 @@ pub struct MlpTape {
     grad_next: Vec<f32>,
     /// How many cores each product may split its rows over.
     cores: usize,
+    /// The tangent pass of [`TrainableMlp::backward_through_input_gradient`]:
+    /// each layer's input tangent ḣ (the first is Q), each hidden layer's
+    /// pre-activation tangent ż, φ'(z) and φ''(z).
+    tangent_inputs: Vec<Vec<f32>>,
+    tangent_pre: Vec<Vec<f32>>,
+    slopes: Vec<Vec<f32>>,
+    curvatures: Vec<Vec<f32>>,
+    /// ∂L/∂ż and its next layer's, beside `grad` and `grad_next` (∂L/∂z).
+    tangent_grad: Vec<f32>,
+    tangent_grad_next: Vec<f32>,
 }
 
 impl MlpTape {
@@ -264,6 +276,122 @@ impl TrainableMlp {
         if let Some(grad_input) = grad_input {
             grad_input.clear();
             grad_input.extend_from_slice(&tape.grad);
+        }
+    }
+
+    /// For a scalar network d(x) (`d_out == 1`) after [`TrainableMlp::forward`]:
+    /// writes into `grads` (overwriting) the gradient of a loss L(d, ∇ₓd), given
+    /// ∂L/∂d per row (`grad_output`, `[rows]`) and Q = ∂L/∂∇ₓd (`grad_input_grad`,
+    /// `[rows, d_in]`): η's losses, which hold ∇ₓη (eq. 3, 4).
+    ///
+    /// Σ_rows Qᵀ∇ₓd is the tangent ḋ of d along Q (forward mode: ż = ḣ·W,
+    /// ḣ = φ'(z)⊙ż from ḣ₀ = Q), so with Q held fixed its parameter gradient
+    /// is the reverse pass over the pair (z, ż), seeded with ∂L/∂d and 1:
+    /// ∂W = hᵀ·g_z + ḣᵀ·g_ż, ∂b = Σ g_z, and below each hidden layer
+    /// g_z ← (g_z·Wᵀ)⊙φ' + (g_ż·Wᵀ)⊙ż⊙φ'', g_ż ← (g_ż·Wᵀ)⊙φ'.
+    pub fn backward_through_input_gradient(
+        &self,
+        tape: &mut MlpTape,
+        grad_output: &[f32],
+        grad_input_grad: &[f32],
+        grads: &mut TrainableMlp,
+    ) {
+        let rows = tape.rows;
+        let last = self.layers.len() - 1;
+        assert_eq!(self.d_out(), 1, "an input gradient needs a scalar network");
+        assert_eq!(grad_output.len(), rows, "MLP output gradient size");
+        assert_eq!(
+            grad_input_grad.len(),
+            rows * self.d_in(),
+            "MLP input-gradient gradient size"
+        );
+        let cores = tape.cores;
+        // The tangent pass, hidden layers only (the output's tangent is not needed).
+        tape.tangent_inputs.resize_with(last + 1, Vec::new);
+        tape.tangent_pre.resize_with(last, Vec::new);
+        tape.slopes.resize_with(last, Vec::new);
+        tape.curvatures.resize_with(last, Vec::new);
+        tape.tangent_inputs[0].clear();
+        tape.tangent_inputs[0].extend_from_slice(grad_input_grad);
+        for (i, layer) in self.layers[..last].iter().enumerate() {
+            let pre = tape.pre_activations.get(i).map(Vec::as_slice);
+            activation_slopes(
+                self.activation,
+                &tape.inputs[i + 1],
+                pre,
+                &mut tape.slopes[i],
+                &mut tape.curvatures[i],
+            );
+            let z_dot = &mut tape.tangent_pre[i];
+            z_dot.resize(rows * layer.d_out, 0.0);
+            product_on_cores(
+                cores,
+                (rows, layer.d_out, layer.d_in),
+                z_dot,
+                (&tape.tangent_inputs[i], layer.d_in as isize, 1),
+                (&layer.weight, layer.d_out as isize, 1),
+            );
+            let h_dot = &mut tape.tangent_inputs[i + 1];
+            h_dot.clear();
+            h_dot.extend(z_dot.iter().zip(&tape.slopes[i]).map(|(z, p)| z * p));
+        }
+        // The reverse pass over (z, ż).
+        tape.grad.clear();
+        tape.grad.extend_from_slice(grad_output);
+        tape.tangent_grad.clear();
+        tape.tangent_grad.resize(rows, 1.0);
+        for (i, layer) in self.layers.iter().enumerate().rev() {
+            let g = &mut grads.layers[i];
+            let (d_in, d_out) = (layer.d_in as isize, layer.d_out as isize);
+            let dims = (layer.d_in, layer.d_out, rows);
+            product_on_cores(
+                cores,
+                dims,
+                &mut g.weight,
+                (&tape.inputs[i], 1, d_in),
+                (&tape.grad, d_out, 1),
+            );
+            product_on_cores_into(
+                cores,
+                dims,
+                &mut g.weight,
+                (&tape.tangent_inputs[i], 1, d_in),
+                (&tape.tangent_grad, d_out, 1),
+                true,
+            );
+            column_sums(&tape.grad, &mut g.bias);
+            if i == 0 {
+                break;
+            }
+            let back = (rows, layer.d_in, layer.d_out);
+            tape.grad_next.resize(rows * layer.d_in, 0.0);
+            tape.tangent_grad_next.resize(rows * layer.d_in, 0.0);
+            product_on_cores(
+                cores,
+                back,
+                &mut tape.grad_next,
+                (&tape.grad, d_out, 1),
+                (&layer.weight, 1, d_out),
+            );
+            product_on_cores(
+                cores,
+                back,
+                &mut tape.tangent_grad_next,
+                (&tape.tangent_grad, d_out, 1),
+                (&layer.weight, 1, d_out),
+            );
+            let (p, q, z_dot) = (
+                &tape.slopes[i - 1],
+                &tape.curvatures[i - 1],
+                &tape.tangent_pre[i - 1],
+            );
+            for j in 0..tape.grad_next.len() {
+                let g_h_dot = tape.tangent_grad_next[j];
+                tape.grad_next[j] = tape.grad_next[j] * p[j] + g_h_dot * z_dot[j] * q[j];
+                tape.tangent_grad_next[j] = g_h_dot * p[j];
+            }
+            std::mem::swap(&mut tape.grad, &mut tape.grad_next);
+            std::mem::swap(&mut tape.tangent_grad, &mut tape.tangent_grad_next);
         }
     }
 }

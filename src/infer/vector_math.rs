@@ -119,6 +119,51 @@ pub fn swish_derivative(z: f32) -> f32 {
     s * (1.0 + z * one_minus_s)
 }
 
+/// φ'(z) into `slope` and φ''(z) into `curvature` for a hidden layer whose
+/// activations are `outputs` (and pre-activations `pre`, which swish needs):
+/// relu' = [a > 0], relu'' = 0; tanh' = 1 − a², tanh'' = −2a(1 − a²);
+/// swish'' = s(1 − s)(2 + z(1 − 2s)). For losses on an input gradient (η's, eq. 3, 4).
+pub fn activation_slopes(
+    activation: Activation,
+    outputs: &[f32],
+    pre: Option<&[f32]>,
+    slope: &mut Vec<f32>,
+    curvature: &mut Vec<f32>,
+) {
+    slope.resize(outputs.len(), 0.0);
+    curvature.resize(outputs.len(), 0.0);
+    let pairs = slope.iter_mut().zip(curvature.iter_mut());
+    match activation {
+        Activation::Relu => {
+            for ((p, q), &a) in pairs.zip(outputs) {
+                (*p, *q) = (if a > 0.0 { 1.0 } else { 0.0 }, 0.0);
+            }
+        }
+        Activation::Tanh => {
+            for ((p, q), &a) in pairs.zip(outputs) {
+                let one_minus = 1.0 - a * a;
+                (*p, *q) = (one_minus, -2.0 * a * one_minus);
+            }
+        }
+        Activation::Swish => {
+            let pre = pre.expect("swish's slopes need the pre-activations");
+            assert_eq!(pre.len(), outputs.len(), "activation_slopes: sizes");
+            for ((p, q), &z) in pairs.zip(pre) {
+                let s = sigmoid(z);
+                *p = s * (1.0 + z * (1.0 - s));
+                *q = s * (1.0 - s) * (2.0 + z * (1.0 - 2.0 * s));
+            }
+        }
+    }
+}
+
+/// s(z) = 1/(1 + e^(−z)), without overflow on either side.
+#[inline(always)]
+fn sigmoid(z: f32) -> f32 {
+    let e = exp(-f64::from(z.abs())) as f32;
+    if z >= 0.0 { 1.0 / (1.0 + e) } else { e / (1.0 + e) }
+}
+
 /// `sums[j] = Σ_rows values[row, j]` (rows as wide as `sums`), overwriting `sums`.
 pub fn column_sums(values: &[f32], sums: &mut [f32]) {
     struct Sums<'a>(&'a [f32], &'a mut [f32]);

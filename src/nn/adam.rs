@@ -140,9 +140,7 @@ impl Adam {
                 let mut values = to_f32_vec(value);
                 let mut grad = to_f32_vec(grad);
                 if let Some(clip) = self.clip_norm {
-                    let norm = grad.iter().map(|g| g * g).sum::<f32>().sqrt();
-                    let coef = (clip / (norm + f32::MIN_POSITIVE)).min(1.0);
-                    grad.iter_mut().for_each(|g| *g *= coef);
+                    clip_to_norm(&mut grad, clip);
                 }
                 let moments = self.state.moments.entry(self.path.join(".")).or_default();
                 self.adam.update(self.step, &mut values, &grad, moments);
@@ -160,4 +158,12 @@ impl Adam {
             path: Vec::new(),
         })
     }
+}
+
+/// Scales `grad` to an L2 norm of at most `clip` (burn's
+/// `GradientClipping::Norm`: g·min(1, c/(‖g‖ + the smallest positive f32))).
+pub fn clip_to_norm(grad: &mut [f32], clip: f32) {
+    let norm = grad.iter().map(|g| g * g).sum::<f32>().sqrt();
+    let coef = (clip / (norm + f32::MIN_POSITIVE)).min(1.0);
+    grad.iter_mut().for_each(|g| *g *= coef);
 }

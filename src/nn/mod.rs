@@ -3,7 +3,7 @@
 mod adam;
 mod mlp;
 
-pub use adam::{Adam, AdamState, AdamStep, Moments};
+pub use adam::{Adam, AdamState, AdamStep, Moments, clip_to_norm};
 pub use mlp::{Activation, Mlp, MlpConfig};
 
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};

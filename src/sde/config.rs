@@ -3,6 +3,8 @@
 
 use burn::config::Config;
 
+use crate::infer::Kernel;
+
 /// Network sizes and output transforms (Appendix C.4, eq. 5 and 8).
 #[derive(Config, Debug, PartialEq)]
 pub struct SdeConfig {
@@ -112,6 +114,19 @@ impl SdeConfig {
             )));
         }
         Ok(())
+    }
+
+    /// h(η)'s b from η's logits on the training data (none without data):
+    /// b = logit(h_on_data) − W·ℓ_q, ℓ_q the logits' `h_data_quantile`
+    /// (`NeuralSde::calibrate_h_bias`).
+    pub fn calibrated_h_bias(&self, mut logits: Vec<f32>) -> Option<f32> {
+        if logits.is_empty() {
+            return None;
+        }
+        logits.sort_by(f32::total_cmp);
+        let at = ((logits.len() - 1) as f64 * self.h_data_quantile).round() as usize;
+        let target = (self.h_on_data / (1.0 - self.h_on_data)).ln();
+        Some(target - self.h_weight * logits[at])
     }
 
     /// W^max for each of `state_dim` dimensions, in multiples of the diffusion scale.
@@ -281,6 +296,12 @@ pub struct FitConfig {
     /// on near-deterministic dimensions (positions), and Adam at lr 1e-2 then diverges.
     #[config(default = 10.0)]
     pub grad_clip_norm: f32,
+    /// What takes the gradient steps: `fused` (the CPU kernels, every core) or
+    /// `burn` (autodiff on the fit's device: a GPU's path). The same loss, draws
+    /// and Adam; either resumes the other's checkpoints. Fits recorded before
+    /// this field ran on burn, and load so.
+    #[config(default = "Kernel::Fused")]
+    pub kernel: Kernel,
     /// Upper bound on gradient steps (early stopping usually ends sooner).
     #[config(default = 20000)]
     pub max_steps: usize,

@@ -67,6 +67,15 @@ impl FarField {
         rng: &mut ChaCha8Rng,
         device: &Device,
     ) -> (Tensor<2>, Tensor<2>) {
+        let (points, mask) = self.sample_values(count, rng);
+        (
+            Tensor::from_data(TensorData::new(points, [count, self.dim]), device),
+            Tensor::from_data(TensorData::new(mask, [count, 1]), device),
+        )
+    }
+
+    /// [`FarField::sample`] as row-major values: points `[count, dim]`, mask `[count]`.
+    pub fn sample_values(&self, count: usize, rng: &mut ChaCha8Rng) -> (Vec<f32>, Vec<f32>) {
         let mut points = Vec::with_capacity(count * self.dim);
         let mut mask = Vec::with_capacity(count);
         let threshold = self.min_distance * self.min_distance;
@@ -85,10 +94,7 @@ impl FarField {
             });
             mask.push(if far { 1.0 } else { 0.0 });
         }
-        (
-            Tensor::from_data(TensorData::new(points, [count, self.dim]), device),
-            Tensor::from_data(TensorData::new(mask, [count, 1]), device),
-        )
+        (points, mask)
     }
 }
 

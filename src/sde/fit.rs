@@ -16,11 +16,14 @@ use serde::{Deserialize, Serialize};
 use super::SdeError;
 use super::config::{FitConfig, LossConfig};
 use super::eta::FarField;
+use super::fit_step::{BurnSdeTrainer, SdeTrainer, StepDraws, StepSettings};
+use super::fused_fit::FusedSdeTrainer;
 use super::losses::WindowTensors;
 use super::model::NeuralSde;
 use super::spec::{DynamicsSpec, PhysicalScales};
 use crate::data::{Dataset, NormalizerConfig, WindowBatch, WindowSampler};
-use crate::nn::{Adam, AdamState, assign_params, normal, seeded_init};
+use crate::infer::Kernel;
+use crate::nn::{AdamState, normal, seeded_init, standard_normal};
 
 /// Losses at one logged step (and the validation NLL when it was measured).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -60,7 +63,21 @@ pub fn window_tensors(
     let (b, h) = (batch.batch, batch.horizon);
     let act_dim = batch.actions.len() / (b * h).max(1);
     let state_dim = obs_dim + usize::from(reward_model);
-    let states = if reward_model {
+    let states = window_states(batch, obs_dim, reward_model);
+    WindowTensors {
+        states: Tensor::from_data(TensorData::new(states, [b, h + 1, state_dim]), device),
+        actions: Tensor::from_data(
+            TensorData::new(batch.actions.clone(), [b, h, act_dim]),
+            device,
+        ),
+    }
+}
+
+/// The windows' states `[batch, horizon + 1, state_dim]`, r_c appended for NUNO^R.
+pub(super) fn window_states(batch: &WindowBatch, obs_dim: usize, reward_model: bool) -> Vec<f32> {
+    let (b, h) = (batch.batch, batch.horizon);
+    let state_dim = obs_dim + usize::from(reward_model);
+    if reward_model {
         let mut states = Vec::with_capacity(b * (h + 1) * state_dim);
         for w in 0..b {
             let mut cumulative = 0.0;
@@ -76,13 +93,6 @@ pub fn window_tensors(
         states
     } else {
         batch.states.clone()
-    };
-    WindowTensors {
-        states: Tensor::from_data(TensorData::new(states, [b, h + 1, state_dim]), device),
-        actions: Tensor::from_data(
-            TensorData::new(batch.actions.clone(), [b, h, act_dim]),
-            device,
-        ),
     }
 }
 
@@ -202,21 +212,21 @@ pub fn fit_from(
         },
     );
     let train_device = device.clone().autodiff();
-    let mut model = seeded_init(&train_device, config.seed, || {
+    let model = seeded_init(&train_device, config.seed, || {
         NeuralSde::init(spec, scales, config.model.clone(), &train_device)
     });
-    let adam = Adam::new(config.adam_epsilon);
-    let mut adam_state = AdamState::default();
     let state_dim = model.constants.state_dim();
     let input_dim = model.spec().obs_dim + model.spec().act_dim;
     let reference = training_inputs(&model, train, config.loss.far_reference, &mut rng);
     let far_field = FarField::new(reference.clone(), input_dim, &config.loss);
-    let rows = reference.len() / input_dim;
-    let reference =
-        Tensor::<2>::from_data(TensorData::new(reference, [rows, input_dim]), &train_device);
-    model.calibrate_h_bias(reference.clone());
+    let settings = StepSettings::of(config);
+    let mut trainer: Box<dyn SdeTrainer> = match config.kernel {
+        Kernel::Burn => Box::new(BurnSdeTrainer::new(model, settings, train_device)),
+        Kernel::Fused => Box::new(FusedSdeTrainer::new(model.valid(), settings)),
+    };
+    trainer.calibrate_h_bias(&reference);
 
-    let mut best = model.valid();
+    let mut best = trainer.model();
     let mut best_nll = validation_nll(
         &best,
         &valid_windows,
@@ -228,50 +238,39 @@ pub fn fit_from(
     let (mut best_step, mut evals_without_improvement, mut step) = (0, 0, 0);
     let mut records = Vec::new();
     if let Some(state) = resume {
-        if state.current.constants.spec != model.constants.spec
-            || state.current.constants.scales != model.constants.scales
+        let fresh = &best.constants;
+        if state.current.constants.spec != fresh.spec
+            || state.current.constants.scales != fresh.scales
         {
             return Err(SdeError::Config(
                 "the checkpoint was fitted on other data (its scales differ)".into(),
             ));
         }
-        model = assign_params(model, &state.current);
-        model.constants = state.current.constants.clone();
+        trainer.restore(&state.current, state.adam);
         (best, best_nll, best_step) = (state.best, state.best_nll, state.best_step);
         (evals_without_improvement, step) = (state.evals_without_improvement, state.step);
-        (adam_state, rng, records) = (state.adam, state.rng, state.records);
+        (rng, records) = (state.rng, state.records);
     }
     let stopped = |evals: usize| evals >= config.patience;
     while step < config.max_steps && !stopped(evals_without_improvement) {
         // eq. 7 on a batch of windows of horizon H.
         let lr = config.learning_rate(step);
-        let batch = train_windows.sample(config.batch_size, &mut rng);
-        let windows = window_tensors(
-            &batch,
-            model.spec().obs_dim,
-            config.model.reward_model,
-            &train_device,
-        );
-        let step_noise = normal(
-            [config.batch_size, config.horizon, state_dim],
-            &mut rng,
-            &train_device,
-        );
+        let windows = train_windows.sample(config.batch_size, &mut rng);
+        let step_noise = standard_normal(config.batch_size * config.horizon * state_dim, &mut rng);
         let samples = config.batch_size * config.loss.convexity_samples;
-        let ball_noise = normal([samples, input_dim], &mut rng, &train_device);
-        let far = far_field.sample(config.batch_size, &mut rng, &train_device);
-        let terms = model.loss(&windows, step_noise, ball_noise, far, &config.loss);
-        let grads = GradientsParams::from_grads(terms.total.backward(), &model);
-        model = adam.step_module_clipped(
-            lr,
-            model,
-            grads,
-            &mut adam_state,
-            Some(config.grad_clip_norm),
-        );
+        let ball_noise = standard_normal(samples * input_dim, &mut rng);
+        let (far_points, far_mask) = far_field.sample_values(config.batch_size, &mut rng);
+        let draws = StepDraws {
+            windows,
+            step_noise,
+            ball_noise,
+            far_points,
+            far_mask,
+        };
+        let terms = trainer.step(&draws, lr);
         step += 1;
         if step % config.h_bias_every == 0 {
-            model.calibrate_h_bias(reference.clone());
+            trainer.calibrate_h_bias(&reference);
         }
 
         // Logging and early stopping, kept apart from the algorithm above.
@@ -280,16 +279,16 @@ pub fn fit_from(
             let mut record = FitRecord {
                 step,
                 learning_rate: lr,
-                loss: terms.total.into_scalar(),
-                data: terms.data.into_scalar(),
-                sc: terms.sc.into_scalar(),
-                grad: terms.grad.into_scalar(),
-                mu: terms.mu.into_scalar(),
-                far: terms.far.into_scalar(),
-                residual: terms.residual.into_scalar(),
+                loss: terms.total,
+                data: terms.data,
+                sc: terms.sc,
+                grad: terms.grad,
+                mu: terms.mu,
+                far: terms.far,
+                residual: terms.residual,
                 valid_nll: None,
             };
-            let current = evaluate.then(|| model.valid());
+            let current = evaluate.then(|| trainer.model());
             if let Some(current) = &current {
                 let nll = validation_nll(
                     current,
@@ -318,7 +317,7 @@ pub fn fit_from(
                     best_nll,
                     best_step,
                     evals_without_improvement,
-                    adam: adam_state.clone(),
+                    adam: trainer.optimizer_state(),
                     rng: rng.clone(),
                 })?;
             }

@@ -136,12 +136,12 @@ fn run_networks(split: &NetworkSplit, jobs: &[Job], rows: usize) {
     });
 }
 
-fn sigmoid(z: f32) -> f32 {
+pub(super) fn sigmoid(z: f32) -> f32 {
     1.0 / (1.0 + (-z).exp())
 }
 
 /// softplus(z) = log(1 + e^z), in the form that cannot overflow.
-fn softplus(z: f32) -> f32 {
+pub(super) fn softplus(z: f32) -> f32 {
     z.max(0.0) + (-z.abs()).exp().ln_1p()
 }
 

@@ -10,7 +10,9 @@ mod eta;
 mod eta_report;
 mod evaluation;
 mod fit;
+mod fit_step;
 mod fused;
+mod fused_fit;
 mod losses;
 mod model;
 mod recipe;
@@ -34,6 +36,7 @@ pub use evaluation::{
 pub use fit::{
     FitRecord, FitSummary, SdeFitState, fit, fit_eta, fit_from, validation_nll, window_tensors,
 };
+pub use fit_step::{Gradients, StepDraws, StepLosses};
 pub use fused::FusedSde;
 pub use losses::{LossTerms, WindowTensors};
 pub use model::{NeuralSde, SdeConstants, SdeTerms};

@@ -233,15 +233,11 @@ impl NeuralSde {
     /// b = logit(h_on_data) − W·ℓ_q. The data decides where "near" ends, not a
     /// constant, since the η a fit reaches on its data differs from task to task.
     pub fn calibrate_h_bias(&mut self, inputs: Tensor<2>) {
-        let mut logits = to_f32_vec(self.distance.logit(inputs));
-        if logits.is_empty() {
-            return;
-        }
-        logits.sort_by(f32::total_cmp);
+        let logits = to_f32_vec(self.distance.logit(inputs));
         let config = &mut self.constants.config;
-        let at = ((logits.len() - 1) as f64 * config.h_data_quantile).round() as usize;
-        let target = (config.h_on_data / (1.0 - config.h_on_data)).ln();
-        config.h_bias = target - config.h_weight * logits[at];
+        if let Some(bias) = config.calibrated_h_bias(logits) {
+            config.h_bias = bias;
+        }
     }
 
     /// One Euler–Maruyama step: `s' = s + f·dt + Σ·sqrt(dt)·ε`.

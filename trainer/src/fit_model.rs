@@ -11,6 +11,7 @@ use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::artifact::{DynamicsProvenance, load_sde_checkpoint, save_dynamics, save_sde_checkpoint};
 use nuno::envs::MujocoTask;
+use nuno::infer::Kernel;
 use nuno::sde::{
     CalibrationConfig, ComputeDevice, DynamicsSpec, FitConfig, LikelihoodPath, LossConfig, Recipe,
     SampleNoise, SdeConfig, SdeError, ThresholdConfig, calibration_report, compute_thresholds,
@@ -88,6 +89,11 @@ pub struct Args {
     /// Compute device: cpu, or wgpu in a build with the `wgpu` feature.
     #[arg(long, default_value_t = ComputeDevice::Cpu)]
     device: ComputeDevice,
+    /// What takes the gradient steps: fused (the CPU kernels, every core) or burn
+    /// (autodiff on --device); default fused on the CPU, burn on a GPU. Either
+    /// resumes the other's checkpoints.
+    #[arg(long)]
+    kernel: Option<Kernel>,
     /// Continue the fit checkpointed in --out (the same settings; --max-steps may grow).
     #[arg(long)]
     resume: bool,
@@ -128,6 +134,14 @@ fn fit_plan(args: &Args) -> anyhow::Result<(MujocoTask, DynamicsSpec, FitConfig,
     config.eval_every = args.eval_every.unwrap_or(config.eval_every);
     config.patience = args.patience.unwrap_or(config.patience);
     config.seed = args.seed;
+    config.kernel = match (args.kernel, args.device) {
+        (Some(Kernel::Fused), ComputeDevice::Wgpu) => anyhow::bail!(
+            "--kernel fused runs on the CPU: use --kernel burn with --device wgpu"
+        ),
+        (Some(kernel), _) => kernel,
+        (None, ComputeDevice::Cpu) => Kernel::Fused,
+        (None, ComputeDevice::Wgpu) => Kernel::Burn,
+    };
     config
         .loss
         .validate()

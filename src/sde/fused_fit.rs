@@ -1,0 +1,988 @@
+//! The SDE's fit step on the fused CPU kernels (`crate::infer`): eq. 7 and its
+//! gradient by hand, each network a [`TrainableMlp`] whose products split
+//! their rows over every core. `super::fit_step`'s burn trainer is the
+//! reference; the unit tests below hold every gradient to it.
+//!
+//! L_data (eq. 6), per window step k with Σ = σ + h(η) and var = Σ²·dt:
+//! ∂/∂mean = −2·err/var, ∂/∂Σ = (2/Σ)·(1 − err²/var) (times λ_data·w_k/B);
+//! on the particle path step k + 1 starts at mean + c·Σ·√dt·ε, so its
+//! gradient with respect to its start adds to step k's mean and, times
+//! c·√dt·ε, to its Σ, and flows into step k's start through every network's
+//! input gradient. h(η) reads η's logit detached, so it passes no gradient.
+//!
+//! η's losses (eq. 3, 4) hold ∇ₓη: with d = NN_ϕ, s = sigmoid(d − offset),
+//! η = η_max·s and ∇η = η_max·s(1 − s)·∇d, so
+//! ∂/∂d = ∂/∂η·η_max·s(1 − s) + (∂/∂∇η·∇d)·η_max·s(1 − s)(1 − 2s) and
+//! ∂/∂∇d = ∂/∂∇η·η_max·s(1 − s), which
+//! [`TrainableMlp::backward_through_input_gradient`] turns into the weights'.
+
+use super::config::{LikelihoodPath, LossConfig};
+use super::fit::window_states;
+use super::fit_step::{Gradients, SdeTrainer, StepDraws, StepLosses, StepSettings};
+use super::fused::{sigmoid, softplus};
+use super::model::NeuralSde;
+use crate::infer::{MlpTape, TrainableMlp};
+use crate::nn::{AdamState, clip_to_norm};
+
+/// Every network of the SDE, in its module's field order.
+#[derive(Debug, Clone)]
+struct Nets {
+    g: TrainableMlp,
+    h: TrainableMlp,
+    res: TrainableMlp,
+    reward: Option<TrainableMlp>,
+    sigma: TrainableMlp,
+    eta: TrainableMlp,
+    mu: TrainableMlp,
+}
+
+impl Nets {
+    fn of(model: &NeuralSde) -> Self {
+        Self {
+            g: TrainableMlp::from_burn(&model.g_net),
+            h: TrainableMlp::from_burn(&model.h_net),
+            res: TrainableMlp::from_burn(&model.res_net),
+            reward: model.reward_net.as_ref().map(TrainableMlp::from_burn),
+            sigma: TrainableMlp::from_burn(&model.sigma_net),
+            eta: TrainableMlp::from_burn(&model.distance.eta_net),
+            mu: TrainableMlp::from_burn(&model.distance.mu_net),
+        }
+    }
+
+    fn zeros_like(&self) -> Self {
+        Self {
+            g: self.g.zeros_like(),
+            h: self.h.zeros_like(),
+            res: self.res.zeros_like(),
+            reward: self.reward.as_ref().map(TrainableMlp::zeros_like),
+            sigma: self.sigma.zeros_like(),
+            eta: self.eta.zeros_like(),
+            mu: self.mu.zeros_like(),
+        }
+    }
+
+    /// `model` holding these weights.
+    fn write_to(&self, mut model: NeuralSde) -> NeuralSde {
+        model.g_net = self.g.write_to(model.g_net);
+        model.h_net = self.h.write_to(model.h_net);
+        model.res_net = self.res.write_to(model.res_net);
+        if let (Some(net), Some(mlp)) = (&self.reward, model.reward_net.take()) {
+            model.reward_net = Some(net.write_to(mlp));
+        }
+        model.sigma_net = self.sigma.write_to(model.sigma_net);
+        model.distance.eta_net = self.eta.write_to(model.distance.eta_net);
+        model.distance.mu_net = self.mu.write_to(model.distance.mu_net);
+        model
+    }
+
+    /// Each network under its module path in [`NeuralSde`].
+    fn named_mut(&mut self) -> Vec<(&'static str, &mut TrainableMlp)> {
+        let mut nets = vec![
+            ("g_net", &mut self.g),
+            ("h_net", &mut self.h),
+            ("res_net", &mut self.res),
+        ];
+        if let Some(reward) = &mut self.reward {
+            nets.push(("reward_net", reward));
+        }
+        nets.push(("sigma_net", &mut self.sigma));
+        nets.push(("distance.eta_net", &mut self.eta));
+        nets.push(("distance.mu_net", &mut self.mu));
+        nets
+    }
+}
+
+/// `total += part`, parameter by parameter.
+fn accumulate(total: &mut TrainableMlp, part: &TrainableMlp) {
+    for (t, p) in total.layers.iter_mut().zip(&part.layers) {
+        t.weight.iter_mut().zip(&p.weight).for_each(|(t, p)| *t += p);
+        t.bias.iter_mut().zip(&p.bias).for_each(|(t, p)| *t += p);
+    }
+}
+
+/// The model's constants as the step reads them.
+#[derive(Debug, Clone)]
+struct Shape {
+    obs: usize,
+    act: usize,
+    state: usize,
+    n_pos: usize,
+    n_vel: usize,
+    /// The velocity of each position (eq. 8: f_pos).
+    pairs: Vec<usize>,
+    state_mean: Vec<f32>,
+    state_std: Vec<f32>,
+    action_mean: Vec<f32>,
+    action_std: Vec<f32>,
+    acceleration: Vec<f32>,
+    derivative: Vec<f32>,
+    reward_rate: f32,
+    diffusion: Vec<f32>,
+    w_max: Vec<f32>,
+    /// 1/scale² of each state dimension: L_data's log-variance in normalised units.
+    inv_scale2: Vec<f32>,
+    dt: f32,
+}
+
+impl Shape {
+    fn of(model: &NeuralSde) -> Self {
+        let c = &model.constants;
+        let n = &c.scales.normalizer;
+        let (obs, state) = (c.spec.obs_dim, c.state_dim());
+        let mut scale = n.state.std[..obs].to_vec();
+        if c.config.reward_model {
+            scale.push(n.reward.std[0]);
+        }
+        Self {
+            obs,
+            act: c.spec.act_dim,
+            state,
+            n_pos: c.spec.n_pos(),
+            n_vel: c.spec.n_vel(),
+            pairs: c.spec.split.position_velocity.clone(),
+            state_mean: n.state.mean[..obs].to_vec(),
+            state_std: n.state.std[..obs].to_vec(),
+            action_mean: n.action.mean.clone(),
+            action_std: n.action.std.clone(),
+            acceleration: c.scales.acceleration.clone(),
+            derivative: c.scales.derivative.clone(),
+            reward_rate: c.scales.reward_rate,
+            diffusion: c.scales.diffusion[..state].to_vec(),
+            w_max: c.config.w_max_per_dimension(state),
+            inv_scale2: scale.iter().map(|s| (s * s).recip()).collect(),
+            dt: c.spec.dt as f32,
+        }
+    }
+
+    fn input(&self) -> usize {
+        self.obs + self.act
+    }
+}
+
+/// The settings one step reads off the model (h's b changes during a fit).
+#[derive(Debug, Clone, Copy)]
+struct Knobs {
+    h_weight: f32,
+    h_bias: f32,
+    sigma_min: f32,
+    eta_offset: f32,
+    eta_max: f32,
+    noise_scale: f32,
+}
+
+impl Knobs {
+    fn of(model: &NeuralSde) -> Self {
+        let c = &model.constants.config;
+        Self {
+            h_weight: c.h_weight,
+            h_bias: c.h_bias,
+            sigma_min: c.sigma_min,
+            eta_offset: model.distance.eta_offset,
+            eta_max: model.distance.eta_max,
+            noise_scale: c.sample_noise_scale,
+        }
+    }
+}
+
+/// One window step's forward values, kept for its backward pass.
+#[derive(Debug, Default)]
+struct StepTape {
+    /// The step's start `[B, state]`, action `[B, act]` and recorded next state `[B, state]`.
+    start: Vec<f32>,
+    action: Vec<f32>,
+    next: Vec<f32>,
+    /// Normalised `(s, a)` `[B, obs + act]`; G's input (its velocity columns)
+    /// and H's (its observation columns).
+    x: Vec<f32>,
+    x_g: Vec<f32>,
+    x_h: Vec<f32>,
+    /// Velocities over their std, `[B, n_vel]`.
+    v_hat: Vec<f32>,
+    /// η's logit, `[B]`.
+    logit: Vec<f32>,
+    /// Σ, the mean, var = Σ²·dt and err = next − mean, each `[B, state]`.
+    diffusion: Vec<f32>,
+    mean: Vec<f32>,
+    var: Vec<f32>,
+    err: Vec<f32>,
+    g: MlpTape,
+    h: MlpTape,
+    res: MlpTape,
+    reward: MlpTape,
+    sigma: MlpTape,
+}
+
+impl StepTape {
+    fn on_cores(cores: usize) -> Self {
+        Self {
+            g: MlpTape::on_cores(cores),
+            h: MlpTape::on_cores(cores),
+            res: MlpTape::on_cores(cores),
+            reward: MlpTape::on_cores(cores),
+            sigma: MlpTape::on_cores(cores),
+            ..Self::default()
+        }
+    }
+}
+
+/// Buffers of η's losses and the backward passes, reused every step.
+#[derive(Debug, Default)]
+struct Work {
+    /// η at the data (with its input gradient), at the ball samples, at the
+    /// far points, and for h(η) and h's b; μ at the data.
+    eta_data: MlpTape,
+    eta_ball: MlpTape,
+    eta_far: MlpTape,
+    eta_plain: MlpTape,
+    mu: MlpTape,
+    /// ∇ₓd at the data `[B, obs + act]`, the ball's points, ones `[B]`.
+    grad_d: Vec<f32>,
+    ball: Vec<f32>,
+    ones: Vec<f32>,
+    /// ∂L/∂ of a network's output (and ∂L/∂∇d), and of its input.
+    out_grad: Vec<f32>,
+    q: Vec<f32>,
+    input_grad: Vec<f32>,
+    /// ∂L/∂ of the normalised input and of the start state, this step's and the next's.
+    x_grad: Vec<f32>,
+    start_grad: Vec<f32>,
+    next_start_grad: Vec<f32>,
+    /// ∂L/∂ of each network's output in one step's backward pass.
+    step: OutputGrads,
+}
+
+/// ∂L/∂ of each network's output at one window step.
+#[derive(Debug, Default)]
+struct OutputGrads {
+    g: Vec<f32>,
+    h: Vec<f32>,
+    res: Vec<f32>,
+    reward: Vec<f32>,
+    sigma: Vec<f32>,
+}
+
+/// Trains a [`NeuralSde`]'s weights on host buffers, by hand.
+pub(crate) struct FusedSdeTrainer {
+    /// The model the weights came from (its constants hold h's current b).
+    template: NeuralSde,
+    shape: Shape,
+    nets: Nets,
+    grads: Nets,
+    scratch: Nets,
+    state: AdamState,
+    settings: StepSettings,
+    steps: Vec<StepTape>,
+    work: Work,
+}
+
+impl FusedSdeTrainer {
+    /// Trains `model`'s weights (read to host memory once).
+    pub fn new(model: NeuralSde, settings: StepSettings) -> Self {
+        let cores = rayon::current_num_threads();
+        let nets = Nets::of(&model);
+        let on_cores = MlpTape::on_cores;
+        Self {
+            shape: Shape::of(&model),
+            grads: nets.zeros_like(),
+            scratch: nets.zeros_like(),
+            nets,
+            template: model,
+            state: AdamState::default(),
+            settings,
+            steps: Vec::new(),
+            work: Work {
+                eta_data: on_cores(cores),
+                eta_ball: on_cores(cores),
+                eta_far: on_cores(cores),
+                eta_plain: on_cores(cores),
+                mu: on_cores(cores),
+                ..Work::default()
+            },
+        }
+    }
+
+    /// eq. 7 on `draws` with its gradient in `self.grads`.
+    fn loss_and_gradient(&mut self, draws: &StepDraws) -> StepLosses {
+        let Self {
+            template,
+            shape: sh,
+            nets,
+            grads,
+            scratch,
+            settings,
+            steps,
+            work,
+            ..
+        } = self;
+        let loss = &settings.loss;
+        let knobs = Knobs::of(template);
+        let windows = &draws.windows;
+        let (batch, horizon) = (windows.batch, windows.horizon);
+        let states = window_states(windows, sh.obs, template.constants.config.reward_model);
+        let cores = rayon::current_num_threads();
+        steps.resize_with(horizon, || StepTape::on_cores(cores));
+        let at = |values: &[f32], steps: usize, k: usize, width: usize, out: &mut Vec<f32>| {
+            out.clear();
+            for r in 0..batch {
+                let row = (r * steps + k) * width;
+                out.extend_from_slice(&values[row..row + width]);
+            }
+        };
+        let particle = loss.likelihood == LikelihoodPath::Particle;
+
+        // Forward, step by step.
+        let (mut data, mut residual) = (0.0f64, 0.0f64);
+        let mut weights = Vec::with_capacity(horizon);
+        let mut weight = 1.0f32;
+        for k in 0..horizon {
+            let (before, after) = steps.split_at_mut(k);
+            let tape = &mut after[0];
+            at(&windows.actions, horizon, k, sh.act, &mut tape.action);
+            at(&states, horizon + 1, k + 1, sh.state, &mut tape.next);
+            match before.last() {
+                Some(previous) if particle => {
+                    let noise = (&draws.step_noise[..], k - 1, horizon);
+                    particle_start(previous, noise, sh.state, knobs, &mut tape.start)
+                }
+                _ => at(&states, horizon + 1, k, sh.state, &mut tape.start),
+            }
+            let (nll, res) = forward_step(nets, sh, knobs, tape, &mut work.eta_plain);
+            data += nll * f64::from(weight);
+            residual += res;
+            weights.push(weight);
+            weight *= loss.step_discount;
+        }
+        let residual = residual / horizon as f64;
+
+        // η's losses at each window's first (s, a), and their gradient.
+        for net in nets_of(grads) {
+            net.layers.iter_mut().for_each(|l| {
+                l.weight.fill(0.0);
+                l.bias.fill(0.0);
+            });
+        }
+        let eta = eta_losses(nets, grads, scratch, sh, knobs, loss, &steps[0].x, draws, work);
+
+        // Backward, last step first.
+        work.next_start_grad.clear();
+        for k in (0..horizon).rev() {
+            let coef = loss.lambda_data * weights[k] / batch as f32;
+            let noise_k = (particle && k + 1 < horizon).then_some(k);
+            let wants_start = particle && k > 0;
+            backward_step(
+                nets,
+                grads,
+                scratch,
+                sh,
+                knobs,
+                &mut steps[k],
+                work,
+                (coef, loss.lambda_res / (batch * horizon) as f32),
+                noise_k.map(|k| (&draws.step_noise[..], k, horizon)),
+                wants_start,
+            );
+            std::mem::swap(&mut work.start_grad, &mut work.next_start_grad);
+        }
+        let data = data as f32;
+        let residual = residual as f32;
+        StepLosses {
+            total: data * loss.lambda_data
+                + eta.sc * loss.lambda_sc
+                + eta.grad * loss.lambda_grad
+                + eta.mu * loss.lambda_mu
+                + eta.far * loss.lambda_far
+                + residual * loss.lambda_res,
+            data,
+            residual,
+            ..eta
+        }
+    }
+
+    /// η's logit ℓ = NN_ϕ(x) − offset at the rows of `x`, into `out`.
+    fn eta_logits(&mut self, x: &[f32], out: &mut Vec<f32>) {
+        let rows = x.len() / self.shape.input();
+        eta_logits(
+            &self.nets.eta,
+            self.template.distance.eta_offset,
+            x,
+            rows,
+            &mut self.work.eta_plain,
+            out,
+        );
+    }
+}
+
+/// Every network of `nets`, mutably.
+fn nets_of(nets: &mut Nets) -> impl Iterator<Item = &mut TrainableMlp> {
+    nets.named_mut().into_iter().map(|(_, net)| net)
+}
+
+fn eta_logits(
+    eta: &TrainableMlp,
+    offset: f32,
+    x: &[f32],
+    rows: usize,
+    tape: &mut MlpTape,
+    out: &mut Vec<f32>,
+) {
+    eta.forward(x, rows, tape);
+    out.clear();
+    out.extend(tape.output.iter().map(|d| d - offset));
+}
+
+/// Step k + 1's start on the particle path from step k (`noise` = (ε, k,
+/// horizon)): mean + c·√var·ε.
+fn particle_start(
+    previous: &StepTape,
+    (noise, k, horizon): (&[f32], usize, usize),
+    state: usize,
+    knobs: Knobs,
+    out: &mut Vec<f32>,
+) {
+    out.clear();
+    let rows = previous.mean.chunks_exact(state).zip(previous.var.chunks_exact(state));
+    for (r, (mean, var)) in rows.enumerate() {
+        let eps = &noise[(r * horizon + k) * state..][..state];
+        let next = mean.iter().zip(var).zip(eps);
+        out.extend(next.map(|((m, v), e)| m + v.sqrt() * knobs.noise_scale * e));
+    }
+}
+
+/// One window step forward from `tape.start`: its mean, Σ, var and err, each
+/// network's tape; returns Σ over rows and dimensions of err²/var + log(var/scale²)
+/// over the batch, and the mean ‖f_res‖².
+fn forward_step(
+    nets: &Nets,
+    sh: &Shape,
+    knobs: Knobs,
+    tape: &mut StepTape,
+    eta_tape: &mut MlpTape,
+) -> (f64, f64) {
+    let (obs, act, s_dim, d_in) = (sh.obs, sh.act, sh.state, sh.input());
+    let (n_pos, n_vel) = (sh.n_pos, sh.n_vel);
+    let rows = tape.start.len() / s_dim;
+    for buffer in [&mut tape.x, &mut tape.x_g, &mut tape.x_h, &mut tape.v_hat] {
+        buffer.clear();
+    }
+    for r in 0..rows {
+        let s = &tape.start[r * s_dim..r * s_dim + obs];
+        let a = &tape.action[r * act..(r + 1) * act];
+        let obs_hat = (0..obs).map(|i| (s[i] - sh.state_mean[i]) / sh.state_std[i]);
+        let act_hat = (0..act).map(|j| (a[j] - sh.action_mean[j]) / sh.action_std[j]);
+        tape.x.extend(obs_hat.chain(act_hat));
+        let x = &tape.x[r * d_in..];
+        tape.x_g.extend_from_slice(&x[n_pos..obs]);
+        tape.x_h.extend_from_slice(&x[..obs]);
+        let vel_std = &sh.state_std[n_pos..obs];
+        let v = s[n_pos..obs].iter().zip(vel_std);
+        tape.v_hat.extend(v.map(|(v, s)| v / s));
+    }
+    nets.g.forward(&tape.x_g, rows, &mut tape.g);
+    nets.h.forward(&tape.x_h, rows, &mut tape.h);
+    nets.res.forward(&tape.x, rows, &mut tape.res);
+    if let Some(reward) = &nets.reward {
+        reward.forward(&tape.x, rows, &mut tape.reward);
+    }
+    nets.sigma.forward(&tape.x, rows, &mut tape.sigma);
+    let offset = knobs.eta_offset;
+    eta_logits(&nets.eta, offset, &tape.x, rows, eta_tape, &mut tape.logit);
+
+    for buffer in [&mut tape.diffusion, &mut tape.mean, &mut tape.var, &mut tape.err] {
+        buffer.resize(rows * s_dim, 0.0);
+    }
+    let (mut nll, mut residual) = (0.0f64, 0.0f64);
+    for r in 0..rows {
+        let row = r * s_dim..(r + 1) * s_dim;
+        let s = &tape.start[row.clone()];
+        let a = &tape.action[r * act..(r + 1) * act];
+        let g = &tape.g.output[r * n_vel * act..][..n_vel * act];
+        let h = &tape.h.output[r * n_vel * n_vel..][..n_vel * n_vel];
+        let v_hat = &tape.v_hat[r * n_vel..(r + 1) * n_vel];
+        let res = &tape.res.output[r * obs..(r + 1) * obs];
+        let u = &tape.sigma.output[row.clone()];
+        let h_gate = sigmoid(tape.logit[r] * knobs.h_weight + knobs.h_bias);
+        for d in 0..s_dim {
+            // eq. 8: f = [vel, G·a + H·v̂] + f_res; NUNO^R's reward drift last.
+            let drift = if d < n_pos {
+                s[sh.pairs[d]] + res[d] * sh.derivative[d]
+            } else if d < obs {
+                let i = d - n_pos;
+                let g_a: f32 = (0..act).map(|j| g[i * act + j] * a[j]).sum();
+                let h_v: f32 = (0..n_vel).map(|j| h[i * n_vel + j] * v_hat[j]).sum();
+                (g_a + h_v) * sh.acceleration[i] + res[d] * sh.derivative[d]
+            } else {
+                tape.reward.output[r] * sh.reward_rate
+            };
+            let i = r * s_dim + d;
+            tape.mean[i] = s[d] + drift * sh.dt;
+            // eq. 5: Σ = σ + h(η).
+            let sigma = (softplus(u[d]) + knobs.sigma_min) * sh.diffusion[d];
+            tape.diffusion[i] = sigma + h_gate * sh.diffusion[d] * sh.w_max[d];
+            tape.var[i] = tape.diffusion[i] * tape.diffusion[i] * sh.dt;
+            tape.err[i] = tape.next[i] - tape.mean[i];
+            let (e, v) = (tape.err[i], tape.var[i]);
+            nll += f64::from(e * e / v + (v * sh.inv_scale2[d]).ln());
+        }
+        residual += res.iter().map(|v| f64::from(v * v)).sum::<f64>();
+    }
+    (nll / rows as f64, residual / rows as f64)
+}
+
+/// L_sc, L_grad, L_μ and L_far (eq. 3, 4) at the data `x` (`[B, obs + act]`),
+/// their gradient added to `grads`' η and μ.
+#[allow(clippy::too_many_arguments)]
+fn eta_losses(
+    nets: &Nets,
+    grads: &mut Nets,
+    scratch: &mut Nets,
+    sh: &Shape,
+    knobs: Knobs,
+    loss: &LossConfig,
+    x: &[f32],
+    draws: &StepDraws,
+    work: &mut Work,
+) -> StepLosses {
+    let d_in = sh.input();
+    let rows = x.len() / d_in;
+    let samples = draws.ball_noise.len() / (rows * d_in);
+    let (eta_max, offset, n) = (knobs.eta_max, knobs.eta_offset, rows as f32);
+    // η and ∇ₓd at the data, μ there, η at the ball's points.
+    nets.eta.forward(x, rows, &mut work.eta_data);
+    work.ones.clear();
+    work.ones.resize(rows, 1.0);
+    nets.eta
+        .backward(&mut work.eta_data, &work.ones, None, Some(&mut work.grad_d));
+    nets.mu.forward(x, rows, &mut work.mu);
+    work.ball.clear();
+    for (b, datum) in x.chunks_exact(d_in).enumerate() {
+        for eps in draws.ball_noise[b * samples * d_in..][..samples * d_in].chunks_exact(d_in) {
+            let point = datum.iter().zip(eps);
+            work.ball.extend(point.map(|(x, e)| x + e * loss.radius));
+        }
+    }
+    nets.eta.forward(&work.ball, rows * samples, &mut work.eta_ball);
+
+    let (mut sc, mut grad_loss, mut mu_loss) = (0.0f64, 0.0f64, 0.0f64);
+    work.out_grad.resize(rows * samples, 0.0);
+    work.q.resize(rows * d_in, 0.0);
+    let mut d_grad = vec![0.0; rows];
+    let mut mu_grad = vec![0.0; rows];
+    for b in 0..rows {
+        let s = sigmoid(work.eta_data.output[b] - offset);
+        let (eta, slope) = (eta_max * s, eta_max * s * (1.0 - s));
+        let grad_d = &work.grad_d[b * d_in..(b + 1) * d_in];
+        let mu = work.mu.output[b].exp();
+        // ∂/∂∇η and ∂/∂η from L_grad = mean(‖∇η‖² + η²), ∂/∂μ from L_μ = mean(1/μ).
+        let g_grad_eta = &mut work.q[b * d_in..(b + 1) * d_in];
+        for (g, d) in g_grad_eta.iter_mut().zip(grad_d) {
+            *g = loss.lambda_grad * 2.0 * slope * d / n;
+        }
+        let mut g_eta = loss.lambda_grad * 2.0 * eta / n;
+        let mut g_mu = -loss.lambda_mu / (n * mu * mu);
+        grad_loss += f64::from(grad_d.iter().map(|d| (slope * d).powi(2)).sum::<f32>() + eta * eta);
+        mu_loss += f64::from(1.0 / mu);
+        // L_sc: c = η(x + δ) − η(x) − ∇η·δ − μ‖δ‖², Σ min(c, 0)² over the batch.
+        for j in 0..samples {
+            let ball = b * samples + j;
+            let eps = &draws.ball_noise[ball * d_in..(ball + 1) * d_in];
+            let (mut linear, mut distance2) = (0.0f32, 0.0f32);
+            for (e, d) in eps.iter().zip(grad_d) {
+                let delta = e * loss.radius;
+                linear += slope * d * delta;
+                distance2 += delta * delta;
+            }
+            let s_near = sigmoid(work.eta_ball.output[ball] - offset);
+            let c = eta_max * s_near - eta - linear - mu * distance2;
+            let w = if c < 0.0 {
+                sc += f64::from(c * c);
+                loss.lambda_sc * 2.0 * c / n
+            } else {
+                0.0
+            };
+            work.out_grad[ball] = w * eta_max * s_near * (1.0 - s_near);
+            g_eta -= w;
+            g_mu -= w * distance2;
+            for (g, e) in g_grad_eta.iter_mut().zip(eps) {
+                *g -= w * e * loss.radius;
+            }
+        }
+        // Through η = η_max·s and ∇η = η_max·s(1 − s)·∇d to d and ∇d.
+        let along: f32 = g_grad_eta.iter().zip(grad_d).map(|(g, d)| g * d).sum();
+        d_grad[b] = g_eta * slope + along * slope * (1.0 - 2.0 * s);
+        g_grad_eta.iter_mut().for_each(|g| *g *= slope);
+        mu_grad[b] = g_mu * mu;
+    }
+    nets.eta.backward(&mut work.eta_ball, &work.out_grad, Some(&mut scratch.eta), None);
+    accumulate(&mut grads.eta, &scratch.eta);
+    nets.eta
+        .backward_through_input_gradient(&mut work.eta_data, &d_grad, &work.q, &mut scratch.eta);
+    accumulate(&mut grads.eta, &scratch.eta);
+    nets.mu.backward(&mut work.mu, &mu_grad, Some(&mut scratch.mu), None);
+    accumulate(&mut grads.mu, &scratch.mu);
+
+    // L_far on η's logit at the far points.
+    let far_rows = draws.far_mask.len();
+    nets.eta.forward(&draws.far_points, far_rows, &mut work.eta_far);
+    let target = (loss.far_target / (1.0 - loss.far_target)).ln();
+    let mut far = 0.0f64;
+    work.out_grad.resize(far_rows, 0.0);
+    for (i, mask) in draws.far_mask.iter().enumerate() {
+        let shortfall = (target - (work.eta_far.output[i] - offset)).max(0.0);
+        far += f64::from(shortfall * shortfall * mask);
+        work.out_grad[i] = -loss.lambda_far * 2.0 * shortfall * mask / far_rows as f32;
+    }
+    if loss.lambda_far > 0.0 {
+        let g = &work.out_grad[..far_rows];
+        nets.eta.backward(&mut work.eta_far, g, Some(&mut scratch.eta), None);
+        accumulate(&mut grads.eta, &scratch.eta);
+    }
+    StepLosses {
+        sc: (sc / f64::from(n)) as f32,
+        grad: (grad_loss / f64::from(n)) as f32,
+        mu: (mu_loss / f64::from(n)) as f32,
+        far: (far / far_rows.max(1) as f64) as f32,
+        ..StepLosses::default()
+    }
+}
+
+/// One window step's backward pass: L_data's (times `coef` = λ_data·w_k/B) and
+/// the residual penalty's (`res_coef` = λ_res/(B·H)) gradient into `grads`;
+/// with `noise` (ε, k, H), the next step's start gradient
+/// (`work.next_start_grad`) too; with `wants_start`, this step's start
+/// gradient into `work.start_grad`.
+#[allow(clippy::too_many_arguments)]
+fn backward_step(
+    nets: &Nets,
+    grads: &mut Nets,
+    scratch: &mut Nets,
+    sh: &Shape,
+    knobs: Knobs,
+    tape: &mut StepTape,
+    work: &mut Work,
+    (coef, res_coef): (f32, f32),
+    noise: Option<(&[f32], usize, usize)>,
+    wants_start: bool,
+) {
+    let (obs, act, s_dim, d_in) = (sh.obs, sh.act, sh.state, sh.input());
+    let (n_pos, n_vel) = (sh.n_pos, sh.n_vel);
+    let rows = tape.start.len() / s_dim;
+    let out = &mut work.step;
+    out.g.resize(rows * n_vel * act, 0.0);
+    out.h.resize(rows * n_vel * n_vel, 0.0);
+    out.res.resize(rows * obs, 0.0);
+    out.reward.resize(rows, 0.0);
+    out.sigma.resize(rows * s_dim, 0.0);
+    let start_grad = &mut work.start_grad;
+    start_grad.resize(rows * s_dim, 0.0);
+    let mut drift_grad = vec![0.0; s_dim];
+    for r in 0..rows {
+        let row = r * s_dim..(r + 1) * s_dim;
+        // ∂/∂mean and ∂/∂Σ of err²/var + log var, var = Σ²·dt; the next start's.
+        for d in 0..s_dim {
+            let i = r * s_dim + d;
+            let (e, v, sigma) = (tape.err[i], tape.var[i], tape.diffusion[i]);
+            let mut g_mean = coef * (-2.0 * e / v);
+            let mut g_diffusion = coef * (2.0 / sigma) * (1.0 - e * e / v);
+            if let Some((eps, k, horizon)) = noise {
+                let g_next = work.next_start_grad[i];
+                let eps = eps[(r * horizon + k) * s_dim + d];
+                g_mean += g_next;
+                // ∂√var/∂Σ = Σ·dt/√var.
+                g_diffusion += g_next * knobs.noise_scale * eps * sigma * sh.dt / v.sqrt();
+            }
+            start_grad[i] = g_mean;
+            drift_grad[d] = g_mean * sh.dt;
+            // σ = (softplus(u) + σ_min)·scale; softplus' = sigmoid.
+            out.sigma[i] = g_diffusion * sh.diffusion[d] * sigmoid(tape.sigma.output[i]);
+        }
+        let a = &tape.action[r * act..(r + 1) * act];
+        let v_hat = &tape.v_hat[r * n_vel..(r + 1) * n_vel];
+        let h = &tape.h.output[r * n_vel * n_vel..][..n_vel * n_vel];
+        let start = &mut start_grad[row];
+        for d in 0..obs {
+            let res = tape.res.output[r * obs + d];
+            out.res[r * obs + d] = drift_grad[d] * sh.derivative[d] + res_coef * 2.0 * res;
+        }
+        for (d, &velocity) in sh.pairs.iter().enumerate() {
+            start[velocity] += drift_grad[d];
+        }
+        for i in 0..n_vel {
+            let q = drift_grad[n_pos + i] * sh.acceleration[i];
+            for j in 0..act {
+                out.g[(r * n_vel + i) * act + j] = q * a[j];
+            }
+            for j in 0..n_vel {
+                out.h[(r * n_vel + i) * n_vel + j] = q * v_hat[j];
+                start[n_pos + j] += q * h[i * n_vel + j] / sh.state_std[n_pos + j];
+            }
+        }
+        if s_dim > obs {
+            out.reward[r] = drift_grad[obs] * sh.reward_rate;
+        }
+    }
+
+    // Through the networks, their input gradients into the start's when asked.
+    work.x_grad.clear();
+    work.x_grad.resize(rows * d_in, 0.0);
+    let mut through = |net: &TrainableMlp,
+                       tape: &mut MlpTape,
+                       out_grad: &[f32],
+                       grads: &mut TrainableMlp,
+                       scratch: &mut TrainableMlp,
+                       columns: std::ops::Range<usize>| {
+        let input_grad = wants_start.then_some(&mut work.input_grad);
+        net.backward(tape, out_grad, Some(scratch), input_grad);
+        accumulate(grads, scratch);
+        if wants_start {
+            let width = columns.len();
+            for (r, g) in work.input_grad.chunks_exact(width).enumerate() {
+                let x = &mut work.x_grad[r * d_in + columns.start..][..width];
+                x.iter_mut().zip(g).for_each(|(x, g)| *x += g);
+            }
+        }
+    };
+    through(&nets.g, &mut tape.g, &out.g, &mut grads.g, &mut scratch.g, n_pos..obs);
+    through(&nets.h, &mut tape.h, &out.h, &mut grads.h, &mut scratch.h, 0..obs);
+    through(&nets.res, &mut tape.res, &out.res, &mut grads.res, &mut scratch.res, 0..d_in);
+    if let (Some(net), Some(g), Some(s)) = (&nets.reward, &mut grads.reward, &mut scratch.reward) {
+        through(net, &mut tape.reward, &out.reward, g, s, 0..d_in);
+    }
+    let sigma_grads = (&mut grads.sigma, &mut scratch.sigma);
+    through(&nets.sigma, &mut tape.sigma, &out.sigma, sigma_grads.0, sigma_grads.1, 0..d_in);
+    if wants_start {
+        for (start, x) in start_grad.chunks_exact_mut(s_dim).zip(work.x_grad.chunks_exact(d_in)) {
+            for i in 0..obs {
+                start[i] += x[i] / sh.state_std[i];
+            }
+        }
+    }
+}
+
+impl SdeTrainer for FusedSdeTrainer {
+    #[cfg(test)]
+    fn gradients(&mut self, draws: &StepDraws) -> (StepLosses, Gradients) {
+        let losses = self.loss_and_gradient(draws);
+        let mut gradients = Gradients::new();
+        for (prefix, net) in self.grads.named_mut() {
+            for (i, layer) in net.layers.iter().enumerate() {
+                gradients.insert(format!("{prefix}.layers.{i}.weight"), layer.weight.clone());
+                gradients.insert(format!("{prefix}.layers.{i}.bias"), layer.bias.clone());
+            }
+        }
+        (losses, gradients)
+    }
+
+    fn step(&mut self, draws: &StepDraws, lr: f64) -> StepLosses {
+        let losses = self.loss_and_gradient(draws);
+        let settings = &self.settings;
+        let step = settings.adam.begin(&mut self.state, lr);
+        let pairs = self.nets.named_mut().into_iter().zip(self.grads.named_mut());
+        for ((prefix, net), (_, grads)) in pairs {
+            for (i, (layer, grad)) in net.layers.iter_mut().zip(&mut grads.layers).enumerate() {
+                let params = [
+                    ("weight", &mut layer.weight, &mut grad.weight),
+                    ("bias", &mut layer.bias, &mut grad.bias),
+                ];
+                for (leaf, values, grad) in params {
+                    clip_to_norm(grad, settings.clip_norm);
+                    let path = format!("{prefix}.layers.{i}.{leaf}");
+                    let moments = self.state.moments.entry(path).or_default();
+                    settings.adam.update(step, values, grad, moments);
+                }
+            }
+        }
+        losses
+    }
+
+    fn calibrate_h_bias(&mut self, reference: &[f32]) {
+        let mut logits = Vec::new();
+        self.eta_logits(reference, &mut logits);
+        let config = &mut self.template.constants.config;
+        if let Some(bias) = config.calibrated_h_bias(logits) {
+            config.h_bias = bias;
+        }
+    }
+
+    fn model(&self) -> NeuralSde {
+        self.nets.write_to(self.template.clone())
+    }
+
+    fn optimizer_state(&self) -> AdamState {
+        self.state.clone()
+    }
+
+    fn restore(&mut self, current: &NeuralSde, adam: AdamState) {
+        self.nets = Nets::of(current);
+        self.template.constants = current.constants.clone();
+        self.state = adam;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use burn::module::Module;
+    use burn::tensor::Device;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::StandardNormal;
+
+    use super::*;
+    use crate::data::{Dataset, DatasetParts, NormalizerConfig, WindowSampler};
+    use crate::envs::{ObservationLayout, StateSplit};
+    use crate::nn::{seeded_init, standard_normal};
+    use crate::sde::eta::FarField;
+    use crate::sde::fit_step::BurnSdeTrainer;
+    use crate::sde::{DynamicsSpec, FitConfig, PhysicalScales, SdeConfig};
+
+    const NQ: usize = 4;
+    const ACT: usize = 2;
+    const DT: f32 = 0.01;
+
+    /// A planar system of NQ joints (D4RL layout: root x dropped) whose
+    /// positions follow their velocities and whose velocities wander.
+    fn dataset(rows: usize, seed: u64) -> (DynamicsSpec, Dataset) {
+        let split = StateSplit::planar(NQ, ObservationLayout::D4rl);
+        let obs_dim = split.obs_dim();
+        let spec = DynamicsSpec {
+            obs_dim,
+            act_dim: ACT,
+            split: split.clone(),
+            dt: f64::from(DT),
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut normal = || rng.sample::<f32, _>(StandardNormal);
+        let (mut obs, mut next, mut act) = (Vec::new(), Vec::new(), Vec::new());
+        let mut state: Vec<f32> = (0..obs_dim).map(|_| normal()).collect();
+        for _ in 0..rows {
+            let action: Vec<f32> = (0..ACT).map(|_| normal().tanh()).collect();
+            let mut following = state.clone();
+            for (p, &v) in split.position_velocity.iter().enumerate() {
+                following[p] += state[v] * DT + 0.001 * normal();
+            }
+            for v in split.velocities.iter().copied() {
+                following[v] += (action[v % ACT] - 0.5 * state[v]) * DT * 20.0 + 0.05 * normal();
+            }
+            obs.extend_from_slice(&state);
+            act.extend(action);
+            next.extend_from_slice(&following);
+            state = following;
+        }
+        let mut timeouts = vec![false; rows];
+        timeouts[rows - 1] = true;
+        let parts = DatasetParts {
+            observations: ndarray::Array2::from_shape_vec((rows, obs_dim), obs).unwrap(),
+            actions: ndarray::Array2::from_shape_vec((rows, ACT), act).unwrap(),
+            rewards: ndarray::Array1::from_shape_fn(rows, |i| (i as f32 * 0.1).sin()),
+            next_observations: ndarray::Array2::from_shape_vec((rows, obs_dim), next).unwrap(),
+            terminals: vec![false; rows],
+            timeouts,
+            qpos: None,
+            qvel: None,
+            action_log_probs: None,
+            metadata: Default::default(),
+        };
+        (spec, Dataset::from_parts(parts, Path::new("planar")).unwrap())
+    }
+
+    /// A small fit config: narrow networks, both ways of η's far field on.
+    fn config(reward_model: bool, path: LikelihoodPath) -> FitConfig {
+        let mut model = SdeConfig::new();
+        model.drift_hidden = vec![32, 32];
+        model.sigma_hidden = vec![32];
+        model.reward_hidden = vec![16];
+        model.eta_hidden = vec![16, 16];
+        model.mu_hidden = vec![8, 8];
+        model.reward_model = reward_model;
+        model.sample_noise_scale = 0.7;
+        let mut config = FitConfig::new(model, crate::sde::LossConfig::new());
+        config.loss.likelihood = path;
+        config.loss.step_discount = 0.9;
+        config.loss.lambda_far = 0.05;
+        // η mid-sigmoid and L_grad heavy, so that every term of η's gradient counts.
+        config.model.eta_offset = 1.0;
+        config.loss.lambda_grad = 1.0;
+        config.batch_size = 16;
+        config.loss.convexity_samples = 5;
+        config
+    }
+
+    /// Both trainers on one model, and one step's draws.
+    fn trainers(config: &FitConfig, seed: u64) -> (BurnSdeTrainer, FusedSdeTrainer, StepDraws) {
+        let (spec, data) = dataset(400, seed);
+        let scales = PhysicalScales::measure(&data, &spec, &NormalizerConfig { std_floor: 1e-3 });
+        let device = Device::flex().autodiff();
+        let mut model = seeded_init(&device, seed, || {
+            NeuralSde::init(spec.clone(), scales, config.model.clone(), &device)
+        });
+        model.constants.config.h_bias = -1.0;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed + 1);
+        let windows = WindowSampler::new(&data, config.horizon)
+            .unwrap()
+            .sample(config.batch_size, &mut rng);
+        let d_in = spec.obs_dim + spec.act_dim;
+        let state_dim = model.constants.state_dim();
+        let reference: Vec<f32> = standard_normal(64 * d_in, &mut rng);
+        let far = FarField::new(reference, d_in, &config.loss);
+        let (far_points, far_mask) = far.sample_values(config.batch_size, &mut rng);
+        let draws = StepDraws {
+            windows,
+            step_noise: standard_normal(config.batch_size * config.horizon * state_dim, &mut rng),
+            ball_noise: standard_normal(
+                config.batch_size * config.loss.convexity_samples * d_in,
+                &mut rng,
+            ),
+            far_points,
+            far_mask,
+        };
+        let settings = StepSettings::of(config);
+        let fused = FusedSdeTrainer::new(model.valid(), settings.clone());
+        (BurnSdeTrainer::new(model, settings, device), fused, draws)
+    }
+
+    /// One gradient tensor against burn's: ‖fused − burn‖ ≤ 1e-5·‖burn‖ (L2),
+    /// or every element within 1e-6. Per element, relative errors of f32 sums
+    /// grow where terms cancel (on the particle path a few elements of σ's
+    /// gradient differ by 1e-3 of themselves from burn's, while the tensor
+    /// agrees to 1e-6), so the tensor, not the element, is what is compared.
+    fn assert_close(name: &str, fused: &[f32], burn: &[f32]) {
+        assert_eq!(fused.len(), burn.len(), "{name}: sizes");
+        let norm = |v: &mut dyn Iterator<Item = f32>| v.map(|x| x * x).sum::<f32>().sqrt();
+        let difference = norm(&mut fused.iter().zip(burn).map(|(f, b)| f - b));
+        let largest = fused.iter().zip(burn).map(|(f, b)| (f - b).abs()).fold(0.0, f32::max);
+        let scale = norm(&mut burn.iter().copied());
+        assert!(
+            difference <= 1e-5 * scale || largest <= 1e-6,
+            "{name}: ‖fused − burn‖ = {difference:e} against ‖burn‖ = {scale:e} (largest \
+             element difference {largest:e})"
+        );
+    }
+
+    fn assert_gradients_match(config: &FitConfig) {
+        let (mut burn, mut fused, draws) = trainers(config, 3);
+        let (burn_losses, burn_grads) = burn.gradients(&draws);
+        let (fused_losses, fused_grads) = fused.gradients(&draws);
+        assert!(burn_losses.sc > 0.0, "L_sc's hinge should be active");
+        assert!(burn_losses.far > 0.0, "L_far should be active");
+        let losses = |l: StepLosses| [l.total, l.data, l.sc, l.grad, l.mu, l.far, l.residual];
+        for (f, b) in losses(fused_losses).iter().zip(losses(burn_losses)) {
+            assert!((f - b).abs() <= 1e-5 * b.abs(), "losses: fused {fused_losses:?}, burn {burn_losses:?}");
+        }
+        let keys = |g: &Gradients| g.keys().cloned().collect::<Vec<_>>();
+        assert_eq!(keys(&fused_grads), keys(&burn_grads));
+        for (path, burn) in &burn_grads {
+            assert_close(path, &fused_grads[path], burn);
+        }
+    }
+
+    #[test]
+    fn gradients_equal_burns_on_the_particle_path() {
+        assert_gradients_match(&config(false, LikelihoodPath::Particle));
+    }
+
+    #[test]
+    fn gradients_equal_burns_with_the_reward_model_on_the_data_path() {
+        assert_gradients_match(&config(true, LikelihoodPath::Data));
+    }
+}
