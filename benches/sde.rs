@@ -2,7 +2,8 @@
 //! measures for its PyTorch and JAX peers (hopper sizes, paper networks):
 //! batched Euler–Maruyama step throughput (batch 1, 256, 4096, 50000), a
 //! 10-step open-loop rollout at batch 50000, and fit steps/s (horizon-2 NLL +
-//! η losses, batch 128). burn's flex backend, one model code path.
+//! η losses, batch 128) on burn's autodiff and on the fused kernel. burn's flex
+//! backend for the rest, one model code path.
 //!
 //! Run: `cargo bench --bench sde` (peer: `.bench-venv/bin/python ../shared/bench/nuno_reference.py --envs hopper`).
 
@@ -12,6 +13,7 @@ mod common;
 
 use burn::tensor::{Device, Tensor, TensorData};
 use common::{ACT, Hopper, OBS, seconds_per_call};
+use nuno::infer::Kernel;
 use nuno::sde::{FitConfig, LossConfig, NeuralSde, OpenLoop, SdeConfig, fit};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -68,21 +70,27 @@ fn main() {
     );
 
     let (train, valid) = hopper.dataset.split_by_trajectory(0.1, 0);
-    let mut fit_config = FitConfig::new(SdeConfig::new(), LossConfig::new());
-    fit_config.max_steps = 200;
-    fit_config.eval_every = 1_000_000;
-    let start = Instant::now();
-    let (_, summary) = fit(
-        &train,
-        &valid,
-        hopper.spec,
-        &fit_config,
-        &device,
-        &mut |_| {},
-    )
-    .expect("fit");
-    println!(
-        "| fit step (NLL h=2 + η losses), steps/s | 128 | {:.1} |",
-        summary.steps as f64 / start.elapsed().as_secs_f64()
-    );
+    for kernel in [Kernel::Burn, Kernel::Fused] {
+        let mut fit_config = FitConfig::new(SdeConfig::new(), LossConfig::new());
+        fit_config.kernel = kernel;
+        fit_config.max_steps = match kernel {
+            Kernel::Burn => 200,
+            Kernel::Fused => 1000,
+        };
+        fit_config.eval_every = 1_000_000;
+        let start = Instant::now();
+        let (_, summary) = fit(
+            &train,
+            &valid,
+            hopper.spec.clone(),
+            &fit_config,
+            &device,
+            &mut |_| {},
+        )
+        .expect("fit");
+        println!(
+            "| fit step (NLL h=2 + η losses), {kernel}, steps/s | 128 | {:.1} |",
+            summary.steps as f64 / start.elapsed().as_secs_f64()
+        );
+    }
 }

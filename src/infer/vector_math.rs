@@ -161,7 +161,11 @@ pub fn activation_slopes(
 #[inline(always)]
 fn sigmoid(z: f32) -> f32 {
     let e = exp(-f64::from(z.abs())) as f32;
-    if z >= 0.0 { 1.0 / (1.0 + e) } else { e / (1.0 + e) }
+    if z >= 0.0 {
+        1.0 / (1.0 + e)
+    } else {
+        e / (1.0 + e)
+    }
 }
 
 /// `sums[j] = Σ_rows values[row, j]` (rows as wide as `sums`), overwriting `sums`.

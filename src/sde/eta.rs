@@ -76,25 +76,38 @@ impl FarField {
 
     /// [`FarField::sample`] as row-major values: points `[count, dim]`, mask `[count]`.
     pub fn sample_values(&self, count: usize, rng: &mut ChaCha8Rng) -> (Vec<f32>, Vec<f32>) {
+        let points = self.sample_points(count, rng);
+        let mask = points
+            .chunks_exact(self.dim)
+            .map(|p| self.far_mask(p))
+            .collect();
+        (points, mask)
+    }
+
+    /// The points of [`FarField::sample_values`] alone (the same draws), for a
+    /// fit whose L_far is off: the mask, a distance to every reference point,
+    /// costs more than the rest of the draw.
+    pub fn sample_points(&self, count: usize, rng: &mut ChaCha8Rng) -> Vec<f32> {
         let mut points = Vec::with_capacity(count * self.dim);
-        let mut mask = Vec::with_capacity(count);
-        let threshold = self.min_distance * self.min_distance;
         for _ in 0..count {
-            let start = points.len();
             for d in 0..self.dim {
                 points.push(rng.random_range(self.low[d]..=self.high[d]));
             }
-            let point = &points[start..];
-            let far = self.reference.chunks_exact(self.dim).all(|r| {
-                r.iter()
-                    .zip(point)
-                    .map(|(a, b)| (a - b) * (a - b))
-                    .sum::<f32>()
-                    >= threshold
-            });
-            mask.push(if far { 1.0 } else { 0.0 });
         }
-        (points, mask)
+        points
+    }
+
+    /// 1 where `point` lies farther than `far_radii`·r from every reference point, else 0.
+    fn far_mask(&self, point: &[f32]) -> f32 {
+        let threshold = self.min_distance * self.min_distance;
+        let far = self.reference.chunks_exact(self.dim).all(|r| {
+            r.iter()
+                .zip(point)
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f32>()
+                >= threshold
+        });
+        if far { 1.0 } else { 0.0 }
     }
 }
 

@@ -35,6 +35,7 @@ pub struct FitRecord {
     pub sc: f32,
     pub grad: f32,
     pub mu: f32,
+    /// L_far; 0 while λ_far = 0 (no point is tested for being far then).
     pub far: f32,
     pub residual: f32,
     pub valid_nll: Option<f32>,
@@ -259,7 +260,13 @@ pub fn fit_from(
         let step_noise = standard_normal(config.batch_size * config.horizon * state_dim, &mut rng);
         let samples = config.batch_size * config.loss.convexity_samples;
         let ball_noise = standard_normal(samples * input_dim, &mut rng);
-        let (far_points, far_mask) = far_field.sample_values(config.batch_size, &mut rng);
+        // Off, L_far's points are drawn (the same stream either way) but none is far.
+        let (far_points, far_mask) = if config.loss.lambda_far > 0.0 {
+            far_field.sample_values(config.batch_size, &mut rng)
+        } else {
+            let points = far_field.sample_points(config.batch_size, &mut rng);
+            (points, vec![0.0; config.batch_size])
+        };
         let draws = StepDraws {
             windows,
             step_noise,

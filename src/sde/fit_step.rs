@@ -7,7 +7,7 @@
 
 use std::collections::BTreeMap;
 
-use burn::module::{Module, ModuleVisitor, Param};
+use burn::module::Module;
 use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
 
@@ -116,7 +116,10 @@ impl BurnSdeTrainer {
             &self.device,
         );
         let input_dim = obs_dim + act_dim;
-        let ball = tensor(&draws.ball_noise, [draws.ball_noise.len() / input_dim, input_dim]);
+        let ball = tensor(
+            &draws.ball_noise,
+            [draws.ball_noise.len() / input_dim, input_dim],
+        );
         let far_rows = draws.far_mask.len();
         let far = (
             tensor(&draws.far_points, [far_rows, input_dim]),
@@ -194,6 +197,8 @@ impl SdeTrainer for BurnSdeTrainer {
 /// `grads` of `module`'s parameters, by module path.
 #[cfg(test)]
 fn by_path<M: Module>(module: &M, grads: &GradientsParams) -> Gradients {
+    use burn::module::{ModuleVisitor, Param};
+
     struct Collect<'a> {
         grads: &'a GradientsParams,
         path: Vec<String>,

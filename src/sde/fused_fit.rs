@@ -18,7 +18,7 @@
 
 use super::config::{LikelihoodPath, LossConfig};
 use super::fit::window_states;
-use super::fit_step::{Gradients, SdeTrainer, StepDraws, StepLosses, StepSettings};
+use super::fit_step::{SdeTrainer, StepDraws, StepLosses, StepSettings};
 use super::fused::{sigmoid, softplus};
 use super::model::NeuralSde;
 use crate::infer::{MlpTape, TrainableMlp};
@@ -75,6 +75,29 @@ impl Nets {
         model
     }
 
+    /// The drift and diffusion networks (G, H, f_res, f_rew, σ), the reward's
+    /// `None` without NUNO^R.
+    fn nets(&self) -> [Option<&TrainableMlp>; 5] {
+        [
+            Some(&self.g),
+            Some(&self.h),
+            Some(&self.res),
+            self.reward.as_ref(),
+            Some(&self.sigma),
+        ]
+    }
+
+    /// [`Nets::nets`], mutably.
+    fn nets_mut(&mut self) -> [Option<&mut TrainableMlp>; 5] {
+        [
+            Some(&mut self.g),
+            Some(&mut self.h),
+            Some(&mut self.res),
+            self.reward.as_mut(),
+            Some(&mut self.sigma),
+        ]
+    }
+
     /// Each network under its module path in [`NeuralSde`].
     fn named_mut(&mut self) -> Vec<(&'static str, &mut TrainableMlp)> {
         let mut nets = vec![
@@ -95,7 +118,10 @@ impl Nets {
 /// `total += part`, parameter by parameter.
 fn accumulate(total: &mut TrainableMlp, part: &TrainableMlp) {
     for (t, p) in total.layers.iter_mut().zip(&part.layers) {
-        t.weight.iter_mut().zip(&p.weight).for_each(|(t, p)| *t += p);
+        t.weight
+            .iter_mut()
+            .zip(&p.weight)
+            .for_each(|(t, p)| *t += p);
         t.bias.iter_mut().zip(&p.bias).for_each(|(t, p)| *t += p);
     }
 }
@@ -239,10 +265,9 @@ struct Work {
     grad_d: Vec<f32>,
     ball: Vec<f32>,
     ones: Vec<f32>,
-    /// ∂L/∂ of a network's output (and ∂L/∂∇d), and of its input.
+    /// ∂L/∂ of a network's output (and ∂L/∂∇d).
     out_grad: Vec<f32>,
     q: Vec<f32>,
-    input_grad: Vec<f32>,
     /// ∂L/∂ of the normalised input and of the start state, this step's and the next's.
     x_grad: Vec<f32>,
     start_grad: Vec<f32>,
@@ -251,7 +276,8 @@ struct Work {
     step: OutputGrads,
 }
 
-/// ∂L/∂ of each network's output at one window step.
+/// ∂L/∂ of each network's output at one window step, and of its input
+/// (G, H, f_res, f_rew, σ).
 #[derive(Debug, Default)]
 struct OutputGrads {
     g: Vec<f32>,
@@ -259,6 +285,7 @@ struct OutputGrads {
     res: Vec<f32>,
     reward: Vec<f32>,
     sigma: Vec<f32>,
+    inputs: [Vec<f32>; 5],
 }
 
 /// Trains a [`NeuralSde`]'s weights on host buffers, by hand.
@@ -278,7 +305,7 @@ pub(crate) struct FusedSdeTrainer {
 impl FusedSdeTrainer {
     /// Trains `model`'s weights (read to host memory once).
     pub fn new(model: NeuralSde, settings: StepSettings) -> Self {
-        let cores = rayon::current_num_threads();
+        let cores = tape_cores();
         let nets = Nets::of(&model);
         let on_cores = MlpTape::on_cores;
         Self {
@@ -319,8 +346,7 @@ impl FusedSdeTrainer {
         let windows = &draws.windows;
         let (batch, horizon) = (windows.batch, windows.horizon);
         let states = window_states(windows, sh.obs, template.constants.config.reward_model);
-        let cores = rayon::current_num_threads();
-        steps.resize_with(horizon, || StepTape::on_cores(cores));
+        steps.resize_with(horizon, || StepTape::on_cores(tape_cores()));
         let at = |values: &[f32], steps: usize, k: usize, width: usize, out: &mut Vec<f32>| {
             out.clear();
             for r in 0..batch {
@@ -361,7 +387,17 @@ impl FusedSdeTrainer {
                 l.bias.fill(0.0);
             });
         }
-        let eta = eta_losses(nets, grads, scratch, sh, knobs, loss, &steps[0].x, draws, work);
+        let eta = eta_losses(
+            nets,
+            grads,
+            scratch,
+            sh,
+            knobs,
+            loss,
+            &steps[0].x,
+            draws,
+            work,
+        );
 
         // Backward, last step first.
         work.next_start_grad.clear();
@@ -412,6 +448,14 @@ impl FusedSdeTrainer {
     }
 }
 
+/// Cores one network's products split their rows over: the networks of a
+/// step run side by side, about four at a time, so each gets its share
+/// (on two cores, one: splitting a 128-row product costs more in waiting
+/// than it saves).
+fn tape_cores() -> usize {
+    (rayon::current_num_threads() / 4).max(1)
+}
+
 /// Every network of `nets`, mutably.
 fn nets_of(nets: &mut Nets) -> impl Iterator<Item = &mut TrainableMlp> {
     nets.named_mut().into_iter().map(|(_, net)| net)
@@ -440,7 +484,10 @@ fn particle_start(
     out: &mut Vec<f32>,
 ) {
     out.clear();
-    let rows = previous.mean.chunks_exact(state).zip(previous.var.chunks_exact(state));
+    let rows = previous
+        .mean
+        .chunks_exact(state)
+        .zip(previous.var.chunks_exact(state));
     for (r, (mean, var)) in rows.enumerate() {
         let eps = &noise[(r * horizon + k) * state..][..state];
         let next = mean.iter().zip(var).zip(eps);
@@ -477,17 +524,38 @@ fn forward_step(
         let v = s[n_pos..obs].iter().zip(vel_std);
         tape.v_hat.extend(v.map(|(v, s)| v / s));
     }
-    nets.g.forward(&tape.x_g, rows, &mut tape.g);
-    nets.h.forward(&tape.x_h, rows, &mut tape.h);
-    nets.res.forward(&tape.x, rows, &mut tape.res);
-    if let Some(reward) = &nets.reward {
-        reward.forward(&tape.x, rows, &mut tape.reward);
-    }
-    nets.sigma.forward(&tape.x, rows, &mut tape.sigma);
+    // The networks are independent: one task each, spread over the cores.
     let offset = knobs.eta_offset;
-    eta_logits(&nets.eta, offset, &tape.x, rows, eta_tape, &mut tape.logit);
+    let StepTape {
+        x,
+        x_g,
+        x_h,
+        logit,
+        g,
+        h,
+        res,
+        reward,
+        sigma,
+        ..
+    } = tape;
+    let (x, x_g, x_h) = (&*x, &*x_g, &*x_h);
+    rayon::scope(|scope| {
+        scope.spawn(|_| nets.g.forward(x_g, rows, g));
+        scope.spawn(|_| nets.h.forward(x_h, rows, h));
+        scope.spawn(|_| nets.res.forward(x, rows, res));
+        if let Some(net) = &nets.reward {
+            scope.spawn(|_| net.forward(x, rows, reward));
+        }
+        scope.spawn(|_| nets.sigma.forward(x, rows, sigma));
+        scope.spawn(|_| eta_logits(&nets.eta, offset, x, rows, eta_tape, logit));
+    });
 
-    for buffer in [&mut tape.diffusion, &mut tape.mean, &mut tape.var, &mut tape.err] {
+    for buffer in [
+        &mut tape.diffusion,
+        &mut tape.mean,
+        &mut tape.var,
+        &mut tape.err,
+    ] {
         buffer.resize(rows * s_dim, 0.0);
     }
     let (mut nll, mut residual) = (0.0f64, 0.0f64);
@@ -560,7 +628,8 @@ fn eta_losses(
             work.ball.extend(point.map(|(x, e)| x + e * loss.radius));
         }
     }
-    nets.eta.forward(&work.ball, rows * samples, &mut work.eta_ball);
+    nets.eta
+        .forward(&work.ball, rows * samples, &mut work.eta_ball);
 
     let (mut sc, mut grad_loss, mut mu_loss) = (0.0f64, 0.0f64, 0.0f64);
     work.out_grad.resize(rows * samples, 0.0);
@@ -612,17 +681,28 @@ fn eta_losses(
         g_grad_eta.iter_mut().for_each(|g| *g *= slope);
         mu_grad[b] = g_mu * mu;
     }
-    nets.eta.backward(&mut work.eta_ball, &work.out_grad, Some(&mut scratch.eta), None);
+    nets.eta.backward(
+        &mut work.eta_ball,
+        &work.out_grad,
+        Some(&mut scratch.eta),
+        None,
+    );
     accumulate(&mut grads.eta, &scratch.eta);
-    nets.eta
-        .backward_through_input_gradient(&mut work.eta_data, &d_grad, &work.q, &mut scratch.eta);
+    nets.eta.backward_through_input_gradient(
+        &mut work.eta_data,
+        &d_grad,
+        &work.q,
+        &mut scratch.eta,
+    );
     accumulate(&mut grads.eta, &scratch.eta);
-    nets.mu.backward(&mut work.mu, &mu_grad, Some(&mut scratch.mu), None);
+    nets.mu
+        .backward(&mut work.mu, &mu_grad, Some(&mut scratch.mu), None);
     accumulate(&mut grads.mu, &scratch.mu);
 
     // L_far on η's logit at the far points.
     let far_rows = draws.far_mask.len();
-    nets.eta.forward(&draws.far_points, far_rows, &mut work.eta_far);
+    nets.eta
+        .forward(&draws.far_points, far_rows, &mut work.eta_far);
     let target = (loss.far_target / (1.0 - loss.far_target)).ln();
     let mut far = 0.0f64;
     work.out_grad.resize(far_rows, 0.0);
@@ -633,7 +713,8 @@ fn eta_losses(
     }
     if loss.lambda_far > 0.0 {
         let g = &work.out_grad[..far_rows];
-        nets.eta.backward(&mut work.eta_far, g, Some(&mut scratch.eta), None);
+        nets.eta
+            .backward(&mut work.eta_far, g, Some(&mut scratch.eta), None);
         accumulate(&mut grads.eta, &scratch.eta);
     }
     StepLosses {
@@ -721,36 +802,53 @@ fn backward_step(
         }
     }
 
-    // Through the networks, their input gradients into the start's when asked.
+    // Through the networks, one task each; their input gradients then into the
+    // start's, when asked.
+    let tapes = [
+        (&mut tape.g, &out.g[..], n_pos..obs),
+        (&mut tape.h, &out.h[..], 0..obs),
+        (&mut tape.res, &out.res[..], 0..d_in),
+        (&mut tape.reward, &out.reward[..], 0..d_in),
+        (&mut tape.sigma, &out.sigma[..], 0..d_in),
+    ];
+    let mut jobs: Vec<_> = nets
+        .nets()
+        .into_iter()
+        .zip(grads.nets_mut())
+        .zip(scratch.nets_mut())
+        .zip(tapes)
+        .zip(&mut out.inputs)
+        .filter_map(
+            |((((net, grads), scratch), (tape, out_grad, columns)), input)| {
+                Some((net?, grads?, scratch?, tape, out_grad, columns, input))
+            },
+        )
+        .collect();
+    rayon::scope(|scope| {
+        for (net, grads, scratch, tape, out_grad, _, input) in &mut jobs {
+            scope.spawn(move |_| {
+                let input = wants_start.then_some(&mut **input);
+                net.backward(tape, out_grad, Some(&mut **scratch), input);
+                accumulate(grads, scratch);
+            });
+        }
+    });
     work.x_grad.clear();
     work.x_grad.resize(rows * d_in, 0.0);
-    let mut through = |net: &TrainableMlp,
-                       tape: &mut MlpTape,
-                       out_grad: &[f32],
-                       grads: &mut TrainableMlp,
-                       scratch: &mut TrainableMlp,
-                       columns: std::ops::Range<usize>| {
-        let input_grad = wants_start.then_some(&mut work.input_grad);
-        net.backward(tape, out_grad, Some(scratch), input_grad);
-        accumulate(grads, scratch);
-        if wants_start {
+    if wants_start {
+        for (.., columns, input) in &jobs {
             let width = columns.len();
-            for (r, g) in work.input_grad.chunks_exact(width).enumerate() {
+            for (r, g) in input.chunks_exact(width).enumerate() {
                 let x = &mut work.x_grad[r * d_in + columns.start..][..width];
                 x.iter_mut().zip(g).for_each(|(x, g)| *x += g);
             }
         }
-    };
-    through(&nets.g, &mut tape.g, &out.g, &mut grads.g, &mut scratch.g, n_pos..obs);
-    through(&nets.h, &mut tape.h, &out.h, &mut grads.h, &mut scratch.h, 0..obs);
-    through(&nets.res, &mut tape.res, &out.res, &mut grads.res, &mut scratch.res, 0..d_in);
-    if let (Some(net), Some(g), Some(s)) = (&nets.reward, &mut grads.reward, &mut scratch.reward) {
-        through(net, &mut tape.reward, &out.reward, g, s, 0..d_in);
     }
-    let sigma_grads = (&mut grads.sigma, &mut scratch.sigma);
-    through(&nets.sigma, &mut tape.sigma, &out.sigma, sigma_grads.0, sigma_grads.1, 0..d_in);
     if wants_start {
-        for (start, x) in start_grad.chunks_exact_mut(s_dim).zip(work.x_grad.chunks_exact(d_in)) {
+        for (start, x) in start_grad
+            .chunks_exact_mut(s_dim)
+            .zip(work.x_grad.chunks_exact(d_in))
+        {
             for i in 0..obs {
                 start[i] += x[i] / sh.state_std[i];
             }
@@ -760,9 +858,9 @@ fn backward_step(
 
 impl SdeTrainer for FusedSdeTrainer {
     #[cfg(test)]
-    fn gradients(&mut self, draws: &StepDraws) -> (StepLosses, Gradients) {
+    fn gradients(&mut self, draws: &StepDraws) -> (StepLosses, super::fit_step::Gradients) {
         let losses = self.loss_and_gradient(draws);
-        let mut gradients = Gradients::new();
+        let mut gradients = super::fit_step::Gradients::new();
         for (prefix, net) in self.grads.named_mut() {
             for (i, layer) in net.layers.iter().enumerate() {
                 gradients.insert(format!("{prefix}.layers.{i}.weight"), layer.weight.clone());
@@ -776,7 +874,11 @@ impl SdeTrainer for FusedSdeTrainer {
         let losses = self.loss_and_gradient(draws);
         let settings = &self.settings;
         let step = settings.adam.begin(&mut self.state, lr);
-        let pairs = self.nets.named_mut().into_iter().zip(self.grads.named_mut());
+        let pairs = self
+            .nets
+            .named_mut()
+            .into_iter()
+            .zip(self.grads.named_mut());
         for ((prefix, net), (_, grads)) in pairs {
             for (i, (layer, grad)) in net.layers.iter_mut().zip(&mut grads.layers).enumerate() {
                 let params = [
@@ -833,7 +935,7 @@ mod tests {
     use crate::envs::{ObservationLayout, StateSplit};
     use crate::nn::{seeded_init, standard_normal};
     use crate::sde::eta::FarField;
-    use crate::sde::fit_step::BurnSdeTrainer;
+    use crate::sde::fit_step::{BurnSdeTrainer, Gradients};
     use crate::sde::{DynamicsSpec, FitConfig, PhysicalScales, SdeConfig};
 
     const NQ: usize = 4;
@@ -883,7 +985,10 @@ mod tests {
             action_log_probs: None,
             metadata: Default::default(),
         };
-        (spec, Dataset::from_parts(parts, Path::new("planar")).unwrap())
+        (
+            spec,
+            Dataset::from_parts(parts, Path::new("planar")).unwrap(),
+        )
     }
 
     /// A small fit config: narrow networks, both ways of η's far field on.
@@ -950,7 +1055,11 @@ mod tests {
         assert_eq!(fused.len(), burn.len(), "{name}: sizes");
         let norm = |v: &mut dyn Iterator<Item = f32>| v.map(|x| x * x).sum::<f32>().sqrt();
         let difference = norm(&mut fused.iter().zip(burn).map(|(f, b)| f - b));
-        let largest = fused.iter().zip(burn).map(|(f, b)| (f - b).abs()).fold(0.0, f32::max);
+        let largest = fused
+            .iter()
+            .zip(burn)
+            .map(|(f, b)| (f - b).abs())
+            .fold(0.0, f32::max);
         let scale = norm(&mut burn.iter().copied());
         assert!(
             difference <= 1e-5 * scale || largest <= 1e-6,
@@ -967,7 +1076,10 @@ mod tests {
         assert!(burn_losses.far > 0.0, "L_far should be active");
         let losses = |l: StepLosses| [l.total, l.data, l.sc, l.grad, l.mu, l.far, l.residual];
         for (f, b) in losses(fused_losses).iter().zip(losses(burn_losses)) {
-            assert!((f - b).abs() <= 1e-5 * b.abs(), "losses: fused {fused_losses:?}, burn {burn_losses:?}");
+            assert!(
+                (f - b).abs() <= 1e-5 * b.abs(),
+                "losses: fused {fused_losses:?}, burn {burn_losses:?}"
+            );
         }
         let keys = |g: &Gradients| g.keys().cloned().collect::<Vec<_>>();
         assert_eq!(keys(&fused_grads), keys(&burn_grads));

@@ -135,9 +135,9 @@ fn fit_plan(args: &Args) -> anyhow::Result<(MujocoTask, DynamicsSpec, FitConfig,
     config.patience = args.patience.unwrap_or(config.patience);
     config.seed = args.seed;
     config.kernel = match (args.kernel, args.device) {
-        (Some(Kernel::Fused), ComputeDevice::Wgpu) => anyhow::bail!(
-            "--kernel fused runs on the CPU: use --kernel burn with --device wgpu"
-        ),
+        (Some(Kernel::Fused), ComputeDevice::Wgpu) => {
+            anyhow::bail!("--kernel fused runs on the CPU: use --kernel burn with --device wgpu")
+        }
         (Some(kernel), _) => kernel,
         (None, ComputeDevice::Cpu) => Kernel::Fused,
         (None, ComputeDevice::Wgpu) => Kernel::Burn,
