@@ -10,8 +10,10 @@
 //! `f32` buffers and evaluates them with bias and activation fused into each
 //! layer's pass, batch tiles sized for cache and spread over all cores
 //! ([`tiles`]), and per-thread buffers reused across steps. [`TrainableMlp`]
-//! adds the backward pass, on which SAC's updates and the ensemble's fit run;
-//! burn stays the path for the SDE's fit and for the GPU; [`Kernel`] picks
+//! adds the backward pass (and, for a loss on a scalar network's input
+//! gradient, the reverse pass of its tangent pass), on which SAC's updates,
+//! the ensemble's fit and the SDE's fit run; burn stays the path for the GPU
+//! and the reference every fused gradient is tested against; [`Kernel`] picks
 //! between them.
 
 mod dense;
