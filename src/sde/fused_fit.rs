@@ -780,18 +780,18 @@ fn backward_step(
         let v_hat = &tape.v_hat[r * n_vel..(r + 1) * n_vel];
         let h = &tape.h.output[r * n_vel * n_vel..][..n_vel * n_vel];
         let start = &mut start_grad[row];
-        for d in 0..obs {
-            let res = tape.res.output[r * obs + d];
-            out.res[r * obs + d] = drift_grad[d] * sh.derivative[d] + res_coef * 2.0 * res;
+        let res = &tape.res.output[r * obs..(r + 1) * obs];
+        let res_grad = out.res[r * obs..(r + 1) * obs].iter_mut();
+        for (((g, drift), scale), res) in res_grad.zip(&drift_grad).zip(&sh.derivative).zip(res) {
+            *g = drift * scale + res_coef * 2.0 * res;
         }
         for (d, &velocity) in sh.pairs.iter().enumerate() {
             start[velocity] += drift_grad[d];
         }
         for i in 0..n_vel {
             let q = drift_grad[n_pos + i] * sh.acceleration[i];
-            for j in 0..act {
-                out.g[(r * n_vel + i) * act + j] = q * a[j];
-            }
+            let g_grad = &mut out.g[(r * n_vel + i) * act..][..act];
+            g_grad.iter_mut().zip(a).for_each(|(g, a)| *g = q * a);
             for j in 0..n_vel {
                 out.h[(r * n_vel + i) * n_vel + j] = q * v_hat[j];
                 start[n_pos + j] += q * h[i * n_vel + j] / sh.state_std[n_pos + j];
