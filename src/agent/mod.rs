@@ -8,6 +8,7 @@ mod buffer;
 mod critic;
 mod fused_actor;
 mod fused_sac;
+mod method;
 mod model_rollout;
 mod model_step;
 mod online_sac;
@@ -26,6 +27,7 @@ pub use buffer::ReplayBuffer;
 pub use critic::{Temperature, TwinCritic};
 pub use fused_actor::FusedActor;
 pub use fused_sac::{FusedGradients, FusedSac};
+pub use method::{Method, Truncation};
 pub use model_rollout::{
     ModelRollout, RolloutActions, RolloutConfig, RolloutStats, RolloutTrace, StepOutcome,
     rollout_model, rollout_model_or_cancel,

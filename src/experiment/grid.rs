@@ -29,88 +29,14 @@
 
 use std::fmt;
 use std::path::{Path, PathBuf};
-use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
 use super::ExperimentError;
-use crate::agent::{MopoSettings, preset};
+use crate::agent::{Method, MopoSettings, preset};
 
 use crate::envs::{ForwardVelocity, ObservationLayout, TaskName};
 use crate::sde::{LikelihoodPath, Recipe, SampleNoise};
-
-/// A policy-learning method a cell runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Method {
-    /// NUNO: the neural SDE with the task's reward, η-penalised and truncated rollouts.
-    Nuno,
-    /// NUNO^R: the neural SDE learning the reward too.
-    NunoR,
-    /// NUNO^al (Appendix D): NUNO penalising and truncating on the aleatoric ‖σ‖.
-    NunoAl,
-    /// MOPO: the Gaussian ensemble, its max-‖σ‖ penalty, no truncation.
-    Mopo,
-    /// TATU+MOPO: MOPO truncated on the ensemble's accumulated disagreement.
-    TatuMopo,
-}
-
-impl Method {
-    pub const ALL: [Method; 5] = [
-        Method::Nuno,
-        Method::NunoR,
-        Method::NunoAl,
-        Method::Mopo,
-        Method::TatuMopo,
-    ];
-
-    /// The name in grid files, and `fit-policy --algo`'s.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Method::Nuno => "nuno",
-            Method::NunoR => "nuno-r",
-            Method::NunoAl => "nuno-al",
-            Method::Mopo => "mopo",
-            Method::TatuMopo => "tatu-mopo",
-        }
-    }
-
-    /// Whether the method trains in the Gaussian ensemble (else the neural SDE).
-    pub fn uses_ensemble(self) -> bool {
-        matches!(self, Method::Mopo | Method::TatuMopo)
-    }
-
-    /// The model the method trains in; methods naming the same one share its
-    /// fit per dataset and seed (NUNO and NUNO^al one SDE, MOPO and TATU+MOPO
-    /// one ensemble), so their comparison is of the policy step alone.
-    pub fn model_kind(self) -> &'static str {
-        match self {
-            Method::Nuno | Method::NunoAl => "sde",
-            Method::NunoR => "sde-reward",
-            Method::Mopo | Method::TatuMopo => "ensemble",
-        }
-    }
-}
-
-impl fmt::Display for Method {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl FromStr for Method {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, String> {
-        Method::ALL
-            .into_iter()
-            .find(|m| m.as_str() == s)
-            .ok_or_else(|| {
-                let known: Vec<&str> = Method::ALL.iter().map(|m| m.as_str()).collect();
-                format!("unknown method `{s}` (known: {})", known.join(", "))
-            })
-    }
-}
 
 /// The step budget every cell gets.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -13,7 +13,7 @@ pub use analysis::{
     ActionSource, Exploitation, ExploitationConfig, PredictionConfig, PredictionError,
     exploitation, prediction_error, uncertainty_by_action,
 };
-pub use grid::{Budget, Cell, CellSelection, Grid, GridDataset, Method};
+pub use grid::{Budget, Cell, CellSelection, Grid, GridDataset};
 pub use results::{
     CellResult, CellStatus, Summary, cell_dir, cell_status, markdown_table, policy_time_left,
     results_csv, summarize, summarize_run, write_result,

@@ -10,8 +10,9 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::ExperimentError;
-use super::grid::{Budget, Cell, Method};
+use super::grid::{Budget, Cell};
 use crate::agent::EpochRecord;
+use crate::agent::Method;
 use crate::agent::MopoSettings;
 use crate::artifact::{latest_checkpoint, read_versioned_json_filled, write_json};
 

@@ -12,10 +12,11 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clap::{Subcommand, ValueEnum};
+use nuno::agent::Method;
 use nuno::data::read_dataset;
 use nuno::envs::{ObservationLayout, TaskConfig};
 use nuno::experiment::{
-    Budget, Cell, CellResult, CellSelection, CellStatus, Grid, Method, cell_dir, cell_status,
+    Budget, Cell, CellResult, CellSelection, CellStatus, Grid, cell_dir, cell_status,
     markdown_table, policy_time_left, results_csv, summarize, summarize_run, write_result,
 };
 

@@ -8,9 +8,9 @@ use anyhow::Context;
 use burn::tensor::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{
-    AleatoricAsEta, EpochRecord, LoopContext, MopoSettings, PolicyLoopConfig, PolicyTraining,
-    Preset, SacConfig, dataset_max_threshold, mopo_preset, preset, rollout_threshold,
-    tatu_pessimism,
+    AleatoricAsEta, EpochRecord, LoopContext, Method, MopoSettings, PolicyLoopConfig,
+    PolicyTraining, Preset, SacConfig, Truncation, dataset_max_threshold, mopo_preset, preset,
+    rollout_threshold, tatu_pessimism,
 };
 use nuno::artifact::{
     BEST_POLICY, LAST_POLICY, PolicyProvenance, latest_checkpoint, load_checkpoint, load_dynamics,
@@ -26,39 +26,6 @@ use nuno::shared::BatchDynamics;
 use crate::output::write_text;
 use crate::plot::{Series, line_chart};
 use crate::resume::checkpoint_to_resume;
-
-/// The offline method: which model kind, penalty and truncation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Algo {
-    /// NUNO: the neural SDE, η-penalised rollouts truncated at ε(h, α) from the model's table.
-    Nuno,
-    /// NUNO^R: NUNO on a neural SDE that learned the reward (fit-model --reward-model).
-    NunoR,
-    /// NUNO^al (Appendix D): NUNO with the aleatoric ‖σ‖ in place of η, ε(h, α) computed on it.
-    NunoAl,
-    /// MOPO: the Gaussian ensemble (fit-ensemble), max-‖σᵢ‖ penalty, no truncation.
-    Mopo,
-    /// TATU+MOPO: MOPO, truncated once the accumulated ensemble disagreement
-    /// passes its largest value on the dataset divided by --pessimism.
-    TatuMopo,
-}
-
-impl Algo {
-    fn name(self) -> &'static str {
-        match self {
-            Algo::Nuno => "nuno",
-            Algo::NunoR => "nuno-r",
-            Algo::NunoAl => "nuno-al",
-            Algo::Mopo => "mopo",
-            Algo::TatuMopo => "tatu-mopo",
-        }
-    }
-
-    /// Whether the method trains in the Gaussian ensemble (else the neural SDE).
-    fn uses_ensemble(self) -> bool {
-        matches!(self, Algo::Mopo | Algo::TatuMopo)
-    }
-}
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -77,8 +44,8 @@ pub struct Args {
     preset: String,
     /// The method: nuno, nuno-r and nuno-al train in the neural SDE of fit-model,
     /// mopo and tatu-mopo in the Gaussian ensemble of fit-ensemble.
-    #[arg(long, value_enum, default_value = "nuno")]
-    algo: Algo,
+    #[arg(long, default_value_t = Method::Nuno)]
+    algo: Method,
     /// TATU's pessimism coefficient (tatu-mopo; default: TATU's for the dataset, else 2).
     #[arg(long)]
     pessimism: Option<f64>,
@@ -188,7 +155,7 @@ fn check_flags(args: &Args) -> anyhow::Result<()> {
         "--hidden needs positive layer sizes"
     );
     anyhow::ensure!(
-        args.pessimism.is_none() || args.algo == Algo::TatuMopo,
+        args.pessimism.is_none() || args.algo == Method::TatuMopo,
         "--pessimism is TATU's coefficient: it needs --algo tatu-mopo"
     );
     anyhow::ensure!(
@@ -236,7 +203,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         // MOPO's own h and λ with the ensemble's max ‖σ‖ as the penalty; TATU
         // adds its truncation to MOPO's, MOPO alone has none.
         (config.horizon, config.penalty) = mopo_preset(&args.preset)?;
-        config.truncate = args.algo == Algo::TatuMopo;
+        config.truncate = args.algo.truncation() != Truncation::Never;
         config.apply_mopo_settings(args.mopo_settings.unwrap_or(MopoSettings::OfflinerlKit));
     }
     config.horizon = args.horizon.unwrap_or(config.horizon);
@@ -263,7 +230,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     });
     let base = model.dynamics(kernel);
     let aleatoric;
-    let dynamics: &dyn BatchDynamics = if args.algo == Algo::NunoAl {
+    let dynamics: &dyn BatchDynamics = if args.algo == Method::NunoAl {
         aleatoric = AleatoricAsEta::new(base.as_ref());
         &aleatoric
     } else {
@@ -294,7 +261,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!(
             "{} ({}): h = {}, α = {}, λ_pen = {}, truncation threshold {threshold:.4}",
             preset.name,
-            args.algo.name(),
+            args.algo.as_str(),
             training.config.horizon,
             training.config.cvar_alpha,
             training.config.penalty
@@ -316,7 +283,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         normalized_score: Some(record.eval.normalized_score),
         mean_return: Some(record.eval.mean_return),
         online_training: None,
-        algorithm: Some(args.algo.name().to_string()),
+        algorithm: Some(args.algo.as_str().to_string()),
         truncation_threshold: training.threshold,
     };
     let policies = args.policies.as_ref().unwrap_or(&args.model);
@@ -481,7 +448,7 @@ fn load_model(args: &Args, preset: &Preset, device: &Device) -> anyhow::Result<L
         let (sde, metadata) = load_dynamics(&args.model, device).with_context(context)?;
         let learns_reward = sde.constants.config.reward_model;
         anyhow::ensure!(
-            args.algo != Algo::NunoR || learns_reward,
+            args.algo != Method::NunoR || learns_reward,
             "--algo nuno-r needs a model that learned the reward (fit-model --reward-model); \
                  the one in {} did not",
             args.model.display()
@@ -514,7 +481,7 @@ fn load_model(args: &Args, preset: &Preset, device: &Device) -> anyhow::Result<L
             metadata.act_dim,
             EnsembleUncertainty::MaxAleatoric,
         );
-        let ensemble = if args.algo == Algo::TatuMopo {
+        let ensemble = if args.algo == Method::TatuMopo {
             ensemble.with_truncation_signal(EnsembleUncertainty::MaxDisagreement)
         } else {
             ensemble
@@ -545,7 +512,7 @@ fn truncation_threshold(
     if !config.truncate {
         return Ok(None);
     }
-    if matches!(args.algo, Algo::Nuno | Algo::NunoR) {
+    if args.algo.truncation() == Truncation::ModelTable {
         return Ok(config.threshold_from(model.thresholds.as_ref())?);
     }
     let path = args.out.join("threshold.json");
@@ -553,16 +520,16 @@ fn truncation_threshold(
         let saved: SavedThreshold = serde_json::from_str(&std::fs::read_to_string(&path)?)
             .with_context(|| format!("reading {}", path.display()))?;
         anyhow::ensure!(
-            saved.algorithm == args.algo.name(),
+            saved.algorithm == args.algo.as_str(),
             "{} was computed for {}, this run is {}",
             path.display(),
             saved.algorithm,
-            args.algo.name()
+            args.algo.as_str()
         );
         return Ok(Some(saved.threshold));
     }
-    let (threshold, how) = match args.algo {
-        Algo::NunoAl => {
+    let (threshold, how) = match args.algo.truncation() {
+        Truncation::AleatoricCvar => {
             let thresholds = ThresholdConfig::new().with_seed(config.seed);
             let value = rollout_threshold(
                 ctx.dynamics,
@@ -578,7 +545,7 @@ fn truncation_threshold(
             );
             (value, how)
         }
-        Algo::TatuMopo => {
+        Truncation::DatasetDisagreement => {
             let pessimism = args
                 .pessimism
                 .unwrap_or_else(|| tatu_pessimism(&args.preset));
@@ -589,11 +556,11 @@ fn truncation_threshold(
             );
             (value, how)
         }
-        Algo::Nuno | Algo::NunoR | Algo::Mopo => unreachable!("handled above"),
+        Truncation::ModelTable | Truncation::Never => unreachable!("handled above"),
     };
     std::fs::create_dir_all(&args.out)?;
     let saved = SavedThreshold {
-        algorithm: args.algo.name().to_string(),
+        algorithm: args.algo.as_str().to_string(),
         threshold,
         how,
     };

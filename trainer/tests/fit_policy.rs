@@ -281,6 +281,24 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
             "{error}"
         );
     }
+    // A method that does not exist is refused with the list of those that do.
+    let error = fails(&[
+        "fit-policy",
+        "--algo",
+        "mbpo",
+        "--model",
+        &model_s,
+        "--dataset",
+        &dataset_s,
+        "--preset",
+        "hopper-medium",
+        "--out",
+        &out,
+    ]);
+    assert!(
+        error.contains("mbpo") && error.contains("nuno-al") && error.contains("tatu-mopo"),
+        "{error}"
+    );
     // The neural SDE's run needs its own model.
     let error = fails(&[
         "fit-policy",

@@ -1,0 +1,110 @@
+//! The offline methods nuno trains a policy with, one list for every caller
+//! (`fit-policy --algo`, grid files, the experiment runner): the model kind
+//! each trains in and where its rollouts truncate.
+
+use std::fmt;
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+/// The offline method: which model kind, penalty and truncation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// NUNO: the neural SDE with the task's reward, η-penalised rollouts
+    /// truncated at ε(h, α) from the model's table.
+    Nuno,
+    /// NUNO^R: NUNO on a neural SDE that learned the reward (fit-model --reward-model).
+    NunoR,
+    /// NUNO^al (Appendix D): NUNO with the aleatoric ‖σ‖ in place of η, ε(h, α)
+    /// computed on it.
+    NunoAl,
+    /// MOPO: the Gaussian ensemble (fit-ensemble), max-‖σᵢ‖ penalty, no truncation.
+    Mopo,
+    /// TATU+MOPO: MOPO, truncated once the accumulated ensemble disagreement
+    /// passes its largest value on the dataset divided by the pessimism coefficient.
+    TatuMopo,
+}
+
+impl Method {
+    pub const ALL: [Method; 5] = [
+        Method::Nuno,
+        Method::NunoR,
+        Method::NunoAl,
+        Method::Mopo,
+        Method::TatuMopo,
+    ];
+
+    /// The name in grid files, and `fit-policy --algo`'s.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Method::Nuno => "nuno",
+            Method::NunoR => "nuno-r",
+            Method::NunoAl => "nuno-al",
+            Method::Mopo => "mopo",
+            Method::TatuMopo => "tatu-mopo",
+        }
+    }
+
+    /// Whether the method trains in the Gaussian ensemble (else the neural SDE).
+    pub fn uses_ensemble(self) -> bool {
+        matches!(self, Method::Mopo | Method::TatuMopo)
+    }
+
+    /// The model the method trains in; methods naming the same one share its
+    /// fit per dataset and seed (NUNO and NUNO^al one SDE, MOPO and TATU+MOPO
+    /// one ensemble), so their comparison is of the policy step alone.
+    pub fn model_kind(self) -> &'static str {
+        match self {
+            Method::Nuno | Method::NunoAl => "sde",
+            Method::NunoR => "sde-reward",
+            Method::Mopo | Method::TatuMopo => "ensemble",
+        }
+    }
+}
+
+/// Where a method's rollouts truncate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Truncation {
+    /// At ε(h, α) from the model's own threshold table (NUNO, NUNO^R).
+    ModelTable,
+    /// At ε(h, α) computed on the aleatoric ‖σ‖ the same way (NUNO^al, Appendix D).
+    AleatoricCvar,
+    /// At the ensemble's largest disagreement over the dataset over the
+    /// pessimism coefficient (TATU's `compute_max_disc`).
+    DatasetDisagreement,
+    /// Never (MOPO).
+    Never,
+}
+
+impl Method {
+    /// Where this method's rollouts truncate.
+    pub fn truncation(self) -> Truncation {
+        match self {
+            Method::Nuno | Method::NunoR => Truncation::ModelTable,
+            Method::NunoAl => Truncation::AleatoricCvar,
+            Method::TatuMopo => Truncation::DatasetDisagreement,
+            Method::Mopo => Truncation::Never,
+        }
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for Method {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Method::ALL
+            .into_iter()
+            .find(|m| m.as_str() == s)
+            .ok_or_else(|| {
+                let known: Vec<&str> = Method::ALL.iter().map(|m| m.as_str()).collect();
+                format!("unknown method `{s}` (known: {})", known.join(", "))
+            })
+    }
+}
