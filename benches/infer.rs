@@ -19,7 +19,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use common::{ACT, Hopper, OBS, seconds_per_call};
 use nuno::agent::FusedActor;
 use nuno::agent::{
-    ActionMode, ActorConfig, ActorPolicy, BatchPolicy, RolloutActions, RolloutConfig, rollout_model,
+    ActionMode, ActorConfig, ActorPolicy, RolloutActions, RolloutConfig, rollout_model,
 };
 use nuno::ensemble::{
     EnsembleDynamics, EnsembleFit, EnsembleUncertainty, GaussianEnsemble, Scaler,
@@ -27,7 +27,9 @@ use nuno::ensemble::{
 use nuno::envs::{TaskConfig, TaskName, TaskRules};
 use nuno::infer::{Dense, Rows};
 use nuno::sde::FusedSde;
-use nuno::sde::{BatchDynamics, NeuralSde, SdeConfig};
+use nuno::sde::{NeuralSde, SdeConfig};
+use nuno::shared::BatchDynamics;
+use nuno::shared::BatchPolicy;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

@@ -9,8 +9,8 @@ use std::time::Instant;
 
 use burn::tensor::Device;
 use nuno::agent::{ActorConfig, FusedSac, Sac, SacConfig};
-use nuno::data::TransitionBatch;
 use nuno::nn::seeded_init;
+use nuno::shared::TransitionBatch;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;

@@ -7,11 +7,14 @@
 //! - [`data`]: D4RL/NeoRL/Minari readers, the D4RL-layout writer, generators,
 //!   the normaliser and samplers;
 //! - [`sde`]: the neural SDE, its losses, fitting and truncation thresholds;
-//! - [`agent`]: SAC on penalised, truncated model rollouts, behind the narrow
-//!   batched `act` and `step` interfaces;
+//! - [`ensemble`]: the Gaussian ensemble, MOPO's model, and its fit;
+//! - [`agent`]: the method list, SAC on penalised, truncated model rollouts,
+//!   behind the narrow batched `act` and `step` interfaces;
+//! - [`experiment`]: grids of datasets × methods × seeds, each cell's result,
+//!   the aggregate tables and the model analyses;
 //! - [`nn`]: the MLP both use;
 //! - [`infer`]: the fused CPU path that rollouts and the server evaluate trained networks with;
-//! - [`artifact`]: atomic writes of everything nuno saves;
+//! - [`artifact`]: everything nuno saves and its validated loading;
 //! - [`server`]: the HTTP model server (axum), a thin layer over the rest;
 //! - [`shared`]: what every concern may import and which imports none of them: the
 //!   batch interfaces, the cancellation flag long work checks between steps, the
@@ -32,6 +35,3 @@ pub mod sde;
 #[cfg(feature = "server")]
 pub mod server;
 pub mod shared;
-
-/// Cancellation, re-exported where it was first defined.
-pub use shared::cancel;

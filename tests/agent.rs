@@ -5,19 +5,22 @@
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 use nuno::agent::{
-    ActorConfig, BatchPolicy, LoopContext, MopoSettings, PRESETS, PolicyLoopConfig, PolicyTraining,
+    ActorConfig, LoopContext, MopoSettings, PRESETS, PolicyLoopConfig, PolicyTraining,
     RandomNetworkPolicy, RolloutActions, RolloutConfig, Sac, SacConfig, StepOutcome, preset,
     rollout_model,
 };
 use nuno::artifact::{
     collect_tensors, latest_checkpoint, load_checkpoint, load_dynamics, save_checkpoint,
 };
-use nuno::data::{Dataset, GenerateConfig, TransitionBatch, generate};
+use nuno::data::{Dataset, GenerateConfig, generate};
 use nuno::envs::{ForwardVelocity, MujocoTask, ObservationLayout, TaskConfig, TaskName, TaskRules};
 use nuno::infer::Kernel;
 use nuno::nn::{polyak_update, seeded_init, to_f32_vec};
-use nuno::sde::{BatchDynamics, DynamicsSpec, ModelStep};
+use nuno::sde::DynamicsSpec;
+use nuno::shared::BatchPolicy;
 use nuno::shared::BatchShape;
+use nuno::shared::TransitionBatch;
+use nuno::shared::{BatchDynamics, ModelStep};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -939,7 +942,7 @@ fn particles_equal_the_model_step_on_repeated_rows() {
 
 /// A policy that sets `cancel` on its `at`-th call and counts its calls.
 struct CancelAt {
-    cancel: nuno::cancel::Cancel,
+    cancel: nuno::shared::cancel::Cancel,
     at: usize,
     calls: std::sync::atomic::AtomicUsize,
 }
@@ -965,8 +968,8 @@ impl BatchPolicy for CancelAt {
 #[test]
 fn cancelled_rollouts_and_evaluations_stop_at_the_next_step() {
     use nuno::agent::rollout_model_or_cancel;
-    use nuno::cancel::Cancelled;
     use nuno::envs::{EnvError, EvaluationConfig, evaluate_or_cancel};
+    use nuno::shared::cancel::Cancelled;
     let (model, metadata) = shipped_model();
     let rules = TaskRules::new(
         TaskConfig::d4rl(TaskName::Hopper),

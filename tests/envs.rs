@@ -1,11 +1,12 @@
 //! The tasks' contracts beyond Gymnasium parity: state split, scores, seeding,
 //! the time limit, bad input, and the evaluator's determinism.
 
-use nuno::agent::{BatchPolicy, RandomPolicy};
+use nuno::agent::RandomPolicy;
 use nuno::envs::{
     EnvError, EvaluationConfig, MujocoTask, ObservationLayout, StateSplit, TaskConfig, TaskName,
     evaluate,
 };
+use nuno::shared::BatchPolicy;
 
 fn random_policy(task: &MujocoTask) -> RandomPolicy {
     let (low, high) = task.action_bounds();

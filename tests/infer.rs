@@ -8,7 +8,7 @@ use std::path::Path;
 use burn::tensor::Device;
 use nuno::agent::FusedActor;
 use nuno::agent::{
-    ActionMode, ActorConfig, ActorPolicy, BatchPolicy, RolloutActions, RolloutConfig, rollout_model,
+    ActionMode, ActorConfig, ActorPolicy, RolloutActions, RolloutConfig, rollout_model,
 };
 use nuno::artifact::{BEST_POLICY, load_dynamics, load_policy};
 use nuno::data::{Dataset, GenerateConfig, generate};
@@ -17,7 +17,9 @@ use nuno::infer::{
     Dense, GEMM_MIN_ROWS, MAX_TILE_ROWS, Rows, SimdLevel, detected_simd_level, simd_level,
 };
 use nuno::sde::FusedSde;
-use nuno::sde::{BatchDynamics, DynamicsSpec, NeuralSde, PhysicalScales, SdeConfig};
+use nuno::sde::{DynamicsSpec, NeuralSde, PhysicalScales, SdeConfig};
+use nuno::shared::BatchDynamics;
+use nuno::shared::BatchPolicy;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;

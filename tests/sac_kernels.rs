@@ -9,9 +9,9 @@ use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
 use nuno::agent::{ActorConfig, FusedSac, Sac, SacConfig, SacLosses};
 use nuno::artifact::collect_tensors;
-use nuno::data::TransitionBatch;
 use nuno::infer::TrainableMlp;
 use nuno::nn::{normal, seeded_init, to_f32_vec};
+use nuno::shared::TransitionBatch;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

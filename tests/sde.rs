@@ -8,7 +8,7 @@ use std::path::Path;
 
 use burn::module::{Module, ModuleMapper, Param};
 use burn::tensor::{Device, Tensor, TensorData};
-use nuno::agent::{BatchPolicy, RandomNetworkPolicy};
+use nuno::agent::RandomNetworkPolicy;
 use nuno::artifact::{
     ArtifactError, DynamicsProvenance, collect_tensors, load_dynamics, save_dynamics,
 };
@@ -21,6 +21,7 @@ use nuno::sde::{
     calibration_report, compute_thresholds, cvar, eta_report, fit, fit_eta, prediction_error,
     window_tensors,
 };
+use nuno::shared::BatchPolicy;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -535,7 +536,7 @@ fn calibration_z_scores_follow_an_independent_gaussian_reference() {
             .map(|_| rng.random_range(-1.0..1.0))
             .collect();
         let noise = nuno::nn::standard_normal(trajectories * 11, &mut rng);
-        let next = nuno::sde::BatchDynamics::step(&model, &state, &actions, &noise).next_states;
+        let next = nuno::shared::BatchDynamics::step(&model, &state, &actions, &noise).next_states;
         for (t, [obs, act, next_obs]) in chains.iter_mut().enumerate() {
             obs.extend_from_slice(&state[t * 11..(t + 1) * 11]);
             act.extend_from_slice(&actions[t * 3..(t + 1) * 3]);

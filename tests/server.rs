@@ -11,16 +11,16 @@ use std::sync::{Arc, Mutex};
 
 use burn::tensor::Device;
 use nuno::agent::FusedActor;
-use nuno::agent::{ActionMode, ActorConfig, ActorPolicy, BatchPolicy};
+use nuno::agent::{ActionMode, ActorConfig, ActorPolicy};
 use nuno::artifact::{BEST_POLICY, PolicyProvenance, load_dynamics, save_policy};
 use nuno::envs::{TaskConfig, TaskName, TaskRules};
 use nuno::infer::Kernel;
-use nuno::sde::BatchDynamics;
 use nuno::sde::FusedSde;
 use nuno::server::{
     ActResponse, AppState, BINARY, ComputeHook, EvaluateResponse, Limits, ModelDetail, ModelList,
     RolloutResponse, ServerConfig, StepResponse, ValidateResponse, openapi_json, serve,
 };
+use nuno::shared::{BatchDynamics, BatchPolicy};
 use reqwest::StatusCode;
 use serde_json::{Value, json};
 

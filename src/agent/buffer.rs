@@ -6,7 +6,7 @@
 
 use rand::Rng;
 
-use crate::data::TransitionBatch;
+use crate::shared::TransitionBatch;
 
 /// A fixed-capacity ring of transitions `(s, a, r, s', d)`.
 #[derive(Debug, Clone, PartialEq)]

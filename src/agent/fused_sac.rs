@@ -9,10 +9,10 @@ use rand_chacha::ChaCha8Rng;
 
 use super::actor::tanh_gaussian_log_density;
 use super::sac::{Sac, SacAdam, SacLosses};
-use crate::data::TransitionBatch;
 use crate::infer::{MlpTape, TrainableMlp};
 use crate::nn::{Adam, AdamState, AdamStep, fill_standard_normal, to_f32_vec};
 use crate::shared::LoggedActions;
+use crate::shared::TransitionBatch;
 
 /// The agent's networks, temperature and Adam state as host buffers.
 pub struct FusedSac {

@@ -19,8 +19,6 @@ mod random_network;
 mod sac;
 mod uncertainty;
 
-/// The policy interface, re-exported where it was first defined.
-pub use crate::shared::BatchPolicy;
 pub(crate) use actor::action_noise;
 pub use actor::{ActionMode, Actor, ActorConfig, ActorPolicy, ActorSample};
 pub use buffer::ReplayBuffer;

@@ -10,12 +10,10 @@
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use super::BatchPolicy;
 use super::model_step::penalized_reward;
-use crate::data::TransitionBatch;
 use crate::envs::TaskRules;
 use crate::shared::cancel::{Cancel, Cancelled};
-use crate::shared::{BatchDynamics, scaled_noise};
+use crate::shared::{BatchDynamics, BatchPolicy, TransitionBatch, scaled_noise};
 
 /// How model rollouts run.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -17,20 +17,20 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use super::AgentError;
 use super::actor::{ActionMode, ActorConfig, ActorPolicy};
 use super::buffer::ReplayBuffer;
 use super::fused_sac::FusedSac;
 use super::model_rollout::{RolloutActions, RolloutConfig, RolloutStats, rollout_model};
 use super::presets::Preset;
 use super::sac::{Sac, SacConfig, SacLosses};
-use super::{AgentError, BatchPolicy};
-use crate::data::{Dataset, StartStateSampler, TransitionBatch, TransitionSampler};
+use crate::data::{Dataset, StartStateSampler, TransitionSampler};
 use crate::envs::{
     EvaluationConfig, EvaluationReport, ForwardVelocity, TaskConfig, TaskRules, evaluate,
 };
 use crate::infer::Kernel;
 use crate::sde::{CODE_MODEL_BUFFER_FACTOR, Recipe, ThresholdTable};
-use crate::shared::BatchDynamics;
+use crate::shared::{BatchDynamics, BatchPolicy, SeedStream, TransitionBatch, derive_seed};
 
 /// How the actor's learning rate moves over a run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -459,7 +459,7 @@ impl PolicyTraining {
         if self.config.eval_episodes == 0 {
             return Ok(EvalSummary::default());
         }
-        let seed = self.config.seed.wrapping_add(1_000_003 * self.epoch as u64);
+        let seed = derive_seed(self.config.seed, SeedStream::EvalEpoch(self.epoch as u64));
         let config = EvaluationConfig::new(ctx.task, self.config.eval_episodes, seed);
         let policy = ctx.kernel.policy(self.policy(ActionMode::Deterministic));
         Ok(EvalSummary::from(&evaluate(policy.as_ref(), &config)?))
@@ -472,7 +472,8 @@ impl PolicyTraining {
         if n == 0 {
             return EtaProbe::default();
         }
-        let mut rng = ChaCha8Rng::seed_from_u64(self.config.seed ^ 0xe7a);
+        let mut rng =
+            ChaCha8Rng::seed_from_u64(derive_seed(self.config.seed, SeedStream::EtaProbe));
         let d = ctx.dataset;
         let rows: Vec<usize> = (0..n).map(|_| rng.random_range(0..d.len())).collect();
         let obs: Vec<f32> = rows

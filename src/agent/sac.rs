@@ -12,8 +12,8 @@ use serde::{Deserialize, Serialize};
 
 use super::actor::{Actor, ActorConfig};
 use super::critic::{Temperature, TwinCritic};
-use crate::data::TransitionBatch;
 use crate::nn::{Adam, AdamState, Initialised, normal, polyak_update};
+use crate::shared::TransitionBatch;
 
 /// SAC's hyperparameters.
 #[derive(Config, Debug, PartialEq)]

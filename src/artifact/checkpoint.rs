@@ -20,8 +20,8 @@ use super::safetensors_file::safetensors_bytes;
 use super::tensors::NamedTensors;
 use super::{ArtifactError, sha256_hex};
 use crate::agent::{ActorLrDecay, EpochRecord, PolicyLoopConfig, PolicyTraining, ReplayBuffer};
-use crate::data::TransitionBatch;
 use crate::envs::ForwardVelocity;
+use crate::shared::TransitionBatch;
 
 /// Version 2: Adam's moments by module path in `adam.safetensors` (version 1
 /// kept burn's optimiser records keyed by parameter id).

@@ -18,7 +18,6 @@ mod tensors;
 
 use std::path::{Path, PathBuf};
 
-pub use crate::shared::write_atomically;
 pub use behaviour::{
     BEHAVIOUR_SCHEMA_VERSION, Behaviour, BehaviourEntry, BehaviourIndex, behaviour_dir,
     load_behaviour, save_behaviour,

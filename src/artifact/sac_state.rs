@@ -13,9 +13,10 @@ use serde::{Deserialize, Serialize};
 use super::json_file::read_checked_weights;
 use super::safetensors_file::safetensors_bytes;
 use super::tensors::{NamedTensors, collect_tensors, load_tensors};
-use super::{ArtifactError, sha256_hex, write_atomically};
+use super::{ArtifactError, sha256_hex};
 use crate::agent::Sac;
 use crate::nn::{AdamState, Moments};
+use crate::shared::write_atomically;
 
 const LATEST: &str = "LATEST";
 const NETWORKS: &str = "networks.safetensors";

@@ -6,8 +6,9 @@ use std::path::Path;
 
 use safetensors::tensor::{Dtype, SafeTensors, TensorView};
 
+use super::ArtifactError;
 use super::tensors::NamedTensors;
-use super::{ArtifactError, write_atomically};
+use crate::shared::write_atomically;
 
 /// Serialises `tensors` (f32, little-endian) with `metadata` in the header.
 pub fn safetensors_bytes(

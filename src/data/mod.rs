@@ -16,8 +16,6 @@ mod sampler;
 
 use std::path::PathBuf;
 
-/// The transition batch, re-exported where it was first defined.
-pub use crate::shared::TransitionBatch;
 pub use behaviour::{BehaviourLevel, BehaviourPick, LEVEL_TOLERANCE, select_behaviour};
 pub use d4rl::{read_d4rl, write_d4rl};
 pub use dataset::{Dataset, DatasetMetadata, DatasetParts, Trajectory};

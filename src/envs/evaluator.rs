@@ -12,8 +12,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::{EnvError, MujocoTask, TaskConfig};
-use crate::shared::BatchPolicy;
 use crate::shared::cancel::Cancel;
+use crate::shared::{BatchPolicy, SeedStream, derive_seed};
 
 /// What to evaluate and how.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -124,7 +124,10 @@ fn run_group(
     let mut observations = Vec::with_capacity(episodes.len());
     for episode in episodes {
         let mut task = MujocoTask::new(config.task)?;
-        observations.push(task.reset(Some(config.seed.wrapping_add(episode as u64))));
+        observations.push(task.reset(Some(derive_seed(
+            config.seed,
+            SeedStream::Episode(episode as u64),
+        ))));
         tasks.push(task);
     }
     let obs_dim = policy.obs_dim();

@@ -16,7 +16,7 @@ use super::ExperimentError;
 use crate::agent::{RolloutActions, RolloutConfig, rollout_model};
 use crate::data::{Dataset, WindowSampler};
 use crate::envs::{MujocoTask, TaskConfig, TaskRules};
-use crate::shared::{BatchDynamics, BatchPolicy};
+use crate::shared::{BatchDynamics, BatchPolicy, SeedStream, derive_seed};
 
 /// How the open-loop prediction error is measured.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -242,7 +242,7 @@ pub fn exploitation(
     let mut starts = Vec::with_capacity(config.starts * env.obs_dim());
     for i in 0..config.starts as u64 {
         let mut obs: Vec<f32> = env
-            .reset(Some(config.seed + i))
+            .reset(Some(derive_seed(config.seed, SeedStream::Episode(i))))
             .iter()
             .map(|&x| x as f32)
             .collect();

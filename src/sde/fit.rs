@@ -24,6 +24,7 @@ use super::spec::{DynamicsSpec, PhysicalScales};
 use crate::data::{Dataset, NormalizerConfig, WindowBatch, WindowSampler};
 use crate::infer::Kernel;
 use crate::nn::{AdamState, normal, seeded_init, standard_normal};
+use crate::shared::{SeedStream, derive_seed};
 
 /// Losses at one logged step (and the validation NLL when it was measured).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -198,7 +199,8 @@ pub fn fit_from(
     let valid_windows = WindowSampler::new(valid, config.horizon)?;
     let valid_starts: Vec<usize> = {
         let all = valid_windows.starts();
-        let mut pick = ChaCha8Rng::seed_from_u64(config.seed ^ 0x5eed);
+        let mut pick =
+            ChaCha8Rng::seed_from_u64(derive_seed(config.seed, SeedStream::ValidWindows));
         (0..config.valid_windows.min(all.len()))
             .map(|_| all[pick.random_range(0..all.len())])
             .collect()

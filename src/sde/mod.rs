@@ -20,8 +20,6 @@ mod rollout;
 mod spec;
 mod threshold;
 
-/// The batch interface, re-exported where it was first defined.
-pub use crate::shared::{BatchDynamics, ModelStep, euler_maruyama};
 pub use calibration::{
     CalibrationConfig, CalibrationReport, DiffusionAt, DimensionCalibration, HorizonCalibration,
     TruncationRate, Z_STD_BAND, calibration_report,

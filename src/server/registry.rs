@@ -16,7 +16,7 @@ use serde::Serialize;
 use utoipa::ToSchema;
 
 use crate::agent::FusedActor;
-use crate::agent::{ActionMode, Actor, ActorPolicy, BatchPolicy};
+use crate::agent::{ActionMode, Actor, ActorPolicy};
 use crate::artifact::{
     BEST_POLICY, DynamicsMetadata, ENSEMBLE_METADATA, EnsembleMetadata, PolicyMetadata, has_policy,
     load_dynamics, load_ensemble, load_policy,
@@ -24,7 +24,8 @@ use crate::artifact::{
 use crate::ensemble::{EnsembleDynamics, EnsembleUncertainty};
 use crate::envs::{TaskConfig, TaskRules};
 use crate::infer::Kernel;
-use crate::sde::{BatchDynamics, FusedSde, NeuralSde, ThresholdTable};
+use crate::sde::{FusedSde, NeuralSde, ThresholdTable};
+use crate::shared::{BatchDynamics, BatchPolicy};
 
 /// Which kind of dynamics model is served (`kind` in `/v1/models/{id}`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize, ToSchema)]

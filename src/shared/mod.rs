@@ -1,11 +1,12 @@
 //! What every concern may import, and which imports none of them: the batch
-//! interfaces, the cancellation flag, the atomic file writer and the names of
-//! field-less enums.
+//! interfaces, the cancellation flag, the atomic file writer, the names of
+//! field-less enums and the derived seeds.
 
 pub mod atomic;
 pub mod batch;
 pub mod cancel;
 mod named_enum;
+pub mod seed;
 
 pub use atomic::write_atomically;
 pub use batch::{
@@ -14,3 +15,4 @@ pub use batch::{
 };
 pub use cancel::{Cancel, CancelOnDrop, Cancelled};
 pub(crate) use named_enum::named_enum;
+pub use seed::{SeedStream, derive_seed};

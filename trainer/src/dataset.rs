@@ -7,9 +7,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use anyhow::Context;
 use clap::{Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
-use nuno::agent::{
-    ActionMode, ActorPolicy, BatchPolicy, FusedActor, OnlineSacConfig, RandomNetworkPolicy,
-};
+use nuno::agent::{ActionMode, ActorPolicy, FusedActor, OnlineSacConfig, RandomNetworkPolicy};
 use nuno::artifact::{
     Behaviour, load_behaviour, read_online_run, read_run_transitions, run_policies,
 };
@@ -19,6 +17,7 @@ use nuno::data::{
 };
 use nuno::envs::{MujocoTask, TaskConfig, TaskName};
 use nuno::sde::ComputeDevice;
+use nuno::shared::BatchPolicy;
 
 use crate::data_source::task_config;
 

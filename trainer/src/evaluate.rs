@@ -3,10 +3,11 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use nuno::agent::{ActionMode, ActorPolicy, BatchPolicy, RandomPolicy};
+use nuno::agent::{ActionMode, ActorPolicy, RandomPolicy};
 use nuno::artifact::{BEST_POLICY, load_policy};
 use nuno::envs::{EvaluationConfig, MujocoTask, TaskConfig, TaskName, evaluate};
 use nuno::infer::Kernel;
+use nuno::shared::BatchPolicy;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::Context;
-use nuno::artifact::write_atomically;
+use nuno::shared::write_atomically;
 
 /// Writes `text` to `path` atomically (temporary file, fsync, rename).
 pub fn write_text(path: &Path, text: &str) -> anyhow::Result<()> {
