@@ -15,14 +15,21 @@ VENV_STAMP        := $(VENV)/.installed
 # Any wheel of the pinned release carries the same libmujoco; take the one for this Python.
 PIP_DOWNLOAD      := $(PYTHON) -m pip download --quiet --no-deps --only-binary=:all:
 
+# Where cargo puts its build (CARGO_TARGET_DIR or the workspace's target/), read when needed.
+TARGET_DIR    = $(shell $(CARGO) metadata --format-version 1 --no-deps | $(PYTHON) -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
+
 SERVE_ADDR   ?= 127.0.0.1:8080
 SERVE_MODELS ?= models
 
 .PHONY: serve test mujoco venv system-deps slurm build lint bench openapi check-wgpu check-docker clean-runtime
 
 ## serve: fetch what is missing, build, and serve the shipped models on $(SERVE_ADDR).
+## The server is the binary `make test` builds (`cargo test --no-run` builds it for the
+## integration tests): `cargo run` would resolve the dependencies' features without the
+## dev-dependencies and compile a second tree, so either command reuses the other's build.
 serve: mujoco
-	$(CARGO) run --release --bin nuno-server -- --models $(SERVE_MODELS) --addr $(SERVE_ADDR)
+	$(CARGO) test --workspace --release --no-run
+	"$(TARGET_DIR)/release/nuno-server" --models $(SERVE_MODELS) --addr $(SERVE_ADDR)
 
 ## test: the full suite (unit, integration, Gymnasium parity), then the fused
 ## kernels' numerics again on each narrower vector level (NUNO_SIMD), so every
