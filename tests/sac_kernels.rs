@@ -4,13 +4,12 @@
 
 use std::collections::BTreeMap;
 
-use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
 use nuno::agent::{ActorConfig, FusedSac, Sac, SacConfig, SacLosses};
 use nuno::artifact::collect_tensors;
 use nuno::infer::TrainableMlp;
-use nuno::nn::{normal, seeded_init, to_f32_vec};
+use nuno::nn::{gradients_by_path, normal, seeded_init};
 use nuno::shared::TransitionBatch;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -41,35 +40,6 @@ fn batch(rows: usize, rng: &mut ChaCha8Rng) -> TransitionBatch {
         next_observations: uniform(rows * OBS, 2.0),
         terminals: (0..rows).map(|i| f32::from(i % 7 == 0)).collect(),
     }
-}
-
-/// Gradients of `module`'s parameters by module path.
-fn named_grads<M: Module>(module: &M, grads: &GradientsParams) -> BTreeMap<String, Vec<f32>> {
-    struct Named<'a> {
-        grads: &'a GradientsParams,
-        path: Vec<String>,
-        out: BTreeMap<String, Vec<f32>>,
-    }
-    impl ModuleVisitor for Named<'_> {
-        fn enter_module(&mut self, name: &str, _: &str) {
-            self.path.push(name.to_string());
-        }
-        fn exit_module(&mut self, _: &str, _: &str) {
-            self.path.pop();
-        }
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            if let Some(grad) = self.grads.get::<D>(param.id) {
-                self.out.insert(self.path.join("."), to_f32_vec(grad));
-            }
-        }
-    }
-    let mut named = Named {
-        grads,
-        path: Vec::new(),
-        out: BTreeMap::new(),
-    };
-    module.visit(&mut named);
-    named.out
 }
 
 fn fused_named(prefix: &str, net: &TrainableMlp) -> BTreeMap<String, Vec<f32>> {
@@ -120,19 +90,19 @@ fn every_gradient_matches_burn_autodiff() {
     );
     let obs = rows(&data.observations, OBS, &device);
     let (critic_loss, ..) = sac.critic_loss(obs.clone(), rows(&data.actions, ACT, &device), y);
-    let critic = named_grads(
+    let critic = gradients_by_path(
         &sac.critic,
         &GradientsParams::from_grads(critic_loss.backward(), &sac.critic),
     );
     let alpha = sac.temperature.alpha().inner();
     let noise = normal([b, ACT], &mut rng, &device);
     let (actor_loss, log_prob) = sac.actor_loss(obs, noise, alpha);
-    let actor = named_grads(
+    let actor = gradients_by_path(
         &sac.actor,
         &GradientsParams::from_grads(actor_loss.backward(), &sac.actor),
     );
     let alpha_loss = sac.alpha_loss(log_prob.inner());
-    let temperature = named_grads(
+    let temperature = gradients_by_path(
         &sac.temperature,
         &GradientsParams::from_grads(alpha_loss.backward(), &sac.temperature),
     );

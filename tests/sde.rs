@@ -839,6 +839,20 @@ fn artifacts_round_trip_bit_exactly_and_refuse_damage() {
 /// `dvel = (−k·pos − c·vel + b·a) dt + σ dW`.
 const OSC: (f32, f32, f32, f32, f32) = (4.0, 0.5, 2.0, 0.3, 0.01); // k, c, b, σ, dt
 
+/// The oscillator's spec: one position, its velocity, dt of OSC.
+fn oscillator_spec() -> DynamicsSpec {
+    DynamicsSpec {
+        obs_dim: 2,
+        act_dim: 1,
+        split: nuno::envs::StateSplit {
+            positions: vec![0],
+            velocities: vec![1],
+            position_velocity: vec![1],
+        },
+        dt: f64::from(OSC.4),
+    }
+}
+
 fn oscillator_dataset(trajectories: usize, steps: usize, seed: u64) -> Dataset {
     use nuno::data::DatasetParts;
     use rand_distr::StandardNormal;
@@ -895,16 +909,7 @@ fn recovers_a_known_linear_sde(path: LikelihoodPath, drift_tolerance: f64) {
     let (k, c, b, sigma, _) = OSC;
     let dataset = oscillator_dataset(200, 100, 0);
     let (train, valid) = dataset.split_by_trajectory(0.1, 0);
-    let spec = DynamicsSpec {
-        obs_dim: 2,
-        act_dim: 1,
-        split: nuno::envs::StateSplit {
-            positions: vec![0],
-            velocities: vec![1],
-            position_velocity: vec![1],
-        },
-        dt: f64::from(OSC.4),
-    };
+    let spec = oscillator_spec();
     let device = Device::flex();
     // A short run: reach the final learning rate early, then refine.
     let mut config = FitConfig {
@@ -1149,16 +1154,7 @@ fn the_fused_fit_tracks_burns_and_continues_its_checkpoints() {
 
     let dataset = oscillator_dataset(100, 100, 1);
     let (train, valid) = dataset.split_by_trajectory(0.1, 0);
-    let spec = DynamicsSpec {
-        obs_dim: 2,
-        act_dim: 1,
-        split: nuno::envs::StateSplit {
-            positions: vec![0],
-            velocities: vec![1],
-            position_velocity: vec![1],
-        },
-        dt: f64::from(OSC.4),
-    };
+    let spec = oscillator_spec();
     let device = Device::flex();
     let config_for = |kernel| FitConfig {
         lr_decay_steps: 500,

@@ -123,6 +123,39 @@ pub fn assign_params<M: Module>(target: M, source: &M) -> M {
     target.map(&mut Assign(flat_params(source).into_iter()))
 }
 
+/// `grads` of `module`'s parameters by module path (`layers.0.weight`, ...):
+/// what a hand-written gradient is compared with.
+pub fn gradients_by_path<M: Module>(
+    module: &M,
+    grads: &burn::optim::GradientsParams,
+) -> std::collections::BTreeMap<String, Vec<f32>> {
+    struct Collect<'a> {
+        grads: &'a burn::optim::GradientsParams,
+        path: Vec<String>,
+        out: std::collections::BTreeMap<String, Vec<f32>>,
+    }
+    impl ModuleVisitor for Collect<'_> {
+        fn enter_module(&mut self, name: &str, _: &str) {
+            self.path.push(name.to_string());
+        }
+        fn exit_module(&mut self, _: &str, _: &str) {
+            self.path.pop();
+        }
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            if let Some(grad) = self.grads.get::<D>(param.id) {
+                self.out.insert(self.path.join("."), to_f32_vec(grad));
+            }
+        }
+    }
+    let mut collect = Collect {
+        grads,
+        path: Vec::new(),
+        out: Default::default(),
+    };
+    module.visit(&mut collect);
+    collect.out
+}
+
 /// Polyak averaging `θ̄ ← τ·θ + (1 − τ)·θ̄` of `target` towards `online`
 /// (same module structure), on `target`'s device and off the autodiff graph.
 pub fn polyak_update<M: Module>(target: M, online: &M, tau: f64) -> M {

@@ -16,6 +16,8 @@ use super::fit::window_tensors;
 use super::losses::LossTerms;
 use super::model::NeuralSde;
 use crate::data::WindowBatch;
+#[cfg(test)]
+use crate::nn::gradients_by_path;
 use crate::nn::{Adam, AdamState, assign_params, to_f32_vec};
 
 /// The random draws of one gradient step, in the order the fit draws them.
@@ -152,7 +154,10 @@ impl SdeTrainer for BurnSdeTrainer {
     fn gradients(&mut self, draws: &StepDraws) -> (StepLosses, Gradients) {
         let terms = self.loss(draws);
         let grads = GradientsParams::from_grads(terms.total.backward(), &self.model);
-        (StepLosses::from(&terms), by_path(&self.model, &grads))
+        (
+            StepLosses::from(&terms),
+            gradients_by_path(&self.model, &grads),
+        )
     }
 
     fn step(&mut self, draws: &StepDraws, lr: f64) -> StepLosses {
@@ -192,36 +197,4 @@ impl SdeTrainer for BurnSdeTrainer {
         self.model.constants = current.constants.clone();
         self.state = adam;
     }
-}
-
-/// `grads` of `module`'s parameters, by module path.
-#[cfg(test)]
-fn by_path<M: Module>(module: &M, grads: &GradientsParams) -> Gradients {
-    use burn::module::{ModuleVisitor, Param};
-
-    struct Collect<'a> {
-        grads: &'a GradientsParams,
-        path: Vec<String>,
-        out: Gradients,
-    }
-    impl ModuleVisitor for Collect<'_> {
-        fn enter_module(&mut self, name: &str, _: &str) {
-            self.path.push(name.to_string());
-        }
-        fn exit_module(&mut self, _: &str, _: &str) {
-            self.path.pop();
-        }
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            if let Some(grad) = self.grads.get::<D>(param.id) {
-                self.out.insert(self.path.join("."), to_f32_vec(grad));
-            }
-        }
-    }
-    let mut collect = Collect {
-        grads,
-        path: Vec::new(),
-        out: Gradients::new(),
-    };
-    module.visit(&mut collect);
-    collect.out
 }
