@@ -316,7 +316,7 @@ fn hopper_fit_beats_constant_velocity_and_flags_random_actions() {
     let config = small_config(1500);
     assert_eq!(summary.steps, 1500);
     assert!(
-        summary.best_valid_nll < records[0].data,
+        summary.best_valid_nll < records[0].losses.data,
         "validation NLL never improved on the first loss"
     );
     assert_eq!(records.len(), 1500 / config.log_every);
@@ -1192,7 +1192,7 @@ fn the_fused_fit_tracks_burns_and_continues_its_checkpoints() {
         let late: Vec<f32> = records
             .iter()
             .filter(|r| r.step > 500)
-            .map(|r| r.loss)
+            .map(|r| r.losses.total)
             .collect();
         late.iter().sum::<f32>() / late.len() as f32
     };

@@ -24,8 +24,8 @@ use crate::envs::TaskConfig;
 use crate::infer::Kernel;
 use crate::nn::seeded_init;
 use crate::sde::{
-    CalibrationReport, DynamicsSpec, FitConfig, FitSummary, LikelihoodPath, NeuralSde,
-    PhysicalScales, SdeConfig, ThresholdTable,
+    CalibrationReport, DynamicsSpec, EtaLossForm, FitConfig, FitSummary, LikelihoodPath,
+    LossConfig, MuForm, NeuralSde, PhysicalScales, SdeConfig, ThresholdTable,
 };
 
 /// Version of the `model.json` layout this build reads and writes. Version 2:
@@ -142,7 +142,8 @@ pub fn read_dynamics_metadata(dir: &Path) -> Result<DynamicsMetadata, ArtifactEr
 /// Fields of `SdeConfig` (at each of `models`) and `FitConfig` (at each of
 /// `fits`) that files written before them lack, with the meaning those files
 /// had: fitted on eq. 6's particle path, every window step weighed 1, samples
-/// drawn at the full Σ. Never reinterpreted: a file that names a field keeps it.
+/// drawn at the full Σ, by burn, μ a network, η's losses the paper's on the
+/// fit's learning rate. Never reinterpreted: a file that names a field keeps it.
 pub(super) fn fill_older_sde_fields(value: &mut serde_json::Value, models: &[&str], fits: &[&str]) {
     let mut fill = |pointer: String, field: &str, default: serde_json::Value| {
         if let Some(fields) = value.pointer_mut(&pointer).and_then(|v| v.as_object_mut()) {
@@ -151,7 +152,8 @@ pub(super) fn fill_older_sde_fields(value: &mut serde_json::Value, models: &[&st
     };
     let fit_models = fits.iter().map(|fit| format!("{fit}/model"));
     for model in models.iter().map(|m| m.to_string()).chain(fit_models) {
-        fill(model, "sample_noise_scale", serde_json::json!(1.0));
+        fill(model.clone(), "sample_noise_scale", serde_json::json!(1.0));
+        fill(model, "mu_form", serde_json::json!(MuForm::Network));
     }
     for fit in fits {
         let loss = format!("{fit}/loss");
@@ -160,8 +162,24 @@ pub(super) fn fill_older_sde_fields(value: &mut serde_json::Value, models: &[&st
             "likelihood",
             serde_json::json!(LikelihoodPath::Particle),
         );
-        fill(loss, "step_discount", serde_json::json!(1.0));
+        fill(loss.clone(), "step_discount", serde_json::json!(1.0));
+        fill(
+            loss.clone(),
+            "eta_losses",
+            serde_json::json!(EtaLossForm::Paper),
+        );
+        // Weights of the code form's terms only, unread under the paper's.
+        let code_form = LossConfig::new();
+        for (field, value) in [
+            ("lambda_value", code_form.lambda_value),
+            ("lambda_one", code_form.lambda_one),
+            ("grad_floor", code_form.grad_floor),
+            ("grad_floor_weight", code_form.grad_floor_weight),
+        ] {
+            fill(loss.clone(), field, serde_json::json!(value));
+        }
         fill(fit.to_string(), "kernel", serde_json::json!(Kernel::Burn));
+        fill(fit.to_string(), "eta_lr", serde_json::Value::Null);
     }
 }
 

@@ -9,6 +9,7 @@
 //! recipe = "code"           # fit-model's and NUNO's fit-policy's --recipe (optional; default "paper")
 //! model_sample_noise = "sqrt-dt"  # fit-model's --sample-noise (optional; default: the recipe's)
 //! model_step_discount = 0.9 # fit-model's --step-discount (optional; default: the recipe's)
+//! model_eta_losses = "code" # fit-model's --eta-losses (optional; default: the recipe's)
 //! model_buffer_factor = 10  # fit-policy's --model-buffer-factor (optional; default: the recipe's)
 //! forward_velocity = "mean" # NUNO's fit-policy --forward-velocity (optional; default: the recipe's)
 //! rollout_batch = 5000      # fit-policy's --rollout-batch, every method (optional; default: each method's)
@@ -36,7 +37,7 @@ use super::ExperimentError;
 use crate::agent::{Method, MopoSettings, preset};
 
 use crate::envs::{ForwardVelocity, ObservationLayout, TaskName};
-use crate::sde::{LikelihoodPath, Recipe, SampleNoise};
+use crate::sde::{EtaLossForm, LikelihoodPath, Recipe, SampleNoise};
 
 /// The step budget every cell gets.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -58,6 +59,9 @@ pub struct Budget {
     /// fit-model's `--step-discount` (default: the recipe's).
     #[serde(default)]
     pub model_step_discount: Option<f32>,
+    /// fit-model's `--eta-losses` (default: the recipe's).
+    #[serde(default)]
+    pub model_eta_losses: Option<EtaLossForm>,
     /// fit-policy's `--model-buffer-factor` (default: the recipe's).
     #[serde(default)]
     pub model_buffer_factor: Option<usize>,
@@ -98,6 +102,7 @@ impl Budget {
             budget.recipe = Recipe::default();
             budget.model_sample_noise = None;
             budget.model_step_discount = None;
+            budget.model_eta_losses = None;
             budget.forward_velocity = None;
         } else {
             budget.ensemble_max_epochs = None;

@@ -47,6 +47,16 @@ pub struct AdamStep {
     epsilon: f32,
 }
 
+impl AdamStep {
+    /// This step at another learning rate (a parameter group's own).
+    pub fn at_rate(self, lr: f64) -> Self {
+        Self {
+            lr: lr as f32,
+            ..self
+        }
+    }
+}
+
 impl Adam {
     /// PyTorch's and optax's β (0.9, 0.999) with the given ε.
     pub fn new(epsilon: f32) -> Self {
@@ -112,6 +122,20 @@ impl Adam {
         &self,
         lr: f64,
         module: M,
+        grads: GradientsParams,
+        state: &mut AdamState,
+        clip_norm: Option<f32>,
+    ) -> M {
+        self.step_module_at_rates(&|_| lr, module, grads, state, clip_norm)
+    }
+
+    /// [`Adam::step_module_clipped`] with each parameter's learning rate read
+    /// from its module path: parameter groups as separate Adams that step
+    /// together (one step count, moments by path either way).
+    pub fn step_module_at_rates<M: Module>(
+        &self,
+        lr: &dyn Fn(&str) -> f64,
+        module: M,
         mut grads: GradientsParams,
         state: &mut AdamState,
         clip_norm: Option<f32>,
@@ -119,6 +143,7 @@ impl Adam {
         struct Stepper<'a> {
             adam: &'a Adam,
             step: AdamStep,
+            lr: &'a dyn Fn(&str) -> f64,
             grads: &'a mut GradientsParams,
             state: &'a mut AdamState,
             clip_norm: Option<f32>,
@@ -142,16 +167,19 @@ impl Adam {
                 if let Some(clip) = self.clip_norm {
                     clip_to_norm(&mut grad, clip);
                 }
-                let moments = self.state.moments.entry(self.path.join(".")).or_default();
-                self.adam.update(self.step, &mut values, &grad, moments);
+                let path = self.path.join(".");
+                let step = self.step.at_rate((self.lr)(&path));
+                let moments = self.state.moments.entry(path).or_default();
+                self.adam.update(step, &mut values, &grad, moments);
                 let tensor = Tensor::from_data(TensorData::new(values, shape), &device);
                 Param::initialized(id, tensor.require_grad())
             }
         }
-        let step = self.begin(state, lr);
+        let step = self.begin(state, 0.0);
         module.map(&mut Stepper {
             adam: self,
             step,
+            lr,
             grads: &mut grads,
             state,
             clip_norm,

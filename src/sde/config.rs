@@ -67,6 +67,51 @@ pub struct SdeConfig {
     /// this field sampled at 1, and load so.
     #[config(default = 1.0)]
     pub sample_noise_scale: f32,
+    /// μ_ϕ's form: a network (Appendix C.4) or NUNO's code's one learned scalar
+    /// (`MuForm`). Models saved before this field used the network, and load so.
+    #[config(default = "MuForm::Network")]
+    pub mu_form: MuForm,
+}
+
+/// The form of the convexity constant μ_ϕ in L_sc (eq. 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MuForm {
+    /// μ_ϕ(s, a) = exp(NN_ϕ(s, a)), 2×32 swish (Appendix C.4).
+    Network,
+    /// One μ for every input, μ = |`SCALAR_MU_FACTOR`·p| with p learned from 1
+    /// (NUNO's code, `losses_diffusion.py`).
+    Scalar,
+}
+
+/// μ = |100·p| under [`MuForm::Scalar`]: p starts at 1, so μ at 100.
+pub const SCALAR_MU_FACTOR: f32 = 100.0;
+
+crate::shared::named_enum!(MuForm, "mu form", MuForm::Network => "network", MuForm::Scalar => "scalar");
+
+/// The form of η's losses (eq. 3, 4) beside L_data.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EtaLossForm {
+    /// The paper's: c = η(x + δ) − η(x) − ∇η·δ − μ‖δ‖² in L_sc, L_grad = ‖∇η‖² + η²,
+    /// L_μ = 1/μ.
+    Paper,
+    /// NUNO's code's (`losses_diffusion.py`): c with ½μ‖δ‖², L_grad = ‖∇η‖² alone,
+    /// λ_value·η and λ_one·(η(x + δ)/η_max − 1)² beside it, L_μ = 1/μ², and the
+    /// gradient floor (`LossConfig::grad_floor`).
+    Code,
+}
+
+crate::shared::named_enum!(EtaLossForm, "eta loss form", EtaLossForm::Paper => "paper", EtaLossForm::Code => "code");
+
+impl EtaLossForm {
+    /// The factor of μ‖δ‖² in L_sc's constraint: 1 in eq. 3, ½ in NUNO's code.
+    pub fn mu_factor(self) -> f32 {
+        match self {
+            Self::Paper => 1.0,
+            Self::Code => 0.5,
+        }
+    }
 }
 
 impl SdeConfig {
@@ -209,6 +254,23 @@ pub struct LossConfig {
     /// Samples per datum for L_sc: 20.
     #[config(default = 20)]
     pub convexity_samples: usize,
+    /// The form of η's losses (`EtaLossForm`). Fits saved before this field used
+    /// the paper's, and load so.
+    #[config(default = "EtaLossForm::Paper")]
+    pub eta_losses: EtaLossForm,
+    /// λ_value, weight of mean η at the data (code form only): 1e-3.
+    #[config(default = 1e-3)]
+    pub lambda_value: f32,
+    /// λ_one, weight of the "set-one" term mean (η(x + δ)/η_max − 1)² at L_sc's
+    /// ball points (code form only): 1e-4.
+    #[config(default = 1e-4)]
+    pub lambda_one: f32,
+    /// Code form only: while the batch mean of ‖∇η‖² is below this,
+    /// `grad_floor_weight`·(−ln of it) joins the loss, so η cannot go flat everywhere.
+    #[config(default = 1e-6)]
+    pub grad_floor: f32,
+    #[config(default = 1000.0)]
+    pub grad_floor_weight: f32,
 }
 
 impl LossConfig {
@@ -221,6 +283,10 @@ impl LossConfig {
             ("lambda_mu", self.lambda_mu),
             ("lambda_res", self.lambda_res),
             ("lambda_far", self.lambda_far),
+            ("lambda_value", self.lambda_value),
+            ("lambda_one", self.lambda_one),
+            ("grad_floor", self.grad_floor),
+            ("grad_floor_weight", self.grad_floor_weight),
         ];
         for (name, value) in weights {
             if !(value.is_finite() && value >= 0.0) {
@@ -296,6 +362,12 @@ pub struct FitConfig {
     /// on near-deterministic dimensions (positions), and Adam at lr 1e-2 then diverges.
     #[config(default = 10.0)]
     pub grad_clip_norm: f32,
+    /// η's and μ's learning rate, constant, where set (NUNO's code: 1e-3, its
+    /// `loss_diffusion` optimiser); unset, they follow the fit's schedule. Only
+    /// η's losses reach η and μ (h(η) reads η detached), so this is their own
+    /// Adam. Fits saved before this field had it unset, and load so.
+    #[config(default = "None")]
+    pub eta_lr: Option<f64>,
     /// What takes the gradient steps: `fused` (the CPU kernels, every core) or
     /// `burn` (autodiff on the fit's device: a GPU's path). The same loss, draws
     /// and Adam; either resumes the other's checkpoints. Fits recorded before

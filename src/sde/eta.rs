@@ -1,17 +1,18 @@
 //! The distance-aware uncertainty η_ϕ and its convexity constant μ_ϕ
-//! (Section 4.1), with their losses L_sc, L_μ (eq. 3) and L_grad (eq. 4).
+//! (Section 4.1), with their losses L_sc, L_μ (eq. 3) and L_grad (eq. 4), in
+//! the paper's form or NUNO's code's (`EtaLossForm`).
 //!
 //! η_ϕ(s, a) = η_max·sigmoid(NN_ϕ(s, a) − offset): near zero with near-zero
 //! gradient on the data, locally strongly convex around it, high but bounded
 //! far from it. Inputs are normalised `(s, a)`.
 
-use burn::module::Module;
+use burn::module::{Module, Param};
 use burn::tensor::activation::{relu, sigmoid};
 use burn::tensor::{Device, Tensor, TensorData};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-use super::config::{LossConfig, SdeConfig};
+use super::config::{EtaLossForm, LossConfig, MuForm, SCALAR_MU_FACTOR, SdeConfig};
 use crate::nn::{Activation, Mlp, MlpConfig};
 
 /// η_ϕ and μ_ϕ over inputs of width `d_input`.
@@ -19,8 +20,10 @@ use crate::nn::{Activation, Mlp, MlpConfig};
 pub struct DistanceAware {
     /// NN_ϕ inside η's sigmoid: 2×64 swish.
     pub eta_net: Mlp,
-    /// NN_ϕ of μ_ϕ = exp(NN_ϕ): 2×32 swish (Appendix C.4).
-    pub mu_net: Mlp,
+    /// NN_ϕ of μ_ϕ = exp(NN_ϕ): 2×32 swish (Appendix C.4), under [`MuForm::Network`].
+    pub mu_net: Option<Mlp>,
+    /// p of μ = |100·p| (`[1]`), under [`MuForm::Scalar`].
+    pub mu_scalar: Option<Param<Tensor<1>>>,
     #[module(skip)]
     pub eta_max: f32,
     #[module(skip)]
@@ -116,22 +119,45 @@ impl FarField {
 pub struct EtaLosses {
     /// L_sc, eq. 3: Σ over samples of min(c, 0)².
     pub sc: Tensor<1>,
-    /// L_grad, eq. 4: ‖∇η‖² + η².
+    /// L_grad, eq. 4: ‖∇η‖² + η² (paper form), ‖∇η‖² (code form).
     pub grad: Tensor<1>,
-    /// L_μ, eq. 3: 1/μ.
+    /// L_μ, eq. 3: 1/μ (paper form), 1/μ² (code form).
     pub mu: Tensor<1>,
     /// L_far: mean over the far points of relu(logit(far_target) − (NN_ϕ − offset))²,
     /// zero exactly where η ≥ far_target·η_max.
     pub far: Tensor<1>,
+    /// Code form: mean η at the data (0 in the paper form).
+    pub value: Tensor<1>,
+    /// Code form: mean (η(x + δ)/η_max − 1)² at the ball's points (0 in the paper form).
+    pub one: Tensor<1>,
+    /// Code form: `grad_floor_weight`·(−ln ‖∇η‖²) while ‖∇η‖² < `grad_floor`,
+    /// already weighted (0 otherwise, and in the paper form).
+    pub floor: Tensor<1>,
+}
+
+impl EtaLosses {
+    /// The terms' share of eq. 7, each times its λ.
+    pub fn weighted(&self, config: &LossConfig) -> Tensor<1> {
+        self.sc.clone() * config.lambda_sc
+            + self.grad.clone() * config.lambda_grad
+            + self.mu.clone() * config.lambda_mu
+            + self.far.clone() * config.lambda_far
+            + self.value.clone() * config.lambda_value
+            + self.one.clone() * config.lambda_one
+            + self.floor.clone()
+    }
 }
 
 impl DistanceAware {
     pub fn init(d_input: usize, config: &SdeConfig, device: &burn::tensor::Device) -> Self {
+        let network = config.mu_form == MuForm::Network;
         Self {
             eta_net: MlpConfig::new(d_input, config.eta_hidden.clone(), 1, Activation::Swish)
                 .init(device),
-            mu_net: MlpConfig::new(d_input, config.mu_hidden.clone(), 1, Activation::Swish)
-                .init(device),
+            mu_net: network.then(|| {
+                MlpConfig::new(d_input, config.mu_hidden.clone(), 1, Activation::Swish).init(device)
+            }),
+            mu_scalar: (!network).then(|| Param::from_tensor(Tensor::ones([1], device))),
             eta_max: config.eta_max,
             eta_offset: config.eta_offset,
         }
@@ -166,19 +192,27 @@ impl DistanceAware {
         (s * self.eta_max, grad_d * slope)
     }
 
-    /// μ_ϕ = exp(NN_ϕ) > 0.
+    /// μ_ϕ = exp(NN_ϕ) > 0, or the one μ = |100·p| of [`MuForm::Scalar`].
     ///
     /// # Shapes
     /// - `x`: `[batch, d_input]` → `[batch, 1]`
     pub fn mu(&self, x: Tensor<2>) -> Tensor<2> {
-        self.mu_net.forward(x).exp()
+        match (&self.mu_net, &self.mu_scalar) {
+            (Some(net), _) => net.forward(x).exp(),
+            (None, Some(p)) => {
+                let mu = (p.val() * SCALAR_MU_FACTOR).abs().reshape([1, 1]);
+                mu.expand([x.dims()[0], 1])
+            }
+            (None, None) => unreachable!("DistanceAware::init builds one form of μ"),
+        }
     }
 
-    /// L_sc, L_grad and L_μ at data points `x` (eq. 3, 4).
+    /// L_sc, L_grad and L_μ at data points `x` (eq. 3, 4), in `config`'s form.
     ///
     /// For each datum `x_t` and offset `δ = r·ε` (`noise` holds the ε, `samples`
     /// per datum), the strong-convexity constraint is
-    /// `c = η(x_t + δ) − η(x_t) − ∇η(x_t)ᵀδ − μ_t‖δ‖²`, and L_sc sums `min(c, 0)²`.
+    /// `c = η(x_t + δ) − η(x_t) − ∇η(x_t)ᵀδ − κ·μ_t‖δ‖²` (κ = 1 in eq. 3, ½ in
+    /// NUNO's code), and L_sc sums `min(c, 0)²`.
     ///
     /// # Shapes
     /// - `x`: `[batch, d]`; `noise`: `[batch · samples, d]`
@@ -193,6 +227,7 @@ impl DistanceAware {
     ) -> EtaLosses {
         let batch = x.dims()[0];
         let samples = noise.dims()[0] / batch;
+        let form = config.eta_losses;
         let (eta, grad) = self.eta_with_grad(x.clone());
         let mu = self.mu(x.clone());
         let repeat = |t: Tensor<2>| {
@@ -205,13 +240,38 @@ impl DistanceAware {
         let eta_near = self.eta(repeat(x) + delta.clone());
         let linear = (repeat(grad.clone()) * delta.clone()).sum_dim(1);
         let distance2 = delta.square().sum_dim(1);
-        let constraint = eta_near - repeat(eta.clone()) - linear - repeat(mu.clone()) * distance2;
+        let constraint = eta_near.clone()
+            - repeat(eta.clone())
+            - linear
+            - repeat(mu.clone()) * distance2 * form.mu_factor();
         let sc = constraint
             .clamp_max(0.0)
             .square()
             .sum()
             .div_scalar(batch as f32);
-        let grad_loss = (grad.square().sum_dim(1) + eta.square()).mean();
+        let grad2 = grad.square().sum_dim(1).mean();
+        let zero = || Tensor::<1>::zeros([1], &eta.device());
+        let (grad_loss, mu_loss, value, one, floor) = match form {
+            EtaLossForm::Paper => (
+                grad2 + eta.clone().square().mean(),
+                mu.recip().mean(),
+                zero(),
+                zero(),
+                zero(),
+            ),
+            EtaLossForm::Code => {
+                let below = grad2.clone().lower_elem(config.grad_floor).float();
+                let floor = below * grad2.clone().log().neg() * config.grad_floor_weight;
+                let one = (eta_near / self.eta_max - 1.0).square().mean();
+                (
+                    grad2,
+                    mu.powi_scalar(2).recip().mean(),
+                    eta.mean(),
+                    one,
+                    floor,
+                )
+            }
+        };
         let (far_points, far_mask) = far;
         // On η's logit: where η ≈ 0 the sigmoid is flat, and a hinge on η itself
         // could not lift it (a ring's interior stayed low that way).
@@ -221,8 +281,11 @@ impl DistanceAware {
         EtaLosses {
             sc,
             grad: grad_loss,
-            mu: mu.recip().mean(),
+            mu: mu_loss,
             far: (shortfall.square() * far_mask).mean(),
+            value,
+            one,
+            floor,
         }
     }
 }

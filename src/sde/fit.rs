@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use super::SdeError;
 use super::config::{FitConfig, LossConfig};
 use super::eta::FarField;
-use super::fit_step::{BurnSdeTrainer, SdeTrainer, StepDraws, StepSettings};
+use super::fit_step::{BurnSdeTrainer, SdeTrainer, StepDraws, StepLosses, StepSettings};
 use super::fused_fit::FusedSdeTrainer;
 use super::losses::WindowTensors;
 use super::model::NeuralSde;
@@ -31,14 +31,10 @@ use crate::shared::{SeedStream, derive_seed};
 pub struct FitRecord {
     pub step: usize,
     pub learning_rate: f64,
-    pub loss: f32,
-    pub data: f32,
-    pub sc: f32,
-    pub grad: f32,
-    pub mu: f32,
-    /// L_far; 0 while λ_far = 0 (no point is tested for being far then).
-    pub far: f32,
-    pub residual: f32,
+    /// Every term, before the step's update (L_far 0 while λ_far = 0: no
+    /// point is tested for being far then).
+    #[serde(flatten)]
+    pub losses: StepLosses,
     pub valid_nll: Option<f32>,
 }
 
@@ -193,6 +189,11 @@ pub fn fit_from(
             "fit config: h_bias_every = 0: must be at least 1".into(),
         ));
     }
+    if let Some(lr) = config.eta_lr.filter(|lr| !(lr.is_finite() && *lr > 0.0)) {
+        return Err(SdeError::Config(format!(
+            "fit config: eta_lr = {lr}: must be finite and > 0"
+        )));
+    }
     let started = Instant::now();
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let train_windows = WindowSampler::new(train, config.horizon)?;
@@ -288,13 +289,7 @@ pub fn fit_from(
             let mut record = FitRecord {
                 step,
                 learning_rate: lr,
-                loss: terms.total,
-                data: terms.data,
-                sc: terms.sc,
-                grad: terms.grad,
-                mu: terms.mu,
-                far: terms.far,
-                residual: terms.residual,
+                losses: terms,
                 valid_nll: None,
             };
             let current = evaluate.then(|| trainer.model());
@@ -417,11 +412,9 @@ pub fn fit_eta(
             &train_device,
         );
         let far = far_field.sample(config.batch_size, &mut rng, &train_device);
-        let terms = model.losses(x, noise, far, &config.loss);
-        let total = terms.sc * config.loss.lambda_sc
-            + terms.grad * config.loss.lambda_grad
-            + terms.mu * config.loss.lambda_mu
-            + terms.far * config.loss.lambda_far;
+        let total = model
+            .losses(x, noise, far, &config.loss)
+            .weighted(&config.loss);
         let grads = GradientsParams::from_grads(total.backward(), &model);
         model = optimizer.step(config.learning_rate(step), model, grads);
     }

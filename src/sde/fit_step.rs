@@ -10,6 +10,7 @@ use std::collections::BTreeMap;
 use burn::module::Module;
 use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
+use serde::{Deserialize, Serialize};
 
 use super::config::{FitConfig, LossConfig};
 use super::fit::window_tensors;
@@ -34,9 +35,12 @@ pub struct StepDraws {
     pub far_mask: Vec<f32>,
 }
 
-/// Every term of eq. 7 at one step, before its update (see [`LossTerms`]).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+/// Every term of eq. 7 at one step, before its update (see [`LossTerms`] and
+/// [`crate::sde::EtaLosses`]); the code form's terms read 0 in the paper's, and are absent
+/// (0) in records written before them.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct StepLosses {
+    #[serde(rename = "loss")]
     pub total: f32,
     pub data: f32,
     pub sc: f32,
@@ -44,6 +48,25 @@ pub struct StepLosses {
     pub mu: f32,
     pub far: f32,
     pub residual: f32,
+    #[serde(default)]
+    pub value: f32,
+    #[serde(default)]
+    pub one: f32,
+    #[serde(default)]
+    pub floor: f32,
+}
+
+impl StepLosses {
+    /// η's terms' share of eq. 7, each times its λ ([`crate::sde::EtaLosses::weighted`]).
+    pub fn weighted_eta(&self, config: &LossConfig) -> f32 {
+        self.sc * config.lambda_sc
+            + self.grad * config.lambda_grad
+            + self.mu * config.lambda_mu
+            + self.far * config.lambda_far
+            + self.value * config.lambda_value
+            + self.one * config.lambda_one
+            + self.floor
+    }
 }
 
 /// Each parameter's gradient, by its module path (`g_net.layers.0.weight`, ...).
@@ -72,6 +95,8 @@ pub(crate) struct StepSettings {
     pub loss: LossConfig,
     pub adam: Adam,
     pub clip_norm: f32,
+    /// η's and μ's own constant rate (`FitConfig::eta_lr`).
+    pub eta_lr: Option<f64>,
 }
 
 impl StepSettings {
@@ -80,6 +105,16 @@ impl StepSettings {
             loss: config.loss.clone(),
             adam: Adam::new(config.adam_epsilon),
             clip_norm: config.grad_clip_norm,
+            eta_lr: config.eta_lr,
+        }
+    }
+
+    /// The learning rate of the parameter at module path `path` in a step at
+    /// the fit's `lr`: η's and μ's (under `distance.`) their own where set.
+    pub fn rate(&self, path: &str, lr: f64) -> f64 {
+        match self.eta_lr {
+            Some(eta_lr) if path.starts_with("distance.") => eta_lr,
+            _ => lr,
         }
     }
 }
@@ -137,14 +172,18 @@ fn scalar(t: Tensor<1>) -> f32 {
 
 impl From<&LossTerms> for StepLosses {
     fn from(terms: &LossTerms) -> Self {
+        let eta = &terms.eta;
         Self {
             total: scalar(terms.total.clone()),
             data: scalar(terms.data.clone()),
-            sc: scalar(terms.sc.clone()),
-            grad: scalar(terms.grad.clone()),
-            mu: scalar(terms.mu.clone()),
-            far: scalar(terms.far.clone()),
+            sc: scalar(eta.sc.clone()),
+            grad: scalar(eta.grad.clone()),
+            mu: scalar(eta.mu.clone()),
+            far: scalar(eta.far.clone()),
             residual: scalar(terms.residual.clone()),
+            value: scalar(eta.value.clone()),
+            one: scalar(eta.one.clone()),
+            floor: scalar(eta.floor.clone()),
         }
     }
 }
@@ -164,8 +203,8 @@ impl SdeTrainer for BurnSdeTrainer {
         let terms = self.loss(draws);
         let grads = GradientsParams::from_grads(terms.total.backward(), &self.model);
         let settings = &self.settings;
-        self.model = settings.adam.step_module_clipped(
-            lr,
+        self.model = settings.adam.step_module_at_rates(
+            &|path| settings.rate(path, lr),
             self.model.clone(),
             grads,
             &mut self.state,

@@ -16,13 +16,16 @@
 //! ∂/∂∇d = ∂/∂∇η·η_max·s(1 − s), which
 //! [`TrainableMlp::backward_through_input_gradient`] turns into the weights'.
 
-use super::config::{LikelihoodPath, LossConfig};
+use burn::module::Param;
+use burn::tensor::{Tensor, TensorData};
+
+use super::config::{EtaLossForm, LikelihoodPath, LossConfig, SCALAR_MU_FACTOR};
 use super::fit::window_states;
 use super::fit_step::{SdeTrainer, StepDraws, StepLosses, StepSettings};
 use super::fused::{sigmoid, softplus};
 use super::model::NeuralSde;
 use crate::infer::{MlpTape, TrainableMlp};
-use crate::nn::{AdamState, clip_to_norm};
+use crate::nn::{AdamState, clip_to_norm, to_f32_vec};
 
 /// Every network of the SDE, in its module's field order.
 #[derive(Debug, Clone)]
@@ -33,7 +36,47 @@ struct Nets {
     reward: Option<TrainableMlp>,
     sigma: TrainableMlp,
     eta: TrainableMlp,
-    mu: TrainableMlp,
+    mu: MuParams,
+}
+
+/// μ_ϕ's parameters (`MuForm`): its network's, or the scalar form's p.
+#[derive(Debug, Clone)]
+enum MuParams {
+    Network(TrainableMlp),
+    Scalar(f32),
+}
+
+/// The scalar form's p, by its module path in [`NeuralSde`].
+const MU_SCALAR_PATH: &str = "distance.mu_scalar";
+
+impl MuParams {
+    fn of(distance: &super::DistanceAware) -> Self {
+        match (&distance.mu_net, &distance.mu_scalar) {
+            (Some(net), _) => Self::Network(TrainableMlp::from_burn(net)),
+            (None, Some(p)) => Self::Scalar(to_f32_vec(p.val())[0]),
+            (None, None) => unreachable!("DistanceAware::init builds one form of μ"),
+        }
+    }
+
+    fn zeros_like(&self) -> Self {
+        match self {
+            Self::Network(net) => Self::Network(net.zeros_like()),
+            Self::Scalar(_) => Self::Scalar(0.0),
+        }
+    }
+
+    fn write_to(&self, distance: &mut super::DistanceAware) {
+        match self {
+            Self::Network(net) => distance.mu_net = distance.mu_net.take().map(|m| net.write_to(m)),
+            Self::Scalar(p) => {
+                distance.mu_scalar = distance.mu_scalar.take().map(|param| {
+                    let device = param.val().device();
+                    let value = Tensor::<1>::from_data(TensorData::new(vec![*p], [1]), &device);
+                    Param::initialized(param.id, value)
+                })
+            }
+        }
+    }
 }
 
 impl Nets {
@@ -45,7 +88,7 @@ impl Nets {
             reward: model.reward_net.as_ref().map(TrainableMlp::from_burn),
             sigma: TrainableMlp::from_burn(&model.sigma_net),
             eta: TrainableMlp::from_burn(&model.distance.eta_net),
-            mu: TrainableMlp::from_burn(&model.distance.mu_net),
+            mu: MuParams::of(&model.distance),
         }
     }
 
@@ -71,7 +114,7 @@ impl Nets {
         }
         model.sigma_net = self.sigma.write_to(model.sigma_net);
         model.distance.eta_net = self.eta.write_to(model.distance.eta_net);
-        model.distance.mu_net = self.mu.write_to(model.distance.mu_net);
+        self.mu.write_to(&mut model.distance);
         model
     }
 
@@ -110,7 +153,9 @@ impl Nets {
         }
         nets.push(("sigma_net", &mut self.sigma));
         nets.push(("distance.eta_net", &mut self.eta));
-        nets.push(("distance.mu_net", &mut self.mu));
+        if let MuParams::Network(mu) = &mut self.mu {
+            nets.push(("distance.mu_net", mu));
+        }
         nets
     }
 }
@@ -422,12 +467,7 @@ impl FusedSdeTrainer {
         let data = data as f32;
         let residual = residual as f32;
         StepLosses {
-            total: data * loss.lambda_data
-                + eta.sc * loss.lambda_sc
-                + eta.grad * loss.lambda_grad
-                + eta.mu * loss.lambda_mu
-                + eta.far * loss.lambda_far
-                + residual * loss.lambda_res,
+            total: data * loss.lambda_data + eta.weighted_eta(loss) + residual * loss.lambda_res,
             data,
             residual,
             ..eta
@@ -596,8 +636,8 @@ fn forward_step(
     (nll / rows as f64, residual / rows as f64)
 }
 
-/// L_sc, L_grad, L_μ and L_far (eq. 3, 4) at the data `x` (`[B, obs + act]`),
-/// their gradient added to `grads`' η and μ.
+/// η's losses (eq. 3, 4, in `loss`'s form) and L_far at the data `x`
+/// (`[B, obs + act]`), their gradient added to `grads`' η and μ.
 #[allow(clippy::too_many_arguments)]
 fn eta_losses(
     nets: &Nets,
@@ -613,14 +653,13 @@ fn eta_losses(
     let d_in = sh.input();
     let rows = x.len() / d_in;
     let samples = draws.ball_noise.len() / (rows * d_in);
-    let (eta_max, offset, n) = (knobs.eta_max, knobs.eta_offset, rows as f32);
     // η and ∇ₓd at the data, μ there, η at the ball's points.
     nets.eta.forward(x, rows, &mut work.eta_data);
     work.ones.clear();
     work.ones.resize(rows, 1.0);
     nets.eta
         .backward(&mut work.eta_data, &work.ones, None, Some(&mut work.grad_d));
-    nets.mu.forward(x, rows, &mut work.mu);
+    let mu = mu_forward(&nets.mu, x, rows, &mut work.mu);
     work.ball.clear();
     for (b, datum) in x.chunks_exact(d_in).enumerate() {
         for eps in draws.ball_noise[b * samples * d_in..][..samples * d_in].chunks_exact(d_in) {
@@ -631,56 +670,8 @@ fn eta_losses(
     nets.eta
         .forward(&work.ball, rows * samples, &mut work.eta_ball);
 
-    let (mut sc, mut grad_loss, mut mu_loss) = (0.0f64, 0.0f64, 0.0f64);
-    work.out_grad.resize(rows * samples, 0.0);
-    work.q.resize(rows * d_in, 0.0);
-    let mut d_grad = vec![0.0; rows];
-    let mut mu_grad = vec![0.0; rows];
-    for b in 0..rows {
-        let s = sigmoid(work.eta_data.output[b] - offset);
-        let (eta, slope) = (eta_max * s, eta_max * s * (1.0 - s));
-        let grad_d = &work.grad_d[b * d_in..(b + 1) * d_in];
-        let mu = work.mu.output[b].exp();
-        // ∂/∂∇η and ∂/∂η from L_grad = mean(‖∇η‖² + η²), ∂/∂μ from L_μ = mean(1/μ).
-        let g_grad_eta = &mut work.q[b * d_in..(b + 1) * d_in];
-        for (g, d) in g_grad_eta.iter_mut().zip(grad_d) {
-            *g = loss.lambda_grad * 2.0 * slope * d / n;
-        }
-        let mut g_eta = loss.lambda_grad * 2.0 * eta / n;
-        let mut g_mu = -loss.lambda_mu / (n * mu * mu);
-        grad_loss += f64::from(grad_d.iter().map(|d| (slope * d).powi(2)).sum::<f32>() + eta * eta);
-        mu_loss += f64::from(1.0 / mu);
-        // L_sc: c = η(x + δ) − η(x) − ∇η·δ − μ‖δ‖², Σ min(c, 0)² over the batch.
-        for j in 0..samples {
-            let ball = b * samples + j;
-            let eps = &draws.ball_noise[ball * d_in..(ball + 1) * d_in];
-            let (mut linear, mut distance2) = (0.0f32, 0.0f32);
-            for (e, d) in eps.iter().zip(grad_d) {
-                let delta = e * loss.radius;
-                linear += slope * d * delta;
-                distance2 += delta * delta;
-            }
-            let s_near = sigmoid(work.eta_ball.output[ball] - offset);
-            let c = eta_max * s_near - eta - linear - mu * distance2;
-            let w = if c < 0.0 {
-                sc += f64::from(c * c);
-                loss.lambda_sc * 2.0 * c / n
-            } else {
-                0.0
-            };
-            work.out_grad[ball] = w * eta_max * s_near * (1.0 - s_near);
-            g_eta -= w;
-            g_mu -= w * distance2;
-            for (g, e) in g_grad_eta.iter_mut().zip(eps) {
-                *g -= w * e * loss.radius;
-            }
-        }
-        // Through η = η_max·s and ∇η = η_max·s(1 − s)·∇d to d and ∇d.
-        let along: f32 = g_grad_eta.iter().zip(grad_d).map(|(g, d)| g * d).sum();
-        d_grad[b] = g_eta * slope + along * slope * (1.0 - 2.0 * s);
-        g_grad_eta.iter_mut().for_each(|g| *g *= slope);
-        mu_grad[b] = g_mu * mu;
-    }
+    let (losses, d_grad, mu_grad) =
+        eta_row_gradients(knobs, loss, &draws.ball_noise, &mu, d_in, work);
     nets.eta.backward(
         &mut work.eta_ball,
         &work.out_grad,
@@ -695,11 +686,185 @@ fn eta_losses(
         &mut scratch.eta,
     );
     accumulate(&mut grads.eta, &scratch.eta);
-    nets.mu
-        .backward(&mut work.mu, &mu_grad, Some(&mut scratch.mu), None);
-    accumulate(&mut grads.mu, &scratch.mu);
+    mu_backward(
+        &nets.mu,
+        (&mut grads.mu, &mut scratch.mu),
+        &mut work.mu,
+        &mu,
+        &mu_grad,
+    );
+    let far = far_loss(nets, grads, scratch, knobs, loss, draws, work);
+    StepLosses { far, ..losses }
+}
 
-    // L_far on η's logit at the far points.
+/// η's losses datum by datum: their values (batch means), ∂L/∂d at the data
+/// and ∂L/∂μ at each datum (returned), ∂L/∂∇d (`work.q`) and ∂L/∂d at the
+/// ball's points (`work.out_grad`), from the forward values in `work`.
+fn eta_row_gradients(
+    knobs: Knobs,
+    loss: &LossConfig,
+    ball_noise: &[f32],
+    mu: &[f32],
+    d_in: usize,
+    work: &mut Work,
+) -> (StepLosses, Vec<f32>, Vec<f32>) {
+    let rows = mu.len();
+    let samples = ball_noise.len() / (rows * d_in);
+    let (eta_max, offset, n) = (knobs.eta_max, knobs.eta_offset, rows as f32);
+    let code = loss.eta_losses == EtaLossForm::Code;
+    let kappa = loss.eta_losses.mu_factor();
+    let sigmoid_at = |b: usize| sigmoid(work.eta_data.output[b] - offset);
+    // ‖∇η‖² at each datum, ∇η = η_max·s(1 − s)·∇d; under the code form its batch
+    // mean G below the floor adds −w·ln G, whose ∂/∂∇η is −(w/G)·2∇η/n.
+    let grad2: Vec<f32> = (0..rows)
+        .map(|b| {
+            let s = sigmoid_at(b);
+            let slope = eta_max * s * (1.0 - s);
+            let grad_d = &work.grad_d[b * d_in..(b + 1) * d_in];
+            grad_d.iter().map(|d| (slope * d).powi(2)).sum()
+        })
+        .collect();
+    let mean_grad2 = grad2.iter().sum::<f32>() / n;
+    let floor_on = code && mean_grad2 < loss.grad_floor;
+    let floor_coef = if floor_on {
+        loss.grad_floor_weight / mean_grad2
+    } else {
+        0.0
+    };
+    let grad_coef = 2.0 * (loss.lambda_grad - floor_coef) / n;
+
+    let (mut sc, mut grad_loss, mut mu_loss, mut value, mut one) = (0f64, 0f64, 0f64, 0f64, 0f64);
+    work.out_grad.resize(rows * samples, 0.0);
+    work.q.resize(rows * d_in, 0.0);
+    let mut d_grad = vec![0.0; rows];
+    let mut mu_grad = vec![0.0; rows];
+    for b in 0..rows {
+        let s = sigmoid_at(b);
+        let (eta, slope, mu) = (eta_max * s, eta_max * s * (1.0 - s), mu[b]);
+        let grad_d = &work.grad_d[b * d_in..(b + 1) * d_in];
+        // ∂/∂∇η from L_grad (and the floor); ∂/∂η and ∂/∂μ from the form's other terms.
+        let g_grad_eta = &mut work.q[b * d_in..(b + 1) * d_in];
+        for (g, d) in g_grad_eta.iter_mut().zip(grad_d) {
+            *g = grad_coef * slope * d;
+        }
+        let (mut g_eta, mut g_mu) = if code {
+            grad_loss += f64::from(grad2[b]);
+            mu_loss += f64::from(1.0 / (mu * mu));
+            value += f64::from(eta);
+            (
+                loss.lambda_value / n,
+                -2.0 * loss.lambda_mu / (n * mu * mu * mu),
+            )
+        } else {
+            grad_loss += f64::from(grad2[b] + eta * eta);
+            mu_loss += f64::from(1.0 / mu);
+            (
+                loss.lambda_grad * 2.0 * eta / n,
+                -loss.lambda_mu / (n * mu * mu),
+            )
+        };
+        // L_sc: c = η(x + δ) − η(x) − ∇η·δ − κμ‖δ‖², Σ min(c, 0)² over the batch;
+        // the code's set-one term (η(x + δ)/η_max − 1)² at the same points.
+        for j in 0..samples {
+            let ball = b * samples + j;
+            let eps = &ball_noise[ball * d_in..(ball + 1) * d_in];
+            let (mut linear, mut distance2) = (0.0f32, 0.0f32);
+            for (e, d) in eps.iter().zip(grad_d) {
+                let delta = e * loss.radius;
+                linear += slope * d * delta;
+                distance2 += delta * delta;
+            }
+            let s_near = sigmoid(work.eta_ball.output[ball] - offset);
+            let eta_near = eta_max * s_near;
+            let c = eta_near - eta - linear - kappa * mu * distance2;
+            let w = if c < 0.0 {
+                sc += f64::from(c * c);
+                loss.lambda_sc * 2.0 * c / n
+            } else {
+                0.0
+            };
+            let mut g_near = w;
+            if code {
+                let miss = eta_near / eta_max - 1.0;
+                one += f64::from(miss * miss);
+                g_near += loss.lambda_one * 2.0 * miss / (eta_max * n * samples as f32);
+            }
+            work.out_grad[ball] = g_near * eta_max * s_near * (1.0 - s_near);
+            g_eta -= w;
+            g_mu -= w * kappa * distance2;
+            for (g, e) in g_grad_eta.iter_mut().zip(eps) {
+                *g -= w * e * loss.radius;
+            }
+        }
+        // Through η = η_max·s and ∇η = η_max·s(1 − s)·∇d to d and ∇d.
+        let along: f32 = g_grad_eta.iter().zip(grad_d).map(|(g, d)| g * d).sum();
+        d_grad[b] = g_eta * slope + along * slope * (1.0 - 2.0 * s);
+        g_grad_eta.iter_mut().for_each(|g| *g *= slope);
+        mu_grad[b] = g_mu;
+    }
+    let mean = |sum: f64, count: f32| (sum / f64::from(count)) as f32;
+    let losses = StepLosses {
+        sc: mean(sc, n),
+        grad: mean(grad_loss, n),
+        mu: mean(mu_loss, n),
+        value: mean(value, n),
+        one: mean(one, n * samples as f32),
+        floor: if floor_on {
+            -loss.grad_floor_weight * mean_grad2.ln()
+        } else {
+            0.0
+        },
+        ..StepLosses::default()
+    };
+    (losses, d_grad, mu_grad)
+}
+
+/// μ at each of the `rows` of `x`: exp of its network's output (its forward
+/// values in `tape`), or the scalar form's one |100·p|.
+fn mu_forward(mu: &MuParams, x: &[f32], rows: usize, tape: &mut MlpTape) -> Vec<f32> {
+    match mu {
+        MuParams::Network(net) => {
+            net.forward(x, rows, tape);
+            tape.output.iter().map(|o| o.exp()).collect()
+        }
+        MuParams::Scalar(p) => vec![(SCALAR_MU_FACTOR * p).abs(); rows],
+    }
+}
+
+/// ∂L/∂μ at each datum (`mu_grad`, μ's `values` there) into the gradient of
+/// μ's parameters (`grads`: the total and a scratch of the same form).
+fn mu_backward(
+    mu: &MuParams,
+    (grads, scratch): (&mut MuParams, &mut MuParams),
+    tape: &mut MlpTape,
+    values: &[f32],
+    mu_grad: &[f32],
+) {
+    match (mu, grads, scratch) {
+        (MuParams::Network(net), MuParams::Network(total), MuParams::Network(part)) => {
+            // μ = exp(NN): ∂μ/∂NN = μ.
+            let out: Vec<f32> = mu_grad.iter().zip(values).map(|(g, m)| g * m).collect();
+            net.backward(tape, &out, Some(part), None);
+            accumulate(total, part);
+        }
+        (MuParams::Scalar(p), MuParams::Scalar(total), _) => {
+            // μ = |F·p|: ∂μ/∂p = F·sign(p).
+            *total = mu_grad.iter().sum::<f32>() * SCALAR_MU_FACTOR * p.signum();
+        }
+        _ => unreachable!("μ's gradients take the form of its parameters"),
+    }
+}
+
+/// L_far on η's logit at the far points, its gradient added to `grads`' η.
+fn far_loss(
+    nets: &Nets,
+    grads: &mut Nets,
+    scratch: &mut Nets,
+    knobs: Knobs,
+    loss: &LossConfig,
+    draws: &StepDraws,
+    work: &mut Work,
+) -> f32 {
     let far_rows = draws.far_mask.len();
     nets.eta
         .forward(&draws.far_points, far_rows, &mut work.eta_far);
@@ -707,7 +872,7 @@ fn eta_losses(
     let mut far = 0.0f64;
     work.out_grad.resize(far_rows, 0.0);
     for (i, mask) in draws.far_mask.iter().enumerate() {
-        let shortfall = (target - (work.eta_far.output[i] - offset)).max(0.0);
+        let shortfall = (target - (work.eta_far.output[i] - knobs.eta_offset)).max(0.0);
         far += f64::from(shortfall * shortfall * mask);
         work.out_grad[i] = -loss.lambda_far * 2.0 * shortfall * mask / far_rows as f32;
     }
@@ -717,13 +882,7 @@ fn eta_losses(
             .backward(&mut work.eta_far, g, Some(&mut scratch.eta), None);
         accumulate(&mut grads.eta, &scratch.eta);
     }
-    StepLosses {
-        sc: (sc / f64::from(n)) as f32,
-        grad: (grad_loss / f64::from(n)) as f32,
-        mu: (mu_loss / f64::from(n)) as f32,
-        far: (far / far_rows.max(1) as f64) as f32,
-        ..StepLosses::default()
-    }
+    (far / far_rows.max(1) as f64) as f32
 }
 
 /// One window step's backward pass: L_data's (times `coef` = λ_data·w_k/B) and
@@ -867,6 +1026,9 @@ impl SdeTrainer for FusedSdeTrainer {
                 gradients.insert(format!("{prefix}.layers.{i}.bias"), layer.bias.clone());
             }
         }
+        if let MuParams::Scalar(g) = self.grads.mu {
+            gradients.insert(MU_SCALAR_PATH.to_string(), vec![g]);
+        }
         (losses, gradients)
     }
 
@@ -874,6 +1036,12 @@ impl SdeTrainer for FusedSdeTrainer {
         let losses = self.loss_and_gradient(draws);
         let settings = &self.settings;
         let step = settings.adam.begin(&mut self.state, lr);
+        let mut update = |path: String, values: &mut [f32], grad: &mut [f32]| {
+            clip_to_norm(grad, settings.clip_norm);
+            let step = step.at_rate(settings.rate(&path, lr));
+            let moments = self.state.moments.entry(path).or_default();
+            settings.adam.update(step, values, grad, moments);
+        };
         let pairs = self
             .nets
             .named_mut()
@@ -881,17 +1049,25 @@ impl SdeTrainer for FusedSdeTrainer {
             .zip(self.grads.named_mut());
         for ((prefix, net), (_, grads)) in pairs {
             for (i, (layer, grad)) in net.layers.iter_mut().zip(&mut grads.layers).enumerate() {
-                let params = [
-                    ("weight", &mut layer.weight, &mut grad.weight),
-                    ("bias", &mut layer.bias, &mut grad.bias),
-                ];
-                for (leaf, values, grad) in params {
-                    clip_to_norm(grad, settings.clip_norm);
-                    let path = format!("{prefix}.layers.{i}.{leaf}");
-                    let moments = self.state.moments.entry(path).or_default();
-                    settings.adam.update(step, values, grad, moments);
-                }
+                update(
+                    format!("{prefix}.layers.{i}.weight"),
+                    &mut layer.weight,
+                    &mut grad.weight,
+                );
+                update(
+                    format!("{prefix}.layers.{i}.bias"),
+                    &mut layer.bias,
+                    &mut grad.bias,
+                );
             }
+        }
+        if let (MuParams::Scalar(p), MuParams::Scalar(g)) = (&mut self.nets.mu, &mut self.grads.mu)
+        {
+            update(
+                MU_SCALAR_PATH.to_string(),
+                std::slice::from_mut(p),
+                std::slice::from_mut(g),
+            );
         }
         losses
     }
@@ -1074,7 +1250,11 @@ mod tests {
         let (fused_losses, fused_grads) = fused.gradients(&draws);
         assert!(burn_losses.sc > 0.0, "L_sc's hinge should be active");
         assert!(burn_losses.far > 0.0, "L_far should be active");
-        let losses = |l: StepLosses| [l.total, l.data, l.sc, l.grad, l.mu, l.far, l.residual];
+        let losses = |l: StepLosses| {
+            [
+                l.total, l.data, l.sc, l.grad, l.mu, l.far, l.residual, l.value, l.one, l.floor,
+            ]
+        };
         for (f, b) in losses(fused_losses).iter().zip(losses(burn_losses)) {
             assert!(
                 (f - b).abs() <= 1e-5 * b.abs(),
@@ -1096,5 +1276,53 @@ mod tests {
     #[test]
     fn gradients_equal_burns_with_the_reward_model_on_the_data_path() {
         assert_gradients_match(&config(true, LikelihoodPath::Data));
+    }
+
+    /// NUNO's code's η losses (D5): the scalar μ, ½μ in L_sc, the value and
+    /// set-one terms, and the gradient floor (forced on by a floor above ‖∇η‖²).
+    fn code_config() -> FitConfig {
+        let mut config = config(false, LikelihoodPath::Particle);
+        EtaLossForm::Code.apply_to_fit(&mut config);
+        config.loss.lambda_grad = 1.0;
+        config.loss.lambda_value = 0.3;
+        config.loss.lambda_one = 0.2;
+        config.loss.grad_floor = 1e6;
+        config.loss.grad_floor_weight = 0.01;
+        config
+    }
+
+    #[test]
+    fn gradients_equal_burns_with_the_codes_eta_losses() {
+        let config = code_config();
+        let (mut burn, _, draws) = trainers(&config, 3);
+        let (losses, grads) = burn.gradients(&draws);
+        assert!(losses.value > 0.0 && losses.one > 0.0 && losses.floor != 0.0);
+        assert!(
+            grads.contains_key(MU_SCALAR_PATH)
+                && !grads.contains_key("distance.mu_net.layers.0.weight")
+        );
+        assert_gradients_match(&config);
+    }
+
+    #[test]
+    fn eta_steps_at_its_own_rate() {
+        // Adam's first step moves every parameter by ≈ its rate (m̂/√v̂ = ±1), so
+        // p of μ = |100·p| (from 1) moves by η's 1e-3 while the fit's rate is 0.1.
+        let config = code_config();
+        let (mut burn, mut fused, draws) = trainers(&config, 3);
+        for trainer in [&mut burn as &mut dyn SdeTrainer, &mut fused] {
+            let before = trainer.model();
+            trainer.step(&draws, 0.1);
+            let after = trainer.model();
+            let p = |m: &NeuralSde| to_f32_vec(m.distance.mu_scalar.as_ref().unwrap().val())[0];
+            assert!(((p(&after) - p(&before)).abs() - 1e-3).abs() < 1e-5);
+            let bias = |m: &NeuralSde| to_f32_vec(m.g_net.layers[0].bias.as_ref().unwrap().val());
+            let moved = bias(&after)
+                .iter()
+                .zip(bias(&before))
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f32::max);
+            assert!((moved - 0.1).abs() < 1e-3, "G's bias moved by {moved}");
+        }
     }
 }

@@ -1,9 +1,10 @@
 //! The training objective (eq. 7): λ_data·L_data + λ_sc·L_sc + λ_grad·L_grad
-//! + λ_μ·L_μ, plus the residual-drift penalty.
+//! + λ_μ·L_μ (and the code form's η terms), plus the residual-drift penalty.
 
 use burn::tensor::Tensor;
 
 use super::config::{LikelihoodPath, LossConfig};
+use super::eta::EtaLosses;
 use super::model::{NeuralSde, constant};
 
 /// One batch of training windows as tensors.
@@ -21,14 +22,8 @@ pub struct LossTerms {
     pub total: Tensor<1>,
     /// L_data, eq. 6.
     pub data: Tensor<1>,
-    /// L_sc, eq. 3.
-    pub sc: Tensor<1>,
-    /// L_grad, eq. 4.
-    pub grad: Tensor<1>,
-    /// L_μ, eq. 3.
-    pub mu: Tensor<1>,
-    /// L_far, the far-field hinge.
-    pub far: Tensor<1>,
+    /// η's losses (eq. 3, 4).
+    pub eta: EtaLosses,
     /// Mean ‖f_res‖² in normalised units.
     pub residual: Tensor<1>,
 }
@@ -123,18 +118,12 @@ impl NeuralSde {
         let input = self.normalized_input(first_state, first_action);
         let eta = self.distance.losses(input, ball_noise, far, config);
         let total = data.clone() * config.lambda_data
-            + eta.sc.clone() * config.lambda_sc
-            + eta.grad.clone() * config.lambda_grad
-            + eta.mu.clone() * config.lambda_mu
-            + eta.far.clone() * config.lambda_far
+            + eta.weighted(config)
             + residual.clone() * config.lambda_res;
         LossTerms {
             total,
             data,
-            sc: eta.sc,
-            grad: eta.grad,
-            mu: eta.mu,
-            far: eta.far,
+            eta,
             residual,
         }
     }

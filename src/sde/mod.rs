@@ -24,7 +24,9 @@ pub use calibration::{
     CalibrationConfig, CalibrationReport, DiffusionAt, DimensionCalibration, HorizonCalibration,
     TruncationRate, Z_STD_BAND, calibration_report,
 };
-pub use config::{FitConfig, LikelihoodPath, LossConfig, SdeConfig};
+pub use config::{
+    EtaLossForm, FitConfig, LikelihoodPath, LossConfig, MuForm, SCALAR_MU_FACTOR, SdeConfig,
+};
 pub use device::ComputeDevice;
 pub use eta::{DistanceAware, EtaLosses, FarField};
 pub use eta_report::{EtaComparison, EtaReport, EtaReportConfig, auroc, eta_report};

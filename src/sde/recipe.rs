@@ -5,7 +5,7 @@
 //! docs/paper-map.md ("Recipes") lists each setting, the file of NUNO's code it
 //! comes from, and which recipe is the default and why.
 
-use super::config::FitConfig;
+use super::config::{EtaLossForm, FitConfig, LossConfig, MuForm};
 use super::threshold::ThresholdConfig;
 
 /// Which reading of NUNO a fit or a policy run follows.
@@ -15,9 +15,8 @@ pub enum Recipe {
     /// The paper's equations and Appendix C.
     #[default]
     Paper,
-    /// NUNO's code where it differs from the paper (D1, D2, D3, D6, D7 of the
-    /// faithful-NUNO issue; the pose-aware drift and η's code losses are not
-    /// in nuno yet).
+    /// NUNO's code where it differs from the paper (D1, D2, D3, D5, D6, D7 of
+    /// the faithful-NUNO issue; the pose-aware drift is not in nuno yet).
     Code,
 }
 
@@ -50,6 +49,31 @@ pub const CODE_STEP_DISCOUNT: f32 = 0.9;
 pub const CODE_MAX_MARGIN: f32 = 1.1;
 /// NUNO's code's model buffer: 10 × rollout batch × h × retained epochs (`train_tatu_modelbased.py`).
 pub const CODE_MODEL_BUFFER_FACTOR: usize = 10;
+/// NUNO's code's weight of ‖∇η‖² (`hop_rand_final`'s config).
+pub const CODE_LAMBDA_GRAD: f32 = 1e-5;
+/// NUNO's code's η optimiser: Adam at a constant 1e-3 (`loss_diffusion`).
+pub const CODE_ETA_LR: f64 = 1e-3;
+
+impl EtaLossForm {
+    /// `fit` with η's losses in this form and what goes with it: the code's
+    /// scalar μ, λ_grad = 1e-5 and η's own Adam at 1e-3 (D5); the paper's
+    /// μ network, λ_grad = 1e-4 on the fit's schedule.
+    pub fn apply_to_fit(self, fit: &mut FitConfig) {
+        fit.loss.eta_losses = self;
+        match self {
+            Self::Paper => {
+                fit.model.mu_form = MuForm::Network;
+                fit.loss.lambda_grad = LossConfig::new().lambda_grad;
+                fit.eta_lr = None;
+            }
+            Self::Code => {
+                fit.model.mu_form = MuForm::Scalar;
+                fit.loss.lambda_grad = CODE_LAMBDA_GRAD;
+                fit.eta_lr = Some(CODE_ETA_LR);
+            }
+        }
+    }
+}
 
 impl Recipe {
     /// How the model samples under this recipe.
@@ -60,12 +84,21 @@ impl Recipe {
         }
     }
 
+    /// η's losses under this recipe.
+    pub fn eta_losses(self) -> EtaLossForm {
+        match self {
+            Self::Paper => EtaLossForm::Paper,
+            Self::Code => EtaLossForm::Code,
+        }
+    }
+
     /// `fit` with this recipe's fit settings, for a model stepping `dt` seconds.
     /// The code's schedule (D2, `hop_rand_final`'s config): the learning rate
     /// decays 1e-2 → 1e-3 over 100 000 steps, validation every 2000 steps, early
     /// stop after 20 evaluations without improvement, 20 % of trajectories held out.
     pub fn apply_to_fit(self, fit: &mut FitConfig, dt: f64) {
         fit.model.sample_noise_scale = self.sample_noise().scale(dt);
+        self.eta_losses().apply_to_fit(fit);
         if self == Self::Code {
             fit.loss.step_discount = CODE_STEP_DISCOUNT;
             fit.lr_decay_steps = 100_000;

@@ -436,6 +436,7 @@ fn model_fit_options(b: &Budget, method: Method) -> Vec<String> {
         option("--recipe", Some(b.recipe)),
         option("--sample-noise", b.model_sample_noise),
         option("--step-discount", b.model_step_discount),
+        option("--eta-losses", b.model_eta_losses),
     ]
     .concat();
     if method == Method::NunoR {

@@ -13,9 +13,9 @@ use nuno::artifact::{DynamicsProvenance, load_sde_checkpoint, save_dynamics, sav
 use nuno::envs::MujocoTask;
 use nuno::infer::Kernel;
 use nuno::sde::{
-    CalibrationConfig, ComputeDevice, DynamicsSpec, FitConfig, LikelihoodPath, LossConfig, Recipe,
-    SampleNoise, SdeConfig, SdeError, ThresholdConfig, calibration_report, compute_thresholds,
-    fit_from, prediction_error,
+    CalibrationConfig, ComputeDevice, DynamicsSpec, EtaLossForm, FitConfig, LikelihoodPath,
+    LossConfig, Recipe, SampleNoise, SdeConfig, SdeError, ThresholdConfig, calibration_report,
+    compute_thresholds, fit_from, prediction_error,
 };
 
 use crate::data_source::DataSource;
@@ -35,13 +35,20 @@ pub struct Args {
     reward_model: bool,
     /// paper (the paper's equations and Appendix C) or code (NUNO's code where it
     /// differs: samples at sqrt(dt), steps weighed 0.9^(t−1), its 100k-step schedule,
-    /// 20 % held out, ε(h, 1) = 1.1 × max); the flags below override single settings.
+    /// 20 % held out, its η losses, ε(h, 1) = 1.1 × max); the flags below override
+    /// single settings.
     #[arg(long, default_value_t = Recipe::Paper)]
     recipe: Recipe,
     /// The scale of ε the model samples at: calibrated (Σ) or sqrt-dt (NUNO's code)
     /// (default: the recipe's). Σ stays the calibrated one-step uncertainty.
     #[arg(long)]
     sample_noise: Option<SampleNoise>,
+    /// η's losses: paper (eq. 3, 4: μ a network, L_grad = ‖∇η‖² + η², on the fit's
+    /// schedule) or code (NUNO's `losses_diffusion.py`: one scalar μ, ½μ in L_sc,
+    /// λ_grad 1e-5, mean-η and set-one terms, the gradient floor, η's own Adam at
+    /// 1e-3) (default: the recipe's); --lambda-grad overrides its weight.
+    #[arg(long)]
+    eta_losses: Option<EtaLossForm>,
     /// L_data's weight of window step t is this to the power t − 1, in (0, 1]
     /// (default: the recipe's: paper 1, code 0.9).
     #[arg(long)]
@@ -66,7 +73,7 @@ pub struct Args {
     /// Ball radius r of L_sc's samples, in normalised units (default: the paper's 0.1).
     #[arg(long)]
     radius: Option<f32>,
-    /// λ_grad, weight of L_grad = ‖∇η‖² + η² (default: the paper's 1e-4).
+    /// λ_grad, weight of L_grad (default: the η loss form's: paper 1e-4, code 1e-5).
     #[arg(long)]
     lambda_grad: Option<f32>,
     /// λ_far, weight of the far-field hinge on η (not in the paper; default 0 = off;
@@ -105,7 +112,6 @@ pub struct Args {
 fn fit_plan(args: &Args) -> anyhow::Result<(MujocoTask, DynamicsSpec, FitConfig, ThresholdConfig)> {
     let mut loss = LossConfig::new();
     loss.radius = args.radius.unwrap_or(loss.radius);
-    loss.lambda_grad = args.lambda_grad.unwrap_or(loss.lambda_grad);
     loss.lambda_far = args.lambda_far.unwrap_or(loss.lambda_far);
     loss.likelihood = args.likelihood;
     anyhow::ensure!(
@@ -129,6 +135,10 @@ fn fit_plan(args: &Args) -> anyhow::Result<(MujocoTask, DynamicsSpec, FitConfig,
     if let Some(noise) = args.sample_noise {
         config.model.sample_noise_scale = noise.scale(spec.dt);
     }
+    if let Some(form) = args.eta_losses {
+        form.apply_to_fit(&mut config);
+    }
+    config.loss.lambda_grad = args.lambda_grad.unwrap_or(config.loss.lambda_grad);
     config.loss.step_discount = args.step_discount.unwrap_or(config.loss.step_discount);
     config.max_steps = args.max_steps.unwrap_or(config.max_steps);
     config.eval_every = args.eval_every.unwrap_or(config.eval_every);
@@ -200,29 +210,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("creating {}", metrics_path.display()))?;
     writeln!(
         csv,
-        "step,learning_rate,loss,data,sc,grad,mu,far,residual,valid_nll"
+        "step,learning_rate,loss,data,sc,grad,mu,far,residual,value,one,floor,valid_nll"
     )?;
     let mut records = Vec::new();
     let mut write_error = None;
     let mut log = |r: &nuno::sde::FitRecord| {
         bar.set_position(r.step as u64);
         let valid_nll = r.valid_nll.map_or(String::new(), |v| v.to_string());
+        let l = &r.losses;
         bar.set_message(format!(
             "L_data {:.2} L_sc {:.3} L_grad {:.3} valid NLL {}",
-            r.data, r.sc, r.grad, valid_nll
+            l.data, l.sc, l.grad, valid_nll
         ));
         if let Err(e) = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.step,
             r.learning_rate,
-            r.loss,
-            r.data,
-            r.sc,
-            r.grad,
-            r.mu,
-            r.far,
-            r.residual,
+            l.total,
+            l.data,
+            l.sc,
+            l.grad,
+            l.mu,
+            l.far,
+            l.residual,
+            l.value,
+            l.one,
+            l.floor,
             valid_nll
         ) {
             write_error.get_or_insert(e);
@@ -293,10 +307,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "gradient step",
         "loss",
         &[
-            curve("L_data (train)", &|r| Some(r.data)),
+            curve("L_data (train)", &|r| Some(r.losses.data)),
             curve("L_data (validation)", &|r| r.valid_nll),
-            curve("L_sc", &|r| Some(r.sc)),
-            curve("L_mu", &|r| Some(r.mu)),
+            curve("L_sc", &|r| Some(r.losses.sc)),
+            curve("L_mu", &|r| Some(r.losses.mu)),
         ],
     )?;
     calibration_charts(&args.out, &calibration)?;

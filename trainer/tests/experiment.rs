@@ -227,6 +227,7 @@ fn bad_grids_are_refused_before_anything_runs() {
         ("model_buffer_factor = 0", "model_buffer_factor = 0"),
         ("model_sample_noise = \"loud\"", "model_sample_noise"),
         ("model_step_discount = 0.0", "model_step_discount = 0"),
+        ("model_eta_losses = \"codes\"", "model_eta_losses"),
     ]
     .into_iter()
     .enumerate()

@@ -23,6 +23,7 @@ fn fit_model_names_unusable_loss_flags_before_reading_anything() {
         ("--step-discount", "1.5", "step_discount = 1.5"),
         ("--recipe", "codes", "unknown recipe \"codes\""),
         ("--sample-noise", "full", "unknown sample noise \"full\""),
+        ("--eta-losses", "codes", "unknown eta loss form \"codes\""),
         (
             "--likelihood",
             "teacher",
