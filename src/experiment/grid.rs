@@ -10,6 +10,7 @@
 //! model_sample_noise = "sqrt-dt"  # fit-model's --sample-noise (optional; default: the recipe's)
 //! model_step_discount = 0.9 # fit-model's --step-discount (optional; default: the recipe's)
 //! model_eta_losses = "code" # fit-model's --eta-losses (optional; default: the recipe's)
+//! threshold_max_margin = 1.1 # fit-model's --threshold-max-margin, ε(h, α ≥ 1) (optional; default: the recipe's)
 //! model_buffer_factor = 10  # fit-policy's --model-buffer-factor (optional; default: the recipe's)
 //! forward_velocity = "mean" # NUNO's fit-policy --forward-velocity (optional; default: the recipe's)
 //! rollout_batch = 5000      # fit-policy's --rollout-batch, every method (optional; default: each method's)
@@ -62,6 +63,10 @@ pub struct Budget {
     /// fit-model's `--eta-losses` (default: the recipe's).
     #[serde(default)]
     pub model_eta_losses: Option<EtaLossForm>,
+    /// fit-model's `--threshold-max-margin`: ε(h, α ≥ 1) is this × the largest
+    /// window's accumulated η (default: the recipe's).
+    #[serde(default)]
+    pub threshold_max_margin: Option<f32>,
     /// fit-policy's `--model-buffer-factor` (default: the recipe's).
     #[serde(default)]
     pub model_buffer_factor: Option<usize>,
@@ -103,6 +108,7 @@ impl Budget {
             budget.model_sample_noise = None;
             budget.model_step_discount = None;
             budget.model_eta_losses = None;
+            budget.threshold_max_margin = None;
             budget.forward_velocity = None;
         } else {
             budget.ensemble_max_epochs = None;
@@ -291,6 +297,13 @@ impl Grid {
         {
             return Err(format!(
                 "budget: model_step_discount = {d} must lie in (0, 1]"
+            ));
+        }
+        if let Some(m) = b.threshold_max_margin
+            && !(m.is_finite() && m >= 1.0)
+        {
+            return Err(format!(
+                "budget: threshold_max_margin = {m} must be finite and at least 1"
             ));
         }
         if b.model_buffer_factor == Some(0) {

@@ -437,6 +437,7 @@ fn model_fit_options(b: &Budget, method: Method) -> Vec<String> {
         option("--sample-noise", b.model_sample_noise),
         option("--step-discount", b.model_step_discount),
         option("--eta-losses", b.model_eta_losses),
+        option("--threshold-max-margin", b.threshold_max_margin),
     ]
     .concat();
     if method == Method::NunoR {
