@@ -41,6 +41,18 @@ fn state_split_pairs_each_position_with_its_velocity() {
     let neorl = StateSplit::planar(6, ObservationLayout::Neorl);
     assert_eq!(neorl.position_velocity, vec![6, 7, 8, 9, 10, 11]);
 
+    // The angles are the positions MuJoCo's model moves by hinge joints (the
+    // root's pitch and every joint; root x and z slide), in both layouts.
+    for name in TaskName::ALL {
+        for config in [TaskConfig::d4rl(name), TaskConfig::neorl(name)] {
+            let skipped = usize::from(config.layout == ObservationLayout::D4rl);
+            let task = MujocoTask::new(config).unwrap();
+            let hinges: Vec<usize> = task.hinge_qpos().iter().map(|q| q - skipped).collect();
+            assert_eq!(task.state_split().angles, hinges, "{name}");
+            assert!(hinges.len() >= 4, "{name}: {hinges:?}");
+        }
+    }
+
     // The pairing is physical: along a trajectory, each observed position's finite
     // difference correlates best, and strongly, with its paired velocity.
     for name in TaskName::ALL {

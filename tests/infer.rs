@@ -16,7 +16,7 @@ use nuno::envs::{MujocoTask, TaskConfig, TaskName, TaskRules};
 use nuno::infer::{
     Dense, GEMM_MIN_ROWS, MAX_TILE_ROWS, Rows, SimdLevel, detected_simd_level, simd_level,
 };
-use nuno::sde::FusedSde;
+use nuno::sde::{DriftInputs, FusedSde};
 use nuno::sde::{DynamicsSpec, NeuralSde, PhysicalScales, SdeConfig};
 use nuno::shared::BatchDynamics;
 use nuno::shared::BatchPolicy;
@@ -127,12 +127,17 @@ fn fused_step_matches_burn_on_random_models() {
     let spec = hopper_spec();
     let device = Device::flex();
     let scales = PhysicalScales::measure(&data, &spec, &Default::default());
-    for reward_model in [false, true] {
+    for (reward_model, drift_inputs) in [
+        (false, DriftInputs::ZScores),
+        (true, DriftInputs::ZScores),
+        (false, DriftInputs::Pose),
+    ] {
         let mut config = SdeConfig::new();
         config.reward_model = reward_model;
+        config.drift_inputs = drift_inputs;
         let model = NeuralSde::init(spec.clone(), scales.clone(), config, &device);
         compare_steps(
-            &format!("random (reward model {reward_model})"),
+            &format!("random (reward model {reward_model}, drift inputs {drift_inputs})"),
             &model,
             &data,
             1,

@@ -24,8 +24,8 @@ use crate::envs::TaskConfig;
 use crate::infer::Kernel;
 use crate::nn::seeded_init;
 use crate::sde::{
-    CalibrationReport, DynamicsSpec, EtaLossForm, FitConfig, FitSummary, LikelihoodPath,
-    LossConfig, MuForm, NeuralSde, PhysicalScales, SdeConfig, ThresholdTable,
+    CalibrationReport, DriftInputs, DynamicsSpec, EtaLossForm, FitConfig, FitSummary,
+    LikelihoodPath, LossConfig, MuForm, NeuralSde, PhysicalScales, SdeConfig, ThresholdTable,
 };
 
 /// Version of the `model.json` layout this build reads and writes. Version 2:
@@ -153,7 +153,12 @@ pub(super) fn fill_older_sde_fields(value: &mut serde_json::Value, models: &[&st
     let fit_models = fits.iter().map(|fit| format!("{fit}/model"));
     for model in models.iter().map(|m| m.to_string()).chain(fit_models) {
         fill(model.clone(), "sample_noise_scale", serde_json::json!(1.0));
-        fill(model, "mu_form", serde_json::json!(MuForm::Network));
+        fill(model.clone(), "mu_form", serde_json::json!(MuForm::Network));
+        fill(
+            model,
+            "drift_inputs",
+            serde_json::json!(DriftInputs::ZScores),
+        );
     }
     for fit in fits {
         let loss = format!("{fit}/loss");

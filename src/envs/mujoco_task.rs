@@ -8,6 +8,7 @@
 use std::sync::{Arc, Once, OnceLock};
 
 use mujoco_rs::prelude::{MjData, MjModel};
+use mujoco_rs::wrappers::mj_model::MjtJoint;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -167,6 +168,17 @@ impl MujocoTask {
     /// Which observation entries are positions and velocities.
     pub fn state_split(&self) -> StateSplit {
         StateSplit::planar(self.init_qpos.len(), self.config.layout)
+    }
+
+    /// The qpos indices of the model's hinge joints (angles, in radians).
+    pub fn hinge_qpos(&self) -> Vec<usize> {
+        let model = self.data.model();
+        let types = model.jnt_type().iter();
+        types
+            .zip(model.jnt_qposadr())
+            .filter(|(t, _)| **t == MjtJoint::mjJNT_HINGE)
+            .map(|(_, &adr)| adr as usize)
+            .collect()
     }
 
     /// The model's default pose and velocity, before reset noise.

@@ -218,6 +218,11 @@ pub struct StateSplit {
     pub velocities: Vec<usize>,
     /// For each position `i`, the observation index of its time derivative.
     pub position_velocity: Vec<usize>,
+    /// The positions that are angles (hinge joints and the root's pitch), which
+    /// a pose-aware drift sees through their cosine and sine. Splits saved
+    /// before this field name none.
+    #[serde(default)]
+    pub angles: Vec<usize>,
 }
 
 impl StateSplit {
@@ -225,6 +230,7 @@ impl StateSplit {
     ///
     /// D4RL observations drop root x, so observed position `i` (qpos `i + 1`) pairs
     /// with velocity `i + 1`; NeoRL keeps root x and pairs position `i` with velocity `i`.
+    /// Every qpos after root x and root z (the root's pitch and the hinges) is an angle.
     pub fn planar(nq: usize, layout: ObservationLayout) -> Self {
         let skipped = match layout {
             ObservationLayout::D4rl => 1,
@@ -234,10 +240,12 @@ impl StateSplit {
         let positions: Vec<usize> = (0..n_pos).collect();
         let velocities: Vec<usize> = (n_pos..n_pos + nq).collect();
         let position_velocity = (0..n_pos).map(|i| n_pos + i + skipped).collect();
+        let root_z = 1 - skipped;
         Self {
             positions,
             velocities,
             position_velocity,
+            angles: (root_z + 1..n_pos).collect(),
         }
     }
 

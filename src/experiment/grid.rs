@@ -10,6 +10,7 @@
 //! model_sample_noise = "sqrt-dt"  # fit-model's --sample-noise (optional; default: the recipe's)
 //! model_step_discount = 0.9 # fit-model's --step-discount (optional; default: the recipe's)
 //! model_eta_losses = "code" # fit-model's --eta-losses (optional; default: the recipe's)
+//! model_drift_inputs = "pose" # fit-model's --drift-inputs (optional; default: the recipe's)
 //! threshold_max_margin = 1.1 # fit-model's --threshold-max-margin, ε(h, α ≥ 1) (optional; default: the recipe's)
 //! model_buffer_factor = 10  # fit-policy's --model-buffer-factor (optional; default: the recipe's)
 //! forward_velocity = "mean" # NUNO's fit-policy --forward-velocity (optional; default: the recipe's)
@@ -38,7 +39,7 @@ use super::ExperimentError;
 use crate::agent::{Method, MopoSettings, preset};
 
 use crate::envs::{ForwardVelocity, ObservationLayout, TaskName};
-use crate::sde::{EtaLossForm, LikelihoodPath, Recipe, SampleNoise};
+use crate::sde::{DriftInputs, EtaLossForm, LikelihoodPath, Recipe, SampleNoise};
 
 /// The step budget every cell gets.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -63,6 +64,9 @@ pub struct Budget {
     /// fit-model's `--eta-losses` (default: the recipe's).
     #[serde(default)]
     pub model_eta_losses: Option<EtaLossForm>,
+    /// fit-model's `--drift-inputs` (default: the recipe's).
+    #[serde(default)]
+    pub model_drift_inputs: Option<DriftInputs>,
     /// fit-model's `--threshold-max-margin`: ε(h, α ≥ 1) is this × the largest
     /// window's accumulated η (default: the recipe's).
     #[serde(default)]
@@ -109,6 +113,7 @@ impl Budget {
             budget.model_step_discount = None;
             budget.model_eta_losses = None;
             budget.threshold_max_margin = None;
+            budget.model_drift_inputs = None;
             budget.forward_velocity = None;
         } else {
             budget.ensemble_max_epochs = None;

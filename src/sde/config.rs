@@ -3,6 +3,7 @@
 
 use burn::config::Config;
 
+use super::drift_inputs::DriftInputs;
 use crate::infer::Kernel;
 
 /// Network sizes and output transforms (Appendix C.4, eq. 5 and 8).
@@ -71,6 +72,11 @@ pub struct SdeConfig {
     /// (`MuForm`). Models saved before this field used the network, and load so.
     #[config(default = "MuForm::Network")]
     pub mu_form: MuForm,
+    /// What the drift networks see of the state: the paper's z-scores or NUNO's
+    /// code's pose features (`DriftInputs`). Models saved before this field saw
+    /// z-scores, and load so.
+    #[config(default = "DriftInputs::ZScores")]
+    pub drift_inputs: DriftInputs,
 }
 
 /// The form of the convexity constant μ_ϕ in L_sc (eq. 3).

@@ -4,6 +4,7 @@
 use std::cell::RefCell;
 use std::sync::Mutex;
 
+use super::drift_inputs::DriftFeatures;
 use super::{NeuralSde, SdeConstants};
 use crate::infer::{
     DenseMlp, GEMM_MIN_ROWS, Kernel, MlpScratch, Rows, row_chunks, run_tiles, tile_rows,
@@ -24,6 +25,8 @@ pub struct FusedSde {
     eta: DenseMlp,
     /// W^max of h_ϕ per state dimension, in multiples of the diffusion scale.
     w_max: Vec<f32>,
+    /// φ(s), what G, H and f_res see of the state.
+    features: DriftFeatures,
     split: NetworkSplit,
 }
 
@@ -43,6 +46,8 @@ struct Tile<'a> {
 #[derive(Debug, Default)]
 struct Scratch {
     input: Vec<f32>,
+    /// `[φ(s), â]`, f_res's input (G and H read columns of it).
+    drift_input: Vec<f32>,
     g: Vec<f32>,
     h: Vec<f32>,
     res: Vec<f32>,
@@ -160,6 +165,7 @@ impl FusedSde {
                 .constants
                 .config
                 .w_max_per_dimension(model.constants.state_dim()),
+            features: DriftFeatures::of(&model.constants),
             split: NetworkSplit::new(&[], 1),
         };
         let weights: Vec<usize> = fused.networks().map(DenseMlp::weight_count).collect();
@@ -185,8 +191,9 @@ impl FusedSde {
         let width = obs_dim + act_dim;
         let rows = tile.eta.len();
 
-        // Normalised (s, a), the input of every network.
+        // Normalised (s, a), σ's and η's input; [φ(s), â], the drift's.
         s.input.clear();
+        s.drift_input.clear();
         for (state, action) in tile
             .states
             .chunks_exact(state_dim)
@@ -202,21 +209,36 @@ impl FusedSde {
                 act.zip(&normalizer.action.std)
                     .map(|((x, m), sd)| (x - m) / sd),
             );
+            self.features.extend(&state[..obs_dim], &mut s.drift_input);
+            let row = s.input.len() - act_dim;
+            s.drift_input.extend_from_slice(&s.input[row..]);
         }
         let input = Rows::dense(&s.input, width);
+        let phi = self.features.width();
+        let drift_width = phi + act_dim;
+        let g_columns = self.features.g_columns();
         // In [`FusedSde::networks`] order: `self.split` assigns cores by position.
         let mut jobs = vec![
             Job::new(
                 &self.g,
-                Rows::columns(&s.input, width, n_pos, n_vel),
+                Rows::columns(
+                    &s.drift_input,
+                    drift_width,
+                    g_columns.start,
+                    g_columns.len(),
+                ),
                 &mut s.g,
             ),
             Job::new(
                 &self.h,
-                Rows::columns(&s.input, width, 0, obs_dim),
+                Rows::columns(&s.drift_input, drift_width, 0, phi),
                 &mut s.h,
             ),
-            Job::new(&self.res, input, &mut s.res),
+            Job::new(
+                &self.res,
+                Rows::dense(&s.drift_input, drift_width),
+                &mut s.res,
+            ),
             Job::new(&self.sigma, input, &mut s.sigma),
             Job::new(&self.eta, input, &mut s.eta),
         ];
@@ -247,7 +269,7 @@ impl FusedSde {
             for (i, &v) in spec.split.position_velocity.iter().enumerate() {
                 mean[i] = state[i] + (state[v] + res[i] * c.scales.derivative[i]) * dt;
             }
-            // eq. 8: f_vel = G(s_vel)·a + H(s)·s_vel, velocities scaled, not shifted.
+            // eq. 8: f_vel = G(φ)·a + H(φ)·s_vel, velocities scaled, not shifted.
             let velocity = &state[n_pos..obs_dim];
             for i in 0..n_vel {
                 let g_a: f32 = g[i * act_dim..(i + 1) * act_dim]

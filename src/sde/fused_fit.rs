@@ -20,6 +20,7 @@ use burn::module::Param;
 use burn::tensor::{Tensor, TensorData};
 
 use super::config::{EtaLossForm, LikelihoodPath, LossConfig, SCALAR_MU_FACTOR};
+use super::drift_inputs::DriftFeatures;
 use super::fit::window_states;
 use super::fit_step::{SdeTrainer, StepDraws, StepLosses, StepSettings};
 use super::fused::{sigmoid, softplus};
@@ -193,6 +194,8 @@ struct Shape {
     /// 1/scale² of each state dimension: L_data's log-variance in normalised units.
     inv_scale2: Vec<f32>,
     dt: f32,
+    /// φ(s), what G, H and f_res see of the state.
+    features: DriftFeatures,
 }
 
 impl Shape {
@@ -222,11 +225,17 @@ impl Shape {
             w_max: c.config.w_max_per_dimension(state),
             inv_scale2: scale.iter().map(|s| (s * s).recip()).collect(),
             dt: c.spec.dt as f32,
+            features: DriftFeatures::of(c),
         }
     }
 
     fn input(&self) -> usize {
         self.obs + self.act
+    }
+
+    /// Width of `[φ(s), â]`, f_res's input.
+    fn drift_input(&self) -> usize {
+        self.features.width() + self.act
     }
 }
 
@@ -262,9 +271,10 @@ struct StepTape {
     start: Vec<f32>,
     action: Vec<f32>,
     next: Vec<f32>,
-    /// Normalised `(s, a)` `[B, obs + act]`; G's input (its velocity columns)
-    /// and H's (its observation columns).
+    /// Normalised `(s, a)` `[B, obs + act]` (σ's, η's and f_rew's input);
+    /// `[φ(s), â]` `[B, φ + act]` (f_res's), G's columns of it and H's (φ).
     x: Vec<f32>,
+    x_drift: Vec<f32>,
     x_g: Vec<f32>,
     x_h: Vec<f32>,
     /// Velocities over their std, `[B, n_vel]`.
@@ -313,8 +323,10 @@ struct Work {
     /// ∂L/∂ of a network's output (and ∂L/∂∇d).
     out_grad: Vec<f32>,
     q: Vec<f32>,
-    /// ∂L/∂ of the normalised input and of the start state, this step's and the next's.
+    /// ∂L/∂ of the normalised input, of `[φ(s), â]` and of the start state,
+    /// this step's and the next's.
     x_grad: Vec<f32>,
+    x_drift_grad: Vec<f32>,
     start_grad: Vec<f32>,
     next_start_grad: Vec<f32>,
     /// ∂L/∂ of each network's output in one step's backward pass.
@@ -548,7 +560,18 @@ fn forward_step(
     let (obs, act, s_dim, d_in) = (sh.obs, sh.act, sh.state, sh.input());
     let (n_pos, n_vel) = (sh.n_pos, sh.n_vel);
     let rows = tape.start.len() / s_dim;
-    for buffer in [&mut tape.x, &mut tape.x_g, &mut tape.x_h, &mut tape.v_hat] {
+    let (phi, d_drift, g_columns) = (
+        sh.features.width(),
+        sh.drift_input(),
+        sh.features.g_columns(),
+    );
+    for buffer in [
+        &mut tape.x,
+        &mut tape.x_drift,
+        &mut tape.x_g,
+        &mut tape.x_h,
+        &mut tape.v_hat,
+    ] {
         buffer.clear();
     }
     for r in 0..rows {
@@ -557,9 +580,12 @@ fn forward_step(
         let obs_hat = (0..obs).map(|i| (s[i] - sh.state_mean[i]) / sh.state_std[i]);
         let act_hat = (0..act).map(|j| (a[j] - sh.action_mean[j]) / sh.action_std[j]);
         tape.x.extend(obs_hat.chain(act_hat));
-        let x = &tape.x[r * d_in..];
-        tape.x_g.extend_from_slice(&x[n_pos..obs]);
-        tape.x_h.extend_from_slice(&x[..obs]);
+        sh.features.extend(s, &mut tape.x_drift);
+        tape.x_drift
+            .extend_from_slice(&tape.x[r * d_in + obs..(r + 1) * d_in]);
+        let x_drift = &tape.x_drift[r * d_drift..];
+        tape.x_g.extend_from_slice(&x_drift[g_columns.clone()]);
+        tape.x_h.extend_from_slice(&x_drift[..phi]);
         let vel_std = &sh.state_std[n_pos..obs];
         let v = s[n_pos..obs].iter().zip(vel_std);
         tape.v_hat.extend(v.map(|(v, s)| v / s));
@@ -568,6 +594,7 @@ fn forward_step(
     let offset = knobs.eta_offset;
     let StepTape {
         x,
+        x_drift,
         x_g,
         x_h,
         logit,
@@ -578,11 +605,11 @@ fn forward_step(
         sigma,
         ..
     } = tape;
-    let (x, x_g, x_h) = (&*x, &*x_g, &*x_h);
+    let (x, x_drift, x_g, x_h) = (&*x, &*x_drift, &*x_g, &*x_h);
     rayon::scope(|scope| {
         scope.spawn(|_| nets.g.forward(x_g, rows, g));
         scope.spawn(|_| nets.h.forward(x_h, rows, h));
-        scope.spawn(|_| nets.res.forward(x, rows, res));
+        scope.spawn(|_| nets.res.forward(x_drift, rows, res));
         if let Some(net) = &nets.reward {
             scope.spawn(|_| net.forward(x, rows, reward));
         }
@@ -962,13 +989,15 @@ fn backward_step(
     }
 
     // Through the networks, one task each; their input gradients then into the
-    // start's, when asked.
+    // start's, when asked: the drift's through φ(s), σ's and f_rew's through
+    // the normalised (s, a).
+    let (phi, d_drift) = (sh.features.width(), sh.drift_input());
     let tapes = [
-        (&mut tape.g, &out.g[..], n_pos..obs),
-        (&mut tape.h, &out.h[..], 0..obs),
-        (&mut tape.res, &out.res[..], 0..d_in),
-        (&mut tape.reward, &out.reward[..], 0..d_in),
-        (&mut tape.sigma, &out.sigma[..], 0..d_in),
+        (&mut tape.g, &out.g[..], (true, sh.features.g_columns())),
+        (&mut tape.h, &out.h[..], (true, 0..phi)),
+        (&mut tape.res, &out.res[..], (true, 0..d_drift)),
+        (&mut tape.reward, &out.reward[..], (false, 0..d_in)),
+        (&mut tape.sigma, &out.sigma[..], (false, 0..d_in)),
     ];
     let mut jobs: Vec<_> = nets
         .nets()
@@ -992,26 +1021,36 @@ fn backward_step(
             });
         }
     });
+    if !wants_start {
+        return;
+    }
     work.x_grad.clear();
     work.x_grad.resize(rows * d_in, 0.0);
-    if wants_start {
-        for (.., columns, input) in &jobs {
-            let width = columns.len();
-            for (r, g) in input.chunks_exact(width).enumerate() {
-                let x = &mut work.x_grad[r * d_in + columns.start..][..width];
-                x.iter_mut().zip(g).for_each(|(x, g)| *x += g);
-            }
+    work.x_drift_grad.clear();
+    work.x_drift_grad.resize(rows * d_drift, 0.0);
+    for (.., (drift, columns), input) in &jobs {
+        let (target, stride) = if *drift {
+            (&mut work.x_drift_grad, d_drift)
+        } else {
+            (&mut work.x_grad, d_in)
+        };
+        let width = columns.len();
+        for (r, g) in input.chunks_exact(width).enumerate() {
+            let x = &mut target[r * stride + columns.start..][..width];
+            x.iter_mut().zip(g).for_each(|(x, g)| *x += g);
         }
     }
-    if wants_start {
-        for (start, x) in start_grad
-            .chunks_exact_mut(s_dim)
-            .zip(work.x_grad.chunks_exact(d_in))
-        {
-            for i in 0..obs {
-                start[i] += x[i] / sh.state_std[i];
-            }
+    let rows = start_grad
+        .chunks_exact_mut(s_dim)
+        .zip(tape.start.chunks_exact(s_dim))
+        .zip(work.x_grad.chunks_exact(d_in))
+        .zip(work.x_drift_grad.chunks_exact(d_drift));
+    for (((start_grad, start), x), x_drift) in rows {
+        for i in 0..obs {
+            start_grad[i] += x[i] / sh.state_std[i];
         }
+        sh.features
+            .add_gradient(&start[..obs], &x_drift[..phi], start_grad);
     }
 }
 
@@ -1112,7 +1151,7 @@ mod tests {
     use crate::nn::{seeded_init, standard_normal};
     use crate::sde::eta::FarField;
     use crate::sde::fit_step::{BurnSdeTrainer, Gradients};
-    use crate::sde::{DynamicsSpec, FitConfig, PhysicalScales, SdeConfig};
+    use crate::sde::{DriftInputs, DynamicsSpec, FitConfig, PhysicalScales, SdeConfig};
 
     const NQ: usize = 4;
     const ACT: usize = 2;
@@ -1276,6 +1315,20 @@ mod tests {
     #[test]
     fn gradients_equal_burns_with_the_reward_model_on_the_data_path() {
         assert_gradients_match(&config(true, LikelihoodPath::Data));
+    }
+
+    #[test]
+    fn gradients_equal_burns_with_pose_drift_inputs() {
+        // The particle path carries gradients through step 2's start into φ's
+        // cos and sin of step 1's sampled angles.
+        let mut config = config(false, LikelihoodPath::Particle);
+        config.model.drift_inputs = DriftInputs::Pose;
+        let (burn, ..) = trainers(&config, 3);
+        let angles = burn.model().spec().split.angles.len();
+        assert!(angles >= 2, "the planar test system has angles");
+        let g_inputs = burn.model().g_net.layers[0].weight.dims()[0];
+        assert_eq!(g_inputs, 2 * NQ - 1 + angles, "G sees all of φ");
+        assert_gradients_match(&config);
     }
 
     /// NUNO's code's η losses (D5): the scalar μ, ½μ in L_sc, the value and

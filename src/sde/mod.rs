@@ -6,6 +6,7 @@ mod batch;
 mod calibration;
 mod config;
 mod device;
+mod drift_inputs;
 mod eta;
 mod eta_report;
 mod evaluation;
@@ -28,6 +29,7 @@ pub use config::{
     EtaLossForm, FitConfig, LikelihoodPath, LossConfig, MuForm, SCALAR_MU_FACTOR, SdeConfig,
 };
 pub use device::ComputeDevice;
+pub use drift_inputs::DriftInputs;
 pub use eta::{DistanceAware, EtaLosses, FarField};
 pub use eta_report::{EtaComparison, EtaReport, EtaReportConfig, auroc, eta_report};
 pub use evaluation::{

@@ -2,7 +2,8 @@
 //!
 //! ```text
 //! ds = f_θ(s, a) dt + (σ_ϕ(s, a) + h_ϕ(η_ϕ(s, a))) dW                       (eq. 5)
-//! f_pos = s_vel,  f_vel = G(s_vel)·a + H(s)·s_vel,  f = [f_pos, f_vel] + f_res (eq. 8)
+//! f_pos = s_vel,  f_vel = G(s_vel)·a + H(s)·s_vel,  f = [f_pos, f_vel] + f_res (eq. 8;
+//!   what G, H and f_res see of s: `drift_inputs`)
 //! h_ϕ(η) = W^max·sigmoid(W·logit(η/η_max) + b),  W ≥ 1   (on η's logit, W and b fixed; see below)
 //! s' = s + f·dt + Σ·sqrt(dt)·ε                                             (Euler–Maruyama)
 //! ```
@@ -22,6 +23,7 @@ use burn::tensor::activation::{sigmoid, softplus};
 use burn::tensor::{Device, Int, Tensor, TensorData};
 
 use super::config::SdeConfig;
+use super::drift_inputs::DriftFeatures;
 use super::eta::DistanceAware;
 use super::spec::{DynamicsSpec, PhysicalScales};
 use crate::nn::{Activation, Mlp, MlpConfig, to_f32_vec};
@@ -79,11 +81,11 @@ impl SdeTerms {
 /// The neural SDE: drift networks, diffusion networks, η_ϕ and μ_ϕ.
 #[derive(Module, Debug)]
 pub struct NeuralSde {
-    /// G(s_vel): `[n_vel × act_dim]` control matrix of eq. 8.
+    /// G(s_vel): `[n_vel × act_dim]` control matrix of eq. 8 (G(φ) under pose drift inputs).
     pub g_net: Mlp,
-    /// H(s): `[n_vel × n_vel]` velocity matrix of eq. 8.
+    /// H(s): `[n_vel × n_vel]` velocity matrix of eq. 8 (H(φ)).
     pub h_net: Mlp,
-    /// f_res(s, a): the penalised residual drift.
+    /// f_res(s, a): the penalised residual drift (f_res(φ, a)).
     pub res_net: Mlp,
     /// f_rew(s, a): the reward drift of NUNO^R.
     pub reward_net: Option<Mlp>,
@@ -116,14 +118,19 @@ impl NeuralSde {
         };
         let config = &constants.config;
         let inputs = n_obs + n_act;
+        let features = DriftFeatures::of(&constants);
         let swish = |d_in, hidden: &Vec<usize>, d_out| {
             MlpConfig::new(d_in, hidden.clone(), d_out, Activation::Swish).init(device)
         };
         let state_dim = constants.state_dim();
         Self {
-            g_net: swish(n_vel, &config.drift_hidden, n_vel * n_act),
-            h_net: swish(n_obs, &config.drift_hidden, n_vel * n_vel),
-            res_net: swish(inputs, &config.drift_hidden, n_obs),
+            g_net: swish(
+                features.g_columns().len(),
+                &config.drift_hidden,
+                n_vel * n_act,
+            ),
+            h_net: swish(features.width(), &config.drift_hidden, n_vel * n_vel),
+            res_net: swish(features.width() + n_act, &config.drift_hidden, n_obs),
             reward_net: config
                 .reward_model
                 .then(|| swish(inputs, &config.reward_hidden, 1)),
@@ -169,7 +176,8 @@ impl NeuralSde {
         let batch = state.dims()[0];
         let (n_pos, n_vel, n_act) = (spec.n_pos(), spec.n_vel(), spec.act_dim);
         let input = self.normalized_input(state.clone(), action.clone());
-        let obs_hat = input.clone().narrow(1, 0, spec.obs_dim);
+        let features = DriftFeatures::of(c);
+        let phi = features.tensor(state.clone().narrow(1, 0, spec.obs_dim));
 
         // eq. 8: f_pos = the velocities of the observed positions.
         let pairs: Vec<i64> = spec
@@ -180,24 +188,29 @@ impl NeuralSde {
             .collect();
         let pairs = Tensor::<1, Int>::from_data(TensorData::new(pairs, [n_pos]), &device);
         let f_pos = state.clone().select(1, pairs);
-        // eq. 8: f_vel = G(s_vel)·a + H(s)·s_vel, velocities scaled (not shifted) so H stays linear in them.
+        // eq. 8: f_vel = G(φ)·a + H(φ)·s_vel, velocities scaled (not shifted) so H stays linear in them.
         let velocity = state.clone().narrow(1, n_pos, n_vel);
         let vel_std = &c.scales.normalizer.state.std[n_pos..spec.obs_dim];
         let velocity_hat = velocity / constant(vel_std, &device).unsqueeze();
+        let g_columns = features.g_columns();
         let g = self
             .g_net
-            .forward(obs_hat.clone().narrow(1, n_pos, n_vel))
+            .forward(phi.clone().narrow(1, g_columns.start, g_columns.len()))
             .reshape([batch, n_vel, n_act]);
         let g_a = (g * action.unsqueeze_dim::<3>(1))
             .sum_dim(2)
             .reshape([batch, n_vel]);
-        let h = self.h_net.forward(obs_hat).reshape([batch, n_vel, n_vel]);
+        let h = self
+            .h_net
+            .forward(phi.clone())
+            .reshape([batch, n_vel, n_vel]);
         let h_v = (h * velocity_hat.unsqueeze_dim::<3>(1))
             .sum_dim(2)
             .reshape([batch, n_vel]);
         let f_vel = (g_a + h_v) * constant(&c.scales.acceleration, &device).unsqueeze();
         // f = [f_pos, f_vel] + f_res, the residual penalised in the loss.
-        let residual = self.res_net.forward(input.clone());
+        let action_hat = input.clone().narrow(1, spec.obs_dim, n_act);
+        let residual = self.res_net.forward(Tensor::cat(vec![phi, action_hat], 1));
         let mut drift = Tensor::cat(vec![f_pos, f_vel], 1)
             + residual.clone() * constant(&c.scales.derivative, &device).unsqueeze();
         if let Some(reward_net) = &self.reward_net {

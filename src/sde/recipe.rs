@@ -6,6 +6,7 @@
 //! comes from, and which recipe is the default and why.
 
 use super::config::{EtaLossForm, FitConfig, LossConfig, MuForm};
+use super::drift_inputs::DriftInputs;
 use super::threshold::ThresholdConfig;
 
 /// Which reading of NUNO a fit or a policy run follows.
@@ -15,8 +16,7 @@ pub enum Recipe {
     /// The paper's equations and Appendix C.
     #[default]
     Paper,
-    /// NUNO's code where it differs from the paper (D1, D2, D3, D5, D6, D7 of
-    /// the faithful-NUNO issue; the pose-aware drift is not in nuno yet).
+    /// NUNO's code where it differs from the paper (D1–D7 of the faithful-NUNO issue).
     Code,
 }
 
@@ -92,12 +92,21 @@ impl Recipe {
         }
     }
 
+    /// What the drift networks see under this recipe (D4).
+    pub fn drift_inputs(self) -> DriftInputs {
+        match self {
+            Self::Paper => DriftInputs::ZScores,
+            Self::Code => DriftInputs::Pose,
+        }
+    }
+
     /// `fit` with this recipe's fit settings, for a model stepping `dt` seconds.
     /// The code's schedule (D2, `hop_rand_final`'s config): the learning rate
     /// decays 1e-2 → 1e-3 over 100 000 steps, validation every 2000 steps, early
     /// stop after 20 evaluations without improvement, 20 % of trajectories held out.
     pub fn apply_to_fit(self, fit: &mut FitConfig, dt: f64) {
         fit.model.sample_noise_scale = self.sample_noise().scale(dt);
+        fit.model.drift_inputs = self.drift_inputs();
         self.eta_losses().apply_to_fit(fit);
         if self == Self::Code {
             fit.loss.step_discount = CODE_STEP_DISCOUNT;

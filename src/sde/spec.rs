@@ -31,10 +31,16 @@ impl DynamicsSpec {
                 .position_velocity
                 .iter()
                 .all(|v| self.split.velocities.contains(v));
-        if !contiguous || !paired || self.dt.is_nan() || self.dt <= 0.0 {
+        let mut angles = self.split.angles.clone();
+        angles.sort_unstable();
+        angles.dedup();
+        let angles_ok =
+            angles.len() == self.split.angles.len() && angles.iter().all(|&i| i < n_pos);
+        if !contiguous || !paired || !angles_ok || self.dt.is_nan() || self.dt <= 0.0 {
             return Err(SdeError::Spec(format!(
                 "the state split must list positions 0..{n_pos} then velocities {n_pos}..{}, \
-                 pair every position with a velocity, and dt must be positive (got {:?}, dt {})",
+                 pair every position with a velocity, name each angle once among the positions, \
+                 and dt must be positive (got {:?}, dt {})",
                 self.obs_dim, self.split, self.dt
             )));
         }

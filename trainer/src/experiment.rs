@@ -438,6 +438,7 @@ fn model_fit_options(b: &Budget, method: Method) -> Vec<String> {
         option("--step-discount", b.model_step_discount),
         option("--eta-losses", b.model_eta_losses),
         option("--threshold-max-margin", b.threshold_max_margin),
+        option("--drift-inputs", b.model_drift_inputs),
     ]
     .concat();
     if method == Method::NunoR {

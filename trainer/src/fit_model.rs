@@ -13,9 +13,9 @@ use nuno::artifact::{DynamicsProvenance, load_sde_checkpoint, save_dynamics, sav
 use nuno::envs::MujocoTask;
 use nuno::infer::Kernel;
 use nuno::sde::{
-    CalibrationConfig, ComputeDevice, DynamicsSpec, EtaLossForm, FitConfig, LikelihoodPath,
-    LossConfig, Recipe, SampleNoise, SdeConfig, SdeError, ThresholdConfig, calibration_report,
-    compute_thresholds, fit_from, prediction_error,
+    CalibrationConfig, ComputeDevice, DriftInputs, DynamicsSpec, EtaLossForm, FitConfig,
+    LikelihoodPath, LossConfig, Recipe, SampleNoise, SdeConfig, SdeError, ThresholdConfig,
+    calibration_report, compute_thresholds, fit_from, prediction_error,
 };
 
 use crate::data_source::DataSource;
@@ -49,6 +49,11 @@ pub struct Args {
     /// 1e-3) (default: the recipe's); --lambda-grad overrides its weight.
     #[arg(long)]
     eta_losses: Option<EtaLossForm>,
+    /// What the drift networks G, H, f_res see of the state: z-scores (eq. 8) or
+    /// pose (NUNO's code's `RBD_Drift`: angles as cos and sin about their mean,
+    /// and G sees the pose) (default: the recipe's).
+    #[arg(long)]
+    drift_inputs: Option<DriftInputs>,
     /// L_data's weight of window step t is this to the power t − 1, in (0, 1]
     /// (default: the recipe's: paper 1, code 0.9).
     #[arg(long)]
@@ -138,6 +143,7 @@ fn fit_plan(args: &Args) -> anyhow::Result<(MujocoTask, DynamicsSpec, FitConfig,
     if let Some(form) = args.eta_losses {
         form.apply_to_fit(&mut config);
     }
+    config.model.drift_inputs = args.drift_inputs.unwrap_or(config.model.drift_inputs);
     config.loss.lambda_grad = args.lambda_grad.unwrap_or(config.loss.lambda_grad);
     config.loss.step_discount = args.step_discount.unwrap_or(config.loss.step_discount);
     config.max_steps = args.max_steps.unwrap_or(config.max_steps);

@@ -229,6 +229,7 @@ fn bad_grids_are_refused_before_anything_runs() {
         ("model_step_discount = 0.0", "model_step_discount = 0"),
         ("model_eta_losses = \"codes\"", "model_eta_losses"),
         ("threshold_max_margin = 0.9", "threshold_max_margin = 0.9"),
+        ("model_drift_inputs = \"angles\"", "model_drift_inputs"),
     ]
     .into_iter()
     .enumerate()

@@ -25,6 +25,11 @@ fn fit_model_names_unusable_loss_flags_before_reading_anything() {
         ("--sample-noise", "full", "unknown sample noise \"full\""),
         ("--eta-losses", "codes", "unknown eta loss form \"codes\""),
         (
+            "--drift-inputs",
+            "angles",
+            "unknown drift inputs \"angles\"",
+        ),
+        (
             "--likelihood",
             "teacher",
             "unknown likelihood path \"teacher\"",
