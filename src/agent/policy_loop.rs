@@ -47,11 +47,12 @@ pub enum ActorLrDecay {
 crate::shared::named_enum!(ActorLrDecay, "actor learning-rate decay", ActorLrDecay::Constant => "constant", ActorLrDecay::Cosine => "cosine");
 
 /// Which SAC settings MOPO's (and TATU+MOPO's) policy step runs with.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum MopoSettings {
     /// OfflineRL-Kit's `run_mopo.py`, the published baseline: actor lr 1e-4 with
-    /// cosine decay, α lr 1e-4, rollouts of 50 000 starts (`KIT_MOPO`).
+    /// cosine decay, α lr 1e-4, rollouts of 50 000 starts (`KIT_MOPO`). The default.
+    #[default]
     OfflinerlKit,
     /// NUNO's SAC settings (3e-4 everywhere, constant, 5000 starts): what nuno's
     /// MOPO ran before it followed OfflineRL-Kit, kept for ablations.

@@ -36,7 +36,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::ExperimentError;
-use crate::agent::{Method, MopoSettings, preset};
+use crate::agent::{Method, MopoSettings, PolicyLoopConfig, SacConfig, preset};
 
 use crate::envs::{ForwardVelocity, ObservationLayout, TaskName};
 use crate::sde::{DriftInputs, EtaLossForm, LikelihoodPath, Recipe, SampleNoise};
@@ -102,9 +102,18 @@ impl Budget {
     /// This budget as `method` runs it: the settings of the other kind of method
     /// at their defaults (an ensemble method fits no SDE and runs no NUNO loop;
     /// NUNO's methods run no MOPO), so a grid may change those without touching
-    /// this method's finished cells.
+    /// this method's finished cells; and the MOPO settings and rollout batch a
+    /// grid leaves to the method resolved to what the method runs, so naming a
+    /// default and leaving it out are the same budget.
     pub fn for_method(&self, method: Method) -> Budget {
         let mut budget = self.clone();
+        let mut policy_loop = PolicyLoopConfig::new(SacConfig::new(), 0, 0.0, 0.0);
+        if method.uses_ensemble() {
+            let settings = self.mopo_settings.unwrap_or_default();
+            policy_loop.apply_mopo_settings(settings);
+            budget.mopo_settings = Some(settings);
+        }
+        budget.rollout_batch = Some(self.rollout_batch.unwrap_or(policy_loop.rollout_batch));
         if method.uses_ensemble() {
             budget.model_steps = 0;
             budget.model_likelihood = default_likelihood();
@@ -120,6 +129,34 @@ impl Budget {
             budget.mopo_settings = None;
         }
         budget
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn budget(extra: &str) -> Budget {
+        toml::from_str(&format!(
+            "model_steps = 5000\npolicy_steps = 50000\n{extra}"
+        ))
+        .unwrap()
+    }
+
+    #[test]
+    fn a_default_named_and_a_default_left_out_are_one_budget() {
+        // NUNO's scripts roll 5000 starts; OfflineRL-Kit's MOPO 50 000.
+        let nuno = |b: &Budget| b.for_method(Method::Nuno);
+        assert_eq!(nuno(&budget("")), nuno(&budget("rollout_batch = 5000")));
+        assert_ne!(nuno(&budget("")), nuno(&budget("rollout_batch = 50000")));
+        let mopo = |b: &Budget| b.for_method(Method::Mopo);
+        let kit = budget("rollout_batch = 50000\nmopo_settings = \"offlinerl-kit\"");
+        assert_eq!(mopo(&budget("")), mopo(&kit));
+        assert_ne!(mopo(&budget("")), mopo(&budget("rollout_batch = 5000")));
+        assert_eq!(
+            mopo(&budget("mopo_settings = \"nuno\"")),
+            mopo(&budget("mopo_settings = \"nuno\"\nrollout_batch = 5000"))
+        );
     }
 }
 

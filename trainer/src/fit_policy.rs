@@ -204,7 +204,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         // adds its truncation to MOPO's, MOPO alone has none.
         (config.horizon, config.penalty) = mopo_preset(&args.preset)?;
         config.truncate = args.algo.truncation() != Truncation::Never;
-        config.apply_mopo_settings(args.mopo_settings.unwrap_or(MopoSettings::OfflinerlKit));
+        config.apply_mopo_settings(args.mopo_settings.unwrap_or_default());
     }
     config.horizon = args.horizon.unwrap_or(config.horizon);
     config.cvar_alpha = args.cvar_alpha.unwrap_or(config.cvar_alpha);
