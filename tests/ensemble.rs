@@ -528,6 +528,32 @@ fn a_saved_ensemble_loads_to_the_same_steps_and_refuses_damage() {
     };
     assert_eq!(step(&loaded), step(&fit));
 
+    // The one model-folder loader reads it as an ensemble of its task, stepping
+    // as the ensemble does on either kernel; a folder of neither kind is named.
+    let folder = nuno::artifact::ModelFolder::load(dir.path(), &Device::flex()).unwrap();
+    assert!(matches!(
+        folder,
+        nuno::artifact::ModelFolder::GaussianEnsemble { .. }
+    ));
+    assert_eq!(folder.task(), Some(task));
+    for kernel in [nuno::infer::Kernel::Burn, nuno::infer::Kernel::Fused] {
+        let stepped = folder.dynamics(kernel).step(&states, &actions, &noise);
+        for (a, b) in stepped.next_states.iter().zip(&step(&fit).next_states) {
+            assert!((a - b).abs() < 1e-4, "{kernel:?}: {a} against {b}");
+        }
+    }
+    let empty = tempfile::tempdir().unwrap();
+    let error = nuno::artifact::ModelFolder::load(empty.path(), &Device::flex())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        error.contains("not a model folder")
+            && error.contains("model.json")
+            && error.contains("ensemble.json"),
+        "{error}"
+    );
+
     // A flipped byte in the weights, or elites the members cannot have.
     let weights = dir.path().join("ensemble.safetensors");
     let mut bytes = std::fs::read(&weights).unwrap();

@@ -9,6 +9,7 @@ mod ensemble;
 mod ensemble_checkpoint;
 mod fit_checkpoint;
 mod json_file;
+mod model_folder;
 mod online_run;
 mod policy;
 mod sac_state;
@@ -39,6 +40,7 @@ pub use ensemble_checkpoint::{
 pub use json_file::{
     read_checked_weights, read_versioned_json, read_versioned_json_filled, write_json,
 };
+pub use model_folder::ModelFolder;
 pub use online_run::{
     ONLINE_RUN_SCHEMA_VERSION, OnlineRunInfo, RunPolicy, load_online_checkpoint, read_online_run,
     read_run_transitions, run_policies, save_online_checkpoint, start_online_run,
@@ -95,6 +97,13 @@ pub enum ArtifactError {
     Safetensors(String),
     #[error("invalid artifact: {0}")]
     Invalid(String),
+    #[error(
+        "{}: not a model folder: it holds neither model.json (a neural SDE, from \
+         `nuno-trainer fit-model`) nor ensemble.json (a Gaussian ensemble, from \
+         `nuno-trainer fit-ensemble`)",
+        .0.display()
+    )]
+    NotAModel(PathBuf),
 }
 
 impl ArtifactError {

@@ -443,9 +443,15 @@ mod tests {
         };
         assert!(changes(&plain, &kit, Method::Nuno).is_empty());
         assert!(changes(&plain, &code, Method::Mopo).is_empty());
+        // Naming the default is no change; NUNO's settings are, with their rollout batch.
+        assert!(changes(&plain, &kit, Method::Mopo).is_empty());
+        let nuno_sac = with("model_steps = 20\npolicy_steps = 100\nmopo_settings = \"nuno\"");
         assert_eq!(
-            changes(&plain, &kit, Method::Mopo),
-            ["mopo_settings: null then, \"offlinerl-kit\" now"]
+            changes(&plain, &nuno_sac, Method::Mopo),
+            [
+                "mopo_settings: \"offlinerl-kit\" then, \"nuno\" now",
+                "rollout_batch: 50000 then, 5000 now"
+            ]
         );
         assert_eq!(
             changes(&plain, &code, Method::NunoAl),

@@ -39,8 +39,7 @@ pub use error::{ApiError, ErrorBody, ErrorDetail, V2ErrorBody};
 pub use metrics::Metrics;
 pub use openapi::{document as openapi_document, openapi_json};
 pub use registry::{
-    LoadFailure, LoadedModel, ModelKind, ModelRegistry, ReloadReport, ServedDynamics,
-    valid_model_id,
+    LoadFailure, LoadedModel, ModelKind, ModelRegistry, ReloadReport, valid_model_id,
 };
 pub use routes::*;
 

@@ -18,13 +18,11 @@ use utoipa::ToSchema;
 use crate::agent::FusedActor;
 use crate::agent::{ActionMode, Actor, ActorPolicy};
 use crate::artifact::{
-    BEST_POLICY, DynamicsMetadata, ENSEMBLE_METADATA, EnsembleMetadata, PolicyMetadata, has_policy,
-    load_dynamics, load_ensemble, load_policy,
+    ArtifactError, BEST_POLICY, ModelFolder, PolicyMetadata, has_policy, load_policy,
 };
-use crate::ensemble::{EnsembleDynamics, EnsembleUncertainty};
 use crate::envs::{TaskConfig, TaskRules};
 use crate::infer::Kernel;
-use crate::sde::{FusedSde, NeuralSde, ThresholdTable};
+use crate::sde::ThresholdTable;
 use crate::shared::{BatchDynamics, BatchPolicy};
 
 /// Which kind of dynamics model is served (`kind` in `/v1/models/{id}`).
@@ -38,38 +36,13 @@ pub enum ModelKind {
     GaussianEnsemble,
 }
 
-/// A served model's dynamics, by kind.
-pub enum ServedDynamics {
-    NeuralSde {
-        model: NeuralSde,
-        metadata: Box<DynamicsMetadata>,
-        /// The same weights on the fused CPU path, when the server uses it.
-        fused: Option<Box<FusedSde>>,
-    },
-    GaussianEnsemble {
-        /// On the fused CPU path when the server uses it.
-        model: EnsembleDynamics,
-        metadata: EnsembleMetadata,
-    },
-}
-
-impl ServedDynamics {
-    /// The model behind the batch interface, on the fused path when loaded there.
-    fn batch_dynamics(&self) -> &dyn BatchDynamics {
-        match self {
-            ServedDynamics::NeuralSde {
-                fused: Some(fused), ..
-            } => fused.as_ref(),
-            ServedDynamics::NeuralSde { model, .. } => model,
-            ServedDynamics::GaussianEnsemble { model, .. } => model,
-        }
-    }
-}
-
 /// One servable model.
 pub struct LoadedModel {
     pub id: String,
-    pub dynamics: ServedDynamics,
+    /// The folder's dynamics, as loaded.
+    pub folder: ModelFolder,
+    /// The same weights on the fused CPU path, when the server uses it.
+    fused: Option<Box<dyn BatchDynamics + Send>>,
     pub task: TaskConfig,
     pub rules: TaskRules,
     pub policy: Option<(Actor, PolicyMetadata)>,
@@ -81,15 +54,18 @@ pub struct LoadedModel {
 
 impl LoadedModel {
     pub fn kind(&self) -> ModelKind {
-        match self.dynamics {
-            ServedDynamics::NeuralSde { .. } => ModelKind::NeuralSde,
-            ServedDynamics::GaussianEnsemble { .. } => ModelKind::GaussianEnsemble,
+        match self.folder {
+            ModelFolder::NeuralSde { .. } => ModelKind::NeuralSde,
+            ModelFolder::GaussianEnsemble { .. } => ModelKind::GaussianEnsemble,
         }
     }
 
     /// The dynamics as requests step them (the server's [`Kernel`]).
     pub fn batch_dynamics(&self) -> &dyn BatchDynamics {
-        self.dynamics.batch_dynamics()
+        match &self.fused {
+            Some(fused) => fused.as_ref(),
+            None => self.folder.burn_dynamics(),
+        }
     }
 
     pub fn obs_dim(&self) -> usize {
@@ -107,21 +83,13 @@ impl LoadedModel {
 
     /// ε(h, α) of the neural SDE; an ensemble has none.
     pub fn thresholds(&self) -> Option<&ThresholdTable> {
-        match &self.dynamics {
-            ServedDynamics::NeuralSde { metadata, .. } => metadata.provenance.thresholds.as_ref(),
-            ServedDynamics::GaussianEnsemble { .. } => None,
-        }
+        self.folder.thresholds()
     }
 
     /// Each observation dimension's spread in the training data (what errors
     /// against the task are measured in).
     pub fn observation_std(&self) -> &[f32] {
-        match &self.dynamics {
-            ServedDynamics::NeuralSde { metadata, .. } => &metadata.scales.normalizer.state.std,
-            ServedDynamics::GaussianEnsemble { metadata, .. } => {
-                &metadata.scaler.std[..metadata.obs_dim]
-            }
-        }
+        self.folder.observation_std()
     }
 
     /// The policy as requests run it, choosing actions by `mode`.
@@ -222,17 +190,16 @@ impl ModelRegistry {
             let Some(id) = dir.file_name().and_then(|n| n.to_str()).map(String::from) else {
                 continue;
             };
-            let holds_model = ["model.json", ENSEMBLE_METADATA]
-                .iter()
-                .any(|f| dir.join(f).is_file());
-            if !dir.is_dir() || !valid_model_id(&id) || !holds_model {
+            if !dir.is_dir() || !valid_model_id(&id) {
                 continue;
             }
             match load_model(&id, &dir, self.kernel) {
                 Ok(model) => {
                     next.insert(id, Arc::new(model));
                 }
-                Err(error) => {
+                // Not every folder beside the models is one.
+                Err(LoadError::NotAModel) => {}
+                Err(LoadError::Invalid(error)) => {
                     if let Some(old) = previous.get(&id) {
                         next.insert(id.clone(), old.clone());
                     }
@@ -253,58 +220,30 @@ impl ModelRegistry {
     }
 }
 
-/// The model in `dir`: its neural SDE when it holds one, else its ensemble.
-fn load_model(id: &str, dir: &Path, kernel: Kernel) -> Result<LoadedModel, String> {
+/// Why a folder is not served.
+enum LoadError {
+    NotAModel,
+    Invalid(String),
+}
+
+/// The model in `dir` (through the one loader), with its policy when it has one.
+fn load_model(id: &str, dir: &Path, kernel: Kernel) -> Result<LoadedModel, LoadError> {
     let device = Device::flex();
+    let folder = match ModelFolder::load(dir, &device) {
+        Ok(folder) => folder,
+        Err(ArtifactError::NotAModel(_)) => return Err(LoadError::NotAModel),
+        Err(e) => return Err(LoadError::Invalid(e.to_string())),
+    };
+    let task = folder.task().ok_or_else(|| {
+        LoadError::Invalid("model.json names no task, so rewards and terminals are unknown".into())
+    })?;
+    let rules = folder
+        .rules(task)
+        .map_err(|e| LoadError::Invalid(e.to_string()))?;
     let fused = kernel == Kernel::Fused;
-    let (dynamics, task, rules, step_seconds) = if dir.join("model.json").is_file() {
-        let (model, metadata) = load_dynamics(dir, &device).map_err(|e| e.to_string())?;
-        let task = metadata
-            .provenance
-            .task
-            .ok_or("model.json names no task, so rewards and terminals are unknown")?;
-        let spec = &metadata.spec;
-        let rules = TaskRules::new(task, &spec.split, spec.dt);
-        let dt = spec.dt;
-        let fused = fused.then(|| Box::new(FusedSde::new(&model)));
-        let dynamics = ServedDynamics::NeuralSde {
-            model,
-            metadata: Box::new(metadata),
-            fused,
-        };
-        (dynamics, task, rules, dt)
-    } else {
-        let (fit, metadata) = load_ensemble(dir, &device).map_err(|e| e.to_string())?;
-        let task = metadata.task;
-        let rules = TaskRules::of_task(task).map_err(|e| e.to_string())?;
-        let model = EnsembleDynamics::new(
-            &fit,
-            metadata.obs_dim,
-            metadata.act_dim,
-            EnsembleUncertainty::MaxAleatoric,
-        );
-        let model = if fused { model.on_fused_path() } else { model };
-        let dynamics = ServedDynamics::GaussianEnsemble { model, metadata };
-        let dt = rules.dt();
-        (dynamics, task, rules, dt)
-    };
-    let (obs_dim, act_dim) = {
-        let batch = dynamics.batch_dynamics();
-        (batch.obs_dim(), batch.act_dim())
-    };
-    let policy = if has_policy(dir, BEST_POLICY) {
-        let (actor, policy_metadata) =
-            load_policy(dir, BEST_POLICY, &device).map_err(|e| format!("policy: {e}"))?;
-        if actor.config.obs_dim != obs_dim || actor.config.act_dim != act_dim {
-            return Err(format!(
-                "policy: acts on {}→{}, the dynamics on {obs_dim}→{act_dim}",
-                actor.config.obs_dim, actor.config.act_dim
-            ));
-        }
-        Some((actor, policy_metadata))
-    } else {
-        None
-    };
+    let dynamics = folder.burn_dynamics();
+    let (obs_dim, act_dim, step_seconds) = (dynamics.obs_dim(), dynamics.act_dim(), rules.dt());
+    let policy = load_served_policy(dir, obs_dim, act_dim, &device).map_err(LoadError::Invalid)?;
     let fused_actor = policy.as_ref().filter(|_| fused).map(|(actor, _)| {
         FusedActor::new(&ActorPolicy {
             actor: actor.clone(),
@@ -313,11 +252,33 @@ fn load_model(id: &str, dir: &Path, kernel: Kernel) -> Result<LoadedModel, Strin
     });
     Ok(LoadedModel {
         id: id.to_string(),
-        dynamics,
+        fused: fused.then(|| folder.fused_dynamics()),
+        folder,
         task,
         rules,
         policy,
         step_seconds,
         fused_actor,
     })
+}
+
+/// The policy saved beside the model in `dir`, checked to act on its dimensions.
+fn load_served_policy(
+    dir: &Path,
+    obs_dim: usize,
+    act_dim: usize,
+    device: &Device,
+) -> Result<Option<(Actor, PolicyMetadata)>, String> {
+    if !has_policy(dir, BEST_POLICY) {
+        return Ok(None);
+    }
+    let (actor, metadata) =
+        load_policy(dir, BEST_POLICY, device).map_err(|e| format!("policy: {e}"))?;
+    if actor.config.obs_dim != obs_dim || actor.config.act_dim != act_dim {
+        return Err(format!(
+            "policy: acts on {}→{}, the dynamics on {obs_dim}→{act_dim}",
+            actor.config.obs_dim, actor.config.act_dim
+        ));
+    }
+    Ok(Some((actor, metadata)))
 }

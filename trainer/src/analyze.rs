@@ -14,15 +14,13 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use burn::tensor::Device;
 use nuno::agent::{ActionMode, ActorPolicy};
-use nuno::artifact::{BEST_POLICY, load_dynamics, load_ensemble, load_policy};
+use nuno::artifact::{BEST_POLICY, ModelFolder, load_policy};
 use nuno::data::{DatasetFormat, NormalizerConfig, Stats, read_dataset};
-use nuno::ensemble::{EnsembleDynamics, EnsembleUncertainty};
 use nuno::envs::{MujocoTask, TaskConfig, TaskRules};
 use nuno::experiment::{
     ExploitationConfig, PredictionConfig, exploitation, prediction_error, uncertainty_by_action,
 };
 use nuno::infer::Kernel;
-use nuno::sde::FusedSde;
 use nuno::shared::BatchDynamics;
 
 use crate::output::write_text;
@@ -288,7 +286,7 @@ fn per_step(curves: &[(String, Vec<f64>)]) -> Vec<Series<'_>> {
         .collect()
 }
 
-/// `DIR` or `NAME=DIR`: the neural SDE when the folder holds model.json, else its ensemble.
+/// `DIR` or `NAME=DIR`: the model folder's dynamics (a neural SDE or an ensemble), on the fused path.
 fn load_model(spec: &str) -> anyhow::Result<Model> {
     let (name, dir) = match spec.split_once('=') {
         Some((name, dir)) => (name.to_string(), PathBuf::from(dir)),
@@ -301,36 +299,17 @@ fn load_model(spec: &str) -> anyhow::Result<Model> {
             (name, dir)
         }
     };
-    let device = Device::flex();
     let context = || format!("loading the model {name} from {}", dir.display());
-    if dir.join("model.json").is_file() {
-        let (sde, metadata) = load_dynamics(&dir, &device).with_context(context)?;
-        let task = metadata
-            .provenance
-            .task
-            .with_context(|| format!("{}: model.json names no task", dir.display()))?;
-        let spec = &metadata.spec;
-        Ok(Model {
-            rules: TaskRules::new(task, &spec.split, spec.dt),
-            dynamics: Box::new(FusedSde::new(&sde)),
-            task,
-            name,
-        })
-    } else {
-        let (fit, metadata) = load_ensemble(&dir, &device).with_context(context)?;
-        let ensemble = EnsembleDynamics::new(
-            &fit,
-            metadata.obs_dim,
-            metadata.act_dim,
-            EnsembleUncertainty::MaxAleatoric,
-        );
-        Ok(Model {
-            rules: TaskRules::of_task(metadata.task)?,
-            dynamics: Box::new(ensemble.on_fused_path()),
-            task: metadata.task,
-            name,
-        })
-    }
+    let folder = ModelFolder::load(&dir, &Device::flex()).with_context(context)?;
+    let task = folder
+        .task()
+        .with_context(|| format!("{}: model.json names no task", dir.display()))?;
+    Ok(Model {
+        rules: folder.rules(task)?,
+        dynamics: folder.fused_dynamics(),
+        task,
+        name,
+    })
 }
 
 /// The deterministic actor of the policy saved in `dir`.

@@ -13,14 +13,14 @@ use nuno::agent::{
     rollout_threshold, tatu_pessimism,
 };
 use nuno::artifact::{
-    BEST_POLICY, LAST_POLICY, PolicyProvenance, latest_checkpoint, load_checkpoint, load_dynamics,
-    load_ensemble, save_checkpoint, save_policy,
+    BEST_POLICY, LAST_POLICY, ModelFolder, PolicyProvenance, latest_checkpoint, load_checkpoint,
+    save_checkpoint, save_policy,
 };
 use nuno::data::{DatasetFormat, read_dataset};
-use nuno::ensemble::{EnsembleDynamics, EnsembleUncertainty};
-use nuno::envs::{ForwardVelocity, TaskConfig, TaskRules};
+use nuno::ensemble::EnsembleUncertainty;
+use nuno::envs::{ForwardVelocity, TaskConfig};
 use nuno::infer::Kernel;
-use nuno::sde::{ComputeDevice, NeuralSde, Recipe, ThresholdConfig, ThresholdTable};
+use nuno::sde::{ComputeDevice, Recipe, ThresholdConfig};
 use nuno::shared::BatchDynamics;
 
 use crate::output::write_text;
@@ -180,8 +180,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     check_flags(&args)?;
     let preset = preset(&args.preset)?;
     let device = args.device.device().map_err(anyhow::Error::msg)?;
-    let model = load_model(&args, preset, &device)?;
-    let task = model.task;
+    let (model, task) = load_model(&args, preset, &device)?;
     anyhow::ensure!(
         task.name == preset.task && task.layout == preset.layout,
         "preset {} is for {} ({:?}), the model is for {} ({:?})",
@@ -240,7 +239,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         dataset: &dataset,
         dynamics,
         task,
-        rules: model.rules,
+        rules: model.rules(task)?,
         kernel,
     };
     let checkpoints = args.out.join("checkpoints");
@@ -275,8 +274,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.set_position(training.step as u64);
     let provenance = |record: &EpochRecord, training: &PolicyTraining| PolicyProvenance {
         preset: Some(preset.name.to_string()),
-        dynamics_sha256: Some(model.weights_sha256.clone()),
-        dataset_sha256: model.dataset_sha256.clone(),
+        dynamics_sha256: Some(model.weights_sha256().to_string()),
+        dataset_sha256: model.dataset_sha256().map(String::from),
         training: Some(training.config.clone()),
         epoch: record.epoch,
         step: record.step,
@@ -417,85 +416,50 @@ fn write_metrics(out: &Path, history: &[EpochRecord]) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The dynamics a run trains in, whichever kind `--algo` reads from `--model`.
-struct LoadedModel {
-    sde: Option<NeuralSde>,
-    ensemble: Option<EnsembleDynamics>,
-    task: TaskConfig,
-    rules: TaskRules,
-    thresholds: Option<ThresholdTable>,
-    weights_sha256: String,
-    dataset_sha256: Option<String>,
-}
-
-impl LoadedModel {
-    /// The model behind the batch interface, its networks run by `kernel`.
-    fn dynamics(&self, kernel: Kernel) -> Box<dyn BatchDynamics + '_> {
-        match (&self.sde, &self.ensemble) {
-            (Some(sde), _) => kernel.dynamics(sde),
-            (None, Some(ensemble)) => match kernel {
-                Kernel::Fused => Box::new(ensemble.on_fused_path()),
-                Kernel::Burn => Box::new(ensemble),
-            },
-            (None, None) => unreachable!("a loaded model has one kind"),
-        }
-    }
-}
-
-fn load_model(args: &Args, preset: &Preset, device: &Device) -> anyhow::Result<LoadedModel> {
-    let context = || format!("loading the model in {}", args.model.display());
-    if !args.algo.uses_ensemble() {
-        let (sde, metadata) = load_dynamics(&args.model, device).with_context(context)?;
-        let learns_reward = sde.constants.config.reward_model;
-        anyhow::ensure!(
-            args.algo != Method::NunoR || learns_reward,
-            "--algo nuno-r needs a model that learned the reward (fit-model --reward-model); \
+/// The model folder `--algo` trains in, checked to hold the kind it reads (a
+/// neural SDE for NUNO's methods, a Gaussian ensemble for MOPO's), with its
+/// task (a model.json from before tasks were recorded: the preset's).
+fn load_model(
+    args: &Args,
+    preset: &Preset,
+    device: &Device,
+) -> anyhow::Result<(ModelFolder, TaskConfig)> {
+    let dir = &args.model;
+    let folder = ModelFolder::load(dir, device)
+        .with_context(|| format!("loading the model in {}", dir.display()))?;
+    let algo = args.algo;
+    let folder = match folder {
+        ModelFolder::NeuralSde { .. } if algo.uses_ensemble() => anyhow::bail!(
+            "--algo {algo} trains in a Gaussian ensemble (ensemble.json, from fit-ensemble); {} holds a neural SDE",
+            dir.display()
+        ),
+        ModelFolder::GaussianEnsemble { .. } if !algo.uses_ensemble() => anyhow::bail!(
+            "--algo {algo} trains in a neural SDE (model.json, from fit-model); {} holds a Gaussian ensemble",
+            dir.display()
+        ),
+        ModelFolder::NeuralSde { ref model, .. }
+            if algo == Method::NunoR && !model.constants.config.reward_model =>
+        {
+            anyhow::bail!(
+                "--algo nuno-r needs a model that learned the reward (fit-model --reward-model); \
                  the one in {} did not",
-            args.model.display()
-        );
-        let task = metadata.provenance.task.unwrap_or(TaskConfig {
-            name: preset.task,
-            layout: preset.layout,
-            ..TaskConfig::d4rl(preset.task)
-        });
-        let c = &sde.constants.spec;
-        Ok(LoadedModel {
-            rules: TaskRules::new(task, &c.split, c.dt),
-            task,
-            thresholds: metadata.provenance.thresholds.clone(),
-            weights_sha256: metadata.weights_sha256.clone(),
-            dataset_sha256: metadata
-                .provenance
-                .dataset
-                .as_ref()
-                .map(|d| d.sha256.clone()),
-            ensemble: None,
-            sde: Some(sde),
-        })
-    } else {
-        let (fit, metadata) = load_ensemble(&args.model, device).with_context(context)?;
-        let task = metadata.task;
-        let ensemble = EnsembleDynamics::new(
-            &fit,
-            metadata.obs_dim,
-            metadata.act_dim,
-            EnsembleUncertainty::MaxAleatoric,
-        );
-        let ensemble = if args.algo == Method::TatuMopo {
-            ensemble.with_truncation_signal(EnsembleUncertainty::MaxDisagreement)
-        } else {
-            ensemble
-        };
-        Ok(LoadedModel {
-            rules: TaskRules::of_task(task)?,
-            task,
-            thresholds: None,
-            weights_sha256: metadata.weights_sha256.clone(),
-            dataset_sha256: metadata.dataset.as_ref().map(|d| d.sha256.clone()),
-            ensemble: Some(ensemble),
-            sde: None,
-        })
-    }
+                dir.display()
+            )
+        }
+        ModelFolder::GaussianEnsemble { model, metadata } if algo == Method::TatuMopo => {
+            ModelFolder::GaussianEnsemble {
+                model: Box::new(model.with_truncation_signal(EnsembleUncertainty::MaxDisagreement)),
+                metadata,
+            }
+        }
+        folder => folder,
+    };
+    let task = folder.task().unwrap_or(TaskConfig {
+        name: preset.task,
+        layout: preset.layout,
+        ..TaskConfig::d4rl(preset.task)
+    });
+    Ok((folder, task))
 }
 
 /// What the run's rollouts truncate at: NUNO's ε(h, α) from the model's table;
@@ -505,7 +469,7 @@ fn load_model(args: &Args, preset: &Preset, device: &Device) -> anyhow::Result<L
 fn truncation_threshold(
     args: &Args,
     config: &PolicyLoopConfig,
-    model: &LoadedModel,
+    model: &ModelFolder,
     ctx: &LoopContext,
     resuming: bool,
 ) -> anyhow::Result<Option<f32>> {
@@ -513,7 +477,7 @@ fn truncation_threshold(
         return Ok(None);
     }
     if args.algo.truncation() == Truncation::ModelTable {
-        return Ok(config.threshold_from(model.thresholds.as_ref())?);
+        return Ok(config.threshold_from(model.thresholds())?);
     }
     let path = args.out.join("threshold.json");
     if resuming && path.is_file() {

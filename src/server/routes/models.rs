@@ -5,7 +5,8 @@ use axum::extract::{Path, State};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use crate::server::{ApiError, AppState, LoadedModel, ModelKind, ServedDynamics};
+use crate::artifact::ModelFolder;
+use crate::server::{ApiError, AppState, LoadedModel, ModelKind};
 
 /// One loaded model in brief.
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
@@ -102,8 +103,8 @@ pub async fn get_model(
 ) -> Result<Json<ModelDetail>, ApiError> {
     let model = state.model(&id)?;
     let value = |v: serde_json::Result<serde_json::Value>| v.unwrap_or_default();
-    let (state_split, hyperparameters, thresholds, training, dataset) = match &model.dynamics {
-        ServedDynamics::NeuralSde { metadata: m, .. } => (
+    let (state_split, hyperparameters, thresholds, training, dataset) = match &model.folder {
+        ModelFolder::NeuralSde { metadata: m, .. } => (
             value(serde_json::to_value(&m.spec.split)),
             value(serde_json::to_value(&m.model)),
             value(serde_json::to_value(&m.provenance.thresholds)),
@@ -113,7 +114,7 @@ pub async fn get_model(
             }),
             value(serde_json::to_value(&m.provenance.dataset)),
         ),
-        ServedDynamics::GaussianEnsemble { metadata: m, .. } => (
+        ModelFolder::GaussianEnsemble { metadata: m, .. } => (
             serde_json::Value::Null,
             value(serde_json::to_value(&m.config)),
             serde_json::Value::Null,
