@@ -113,6 +113,7 @@ impl Server {
             // reused in that instant fails with hyper's IncompleteMessage.
             client: reqwest::Client::builder()
                 .pool_max_idle_per_host(0)
+                .timeout(common::bounded::HANG_BOUND)
                 .build()
                 .unwrap(),
             models_path: models.path().to_path_buf(),
@@ -1341,11 +1342,18 @@ async fn the_binary_serves_and_stops_cleanly_on_sigterm() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    // The first line names the address it bound.
-    let mut line = String::new();
-    BufReader::new(child.stderr.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
+    // The first line names the address it bound (read aside, so a server that
+    // never says it fails the wait instead of blocking it).
+    let stderr = child.stderr.take().unwrap();
+    let (sender, first_line) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut line = String::new();
+        let _ = BufReader::new(stderr).read_line(&mut line);
+        let _ = sender.send(line);
+    });
+    let line = first_line
+        .recv_timeout(common::bounded::HANG_BOUND)
+        .expect("nuno-server never named its address");
     assert!(
         line.contains("serving [\"hopper-random\", \"no-policy\"]"),
         "{line}"
@@ -1358,14 +1366,22 @@ async fn the_binary_serves_and_stops_cleanly_on_sigterm() {
         .next()
         .unwrap()
         .to_string();
-    let health = reqwest::get(format!("http://{addr}/readyz")).await.unwrap();
+    let client = reqwest::Client::builder()
+        .timeout(common::bounded::HANG_BOUND)
+        .build()
+        .unwrap();
+    let health = client
+        .get(format!("http://{addr}/readyz"))
+        .send()
+        .await
+        .unwrap();
     assert_eq!(health.status(), StatusCode::OK);
     let status = Command::new("kill")
         .args(["-TERM", &child.id().to_string()])
         .status()
         .unwrap();
     assert!(status.success());
-    let exit = child.wait().unwrap();
+    let exit = common::bounded::wait_within(&mut child, "nuno-server after SIGTERM");
     assert!(exit.success(), "graceful shutdown exits 0, got {exit:?}");
 }
 

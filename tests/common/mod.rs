@@ -1,4 +1,7 @@
-//! Helpers shared by the integration tests: the Python peer from `make venv`.
+//! Helpers shared by the integration tests: the Python peer from `make venv`,
+//! and bounded waits on what a test starts.
+
+pub mod bounded;
 
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
@@ -29,12 +32,9 @@ pub fn python() -> PathBuf {
 /// (Python's MuJoCo writes MUJOCO_LOG.TXT there); panics with its stderr if it fails.
 pub fn run_python<A: AsRef<OsStr>>(script: &str, args: &[A], workdir: &Path) {
     let script = workspace_root().join("tests/python").join(script);
-    let output = Command::new(python())
-        .arg(&script)
-        .args(args)
-        .current_dir(workdir)
-        .output()
-        .expect("could not start the test venv's python");
+    let mut command = Command::new(python());
+    command.arg(&script).args(args).current_dir(workdir);
+    let output = bounded::output_within(&mut command, &script.display().to_string());
     assert!(
         output.status.success(),
         "{} failed:\n{}",

@@ -247,7 +247,8 @@ fn bad_grids_are_refused_before_anything_runs() {
 
     // --executor slurm without Slurm's client.
     let grid = s(&write_grid(dir, "grid.toml", &[good_row]));
-    let output = Command::new(env!("CARGO_BIN_EXE_nuno-trainer"))
+    let mut command = Command::new(env!("CARGO_BIN_EXE_nuno-trainer"));
+    command
         .args([
             "experiment",
             "run",
@@ -258,9 +259,8 @@ fn bad_grids_are_refused_before_anything_runs() {
             "--executor",
             "slurm",
         ])
-        .env("PATH", "/nonexistent")
-        .output()
-        .unwrap();
+        .env("PATH", "/nonexistent");
+    let output = common::bounded::output_within(&mut command, "nuno-trainer experiment run");
     assert!(!output.status.success());
     let error = String::from_utf8_lossy(&output.stderr);
     assert!(error.contains("needs `sbatch` on PATH"), "{error}");
@@ -592,11 +592,10 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let cluster = dir.join("cluster");
-    let started = Command::new(&script)
-        .arg("start")
-        .arg(&cluster)
-        .output()
-        .unwrap();
+    let started = common::bounded::output_within(
+        Command::new(&script).arg("start").arg(&cluster),
+        "local-cluster.sh start",
+    );
     assert!(
         started.status.success(),
         "a single-node Slurm is needed (`make test` installs slurm-wlm and munge; the daemons run as root): {}",
@@ -618,7 +617,8 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
         "[0]",
     );
     let out = dir.join("out");
-    let submitted = Command::new(env!("CARGO_BIN_EXE_nuno-trainer"))
+    let mut command = Command::new(env!("CARGO_BIN_EXE_nuno-trainer"));
+    command
         .args([
             "experiment",
             "run",
@@ -630,9 +630,8 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
             "slurm",
         ])
         .arg("--slurm-arg=--cpus-per-task=1")
-        .env("SLURM_CONF", &conf)
-        .output()
-        .unwrap();
+        .env("SLURM_CONF", &conf);
+    let submitted = common::bounded::output_within(&mut command, "nuno-trainer experiment run");
     let stdout = String::from_utf8_lossy(&submitted.stdout);
     assert!(
         submitted.status.success(),
@@ -646,23 +645,18 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
         "{script_text}"
     );
 
-    // Wait for the queue to empty (event polling, no fixed sleep budget).
-    loop {
-        let queue = Command::new("squeue")
-            .arg("-h")
-            .env("SLURM_CONF", &conf)
-            .output()
-            .unwrap();
+    // Wait for the queue to empty (event polling, bounded only against a hang).
+    common::bounded::wait_until("the Slurm array job", || {
+        let mut squeue = Command::new("squeue");
+        squeue.arg("-h").env("SLURM_CONF", &conf);
+        let queue = common::bounded::output_within(&mut squeue, "squeue");
         assert!(
             queue.status.success(),
             "{}",
             String::from_utf8_lossy(&queue.stderr)
         );
-        if queue.stdout.is_empty() {
-            break;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(200));
-    }
+        queue.stdout.is_empty()
+    });
     let status = ok(&["experiment", "status", "--grid", &grid, "--out", &s(&out)]);
     assert!(
         status.contains("4/4 cells done"),

@@ -5,11 +5,14 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
+#[path = "../../../tests/common/bounded.rs"]
+pub mod bounded;
+
 pub fn trainer<S: AsRef<str>>(args: &[S]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_nuno-trainer"))
-        .args(args.iter().map(|a| a.as_ref()))
-        .output()
-        .expect("could not run nuno-trainer")
+    let args: Vec<&str> = args.iter().map(|a| a.as_ref()).collect();
+    let mut command = Command::new(env!("CARGO_BIN_EXE_nuno-trainer"));
+    command.args(&args);
+    bounded::output_within(&mut command, &format!("nuno-trainer {}", args.join(" ")))
 }
 
 pub fn ok<S: AsRef<str>>(args: &[S]) -> String {
