@@ -18,6 +18,11 @@ PIP_DOWNLOAD      := $(PYTHON) -m pip download --quiet --no-deps --only-binary=:
 # Where cargo puts its build (CARGO_TARGET_DIR or the workspace's target/), read when needed.
 TARGET_DIR    = $(shell $(CARGO) metadata --format-version 1 --no-deps | $(PYTHON) -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')
 
+# The suite with the tests that need the venv, Slurm and the Kubernetes schemas
+# (`cargo test --workspace` alone lists them as ignored, saying why). `make serve`
+# builds with the same features, so either command reuses the other's build.
+SUITE        := --workspace --release --features nuno-trainer/external-tests
+
 SERVE_ADDR   ?= 127.0.0.1:8080
 SERVE_MODELS ?= models
 
@@ -28,17 +33,17 @@ SERVE_MODELS ?= models
 ## integration tests): `cargo run` would resolve the dependencies' features without the
 ## dev-dependencies and compile a second tree, so either command reuses the other's build.
 serve: mujoco
-	$(CARGO) test --workspace --release --no-run
+	$(CARGO) test $(SUITE) --no-run
 	"$(TARGET_DIR)/release/nuno-server" --models $(SERVE_MODELS) --addr $(SERVE_ADDR)
 
 ## test: the full suite (unit, integration, Gymnasium parity), then the fused
 ## kernels' numerics again on each narrower vector level (NUNO_SIMD), so every
 ## variant runs whatever the machine's widest is (--workspace: the same build as above).
 test: mujoco venv slurm
-	$(CARGO) test --workspace --release
+	$(CARGO) test $(SUITE)
 	for level in portable avx2; do \
-	  NUNO_SIMD=$$level $(CARGO) test --workspace --release --lib infer:: || exit 1; \
-	  NUNO_SIMD=$$level $(CARGO) test --workspace --release --test infer || exit 1; \
+	  NUNO_SIMD=$$level $(CARGO) test $(SUITE) --lib infer:: || exit 1; \
+	  NUNO_SIMD=$$level $(CARGO) test $(SUITE) --test infer || exit 1; \
 	done
 
 build: mujoco

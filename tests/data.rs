@@ -109,6 +109,10 @@ struct H5pyReport {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "external-tests"),
+    ignore = "needs the Python venv (`make venv`); `make test` runs it"
+)]
 fn written_files_round_trip_and_h5py_reads_d4rl_layout() {
     let dataset = small_hopper_dataset(2000, 2);
     let dir = tempfile::tempdir().unwrap();
@@ -185,6 +189,10 @@ fn written_files_round_trip_and_h5py_reads_d4rl_layout() {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "external-tests"),
+    ignore = "needs the Python venv (`make venv`); `make test` runs it"
+)]
 fn d4rl_quirks_are_repaired_not_copied() {
     let (_dir, d) = fixtures();
     // Boundary missing from the flags, float64 observations, rewards [n, 1].
@@ -240,6 +248,10 @@ fn expect_error(path: &Path, check: impl Fn(&DataError) -> bool) -> String {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "external-tests"),
+    ignore = "needs the Python venv (`make venv`); `make test` runs it"
+)]
 fn bad_files_are_refused_with_what_is_wrong() {
     let (_dir, d) = fixtures();
     let m = expect_error(
@@ -295,6 +307,10 @@ fn bad_files_are_refused_with_what_is_wrong() {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "external-tests"),
+    ignore = "needs the Python venv (`make venv`); `make test` runs it"
+)]
 fn neorl_and_minari_files_are_read() {
     let (_dir, d) = fixtures();
     let neorl = read_neorl(&d.join("neorl.npz")).unwrap();

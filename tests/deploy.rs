@@ -7,6 +7,10 @@ mod common;
 use std::path::Path;
 
 #[test]
+#[cfg_attr(
+    not(feature = "external-tests"),
+    ignore = "needs the Python venv and its Kubernetes schemas (`make venv`); `make test` runs it"
+)]
 fn deploy_manifests_validate_against_the_kubernetes_schemas() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let work = tempfile::tempdir().unwrap();

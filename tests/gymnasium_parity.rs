@@ -86,6 +86,10 @@ fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "external-tests"),
+    ignore = "needs the Python venv (`make venv`); `make test` runs it"
+)]
 fn rust_tasks_match_gymnasium_v4() {
     let mut runs: Vec<(Episode, Outcome)> = Vec::new();
     for name in TaskName::ALL {

@@ -713,6 +713,10 @@ fn threshold_settings_no_table_can_use_are_refused_by_name() {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "external-tests"),
+    ignore = "needs the Python venv (`make venv`); `make test` runs it"
+)]
 fn artifacts_round_trip_bit_exactly_and_refuse_damage() {
     let dataset = hopper_dataset(3000, 3);
     let (train, valid) = dataset.split_by_trajectory(0.2, 0);

@@ -921,6 +921,10 @@ fn committed_openapi_spec_is_current() {
 /// tensor extension off and on: the same numbers as `/v1/.../step` with the
 /// same seed, and binary answers are binary.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(feature = "external-tests"),
+    ignore = "needs the Python venv (`make venv`); `make test` runs it"
+)]
 async fn kserves_python_client_infers_in_json_and_binary() {
     let server = Server::start(limits(), None).await;
     let (states, acts) = (upright(5), actions(5));
@@ -1044,6 +1048,10 @@ async fn malformed_binary_infer_bodies_are_refused_by_name() {
 /// binary bodies, and model-dependent widths and field relations). Small
 /// limits keep every generated request cheap, and the spec states them.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(feature = "external-tests"),
+    ignore = "needs the Python venv (`make venv`); `make test` runs it"
+)]
 async fn the_server_keeps_the_contract_of_its_own_spec() {
     let limits = Limits {
         max_batch: 16,
@@ -1081,6 +1089,10 @@ async fn the_server_keeps_the_contract_of_its_own_spec() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(feature = "external-tests"),
+    ignore = "needs the Python venv (`make venv`); `make test` runs it"
+)]
 async fn a_client_generated_from_the_spec_calls_the_server() {
     let server = Server::start(limits(), None).await;
     let work = tempfile::tempdir().unwrap();

@@ -134,6 +134,10 @@ fn online_sac_records_d4rl_columns_and_resumes_bit_for_bit() {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "external-tests"),
+    ignore = "needs the Python venv (`make venv`); `make test` runs it"
+)]
 fn behaviour_recipes_make_d4rl_and_neorl_datasets() {
     let tmp = tempfile::tempdir().unwrap();
     let p = |name: &str| tmp.path().join(name);

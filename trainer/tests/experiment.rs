@@ -586,6 +586,10 @@ fn methods_in_the_same_kind_of_model_share_one_fit_per_seed() {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "external-tests"),
+    ignore = "needs a single-node Slurm (`make slurm`); `make test` runs it"
+)]
 fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let script = root.join("deploy/slurm/local-cluster.sh");
