@@ -6,8 +6,6 @@
 //! numpy; bad requests are refused by name before any work.
 
 mod common;
-#[path = "../../tests/common/mod.rs"]
-mod python_peer;
 
 use std::path::{Path, PathBuf};
 
@@ -50,7 +48,7 @@ fn online<S: AsRef<str>>(out: &Path, steps: usize, seed: u64, extra: &[S]) -> Ve
 /// What h5py (`inspect-d4rl`) or numpy (`inspect-neorl`) sees in `file`.
 fn inspect(command: &str, file: &Path, workdir: &Path) -> serde_json::Value {
     let report = workdir.join(format!("{command}.json"));
-    python_peer::run_python(
+    common::peer::run_python(
         "datasets.py",
         &[command.as_ref(), file.as_os_str(), report.as_os_str()],
         workdir,

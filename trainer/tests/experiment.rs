@@ -260,7 +260,7 @@ fn bad_grids_are_refused_before_anything_runs() {
             "slurm",
         ])
         .env("PATH", "/nonexistent");
-    let output = common::bounded::output_within(&mut command, "nuno-trainer experiment run");
+    let output = common::peer::bounded::output_within(&mut command, "nuno-trainer experiment run");
     assert!(!output.status.success());
     let error = String::from_utf8_lossy(&output.stderr);
     assert!(error.contains("needs `sbatch` on PATH"), "{error}");
@@ -596,7 +596,7 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let cluster = dir.join("cluster");
-    let started = common::bounded::output_within(
+    let started = common::peer::bounded::output_within(
         Command::new(&script).arg("start").arg(&cluster),
         "local-cluster.sh start",
     );
@@ -635,7 +635,8 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
         ])
         .arg("--slurm-arg=--cpus-per-task=1")
         .env("SLURM_CONF", &conf);
-    let submitted = common::bounded::output_within(&mut command, "nuno-trainer experiment run");
+    let submitted =
+        common::peer::bounded::output_within(&mut command, "nuno-trainer experiment run");
     let stdout = String::from_utf8_lossy(&submitted.stdout);
     assert!(
         submitted.status.success(),
@@ -650,10 +651,10 @@ fn the_slurm_executor_runs_an_array_job_on_a_real_cluster() {
     );
 
     // Wait for the queue to empty (event polling, bounded only against a hang).
-    common::bounded::wait_until("the Slurm array job", || {
+    common::peer::bounded::wait_until("the Slurm array job", || {
         let mut squeue = Command::new("squeue");
         squeue.arg("-h").env("SLURM_CONF", &conf);
-        let queue = common::bounded::output_within(&mut squeue, "squeue");
+        let queue = common::peer::bounded::output_within(&mut squeue, "squeue");
         assert!(
             queue.status.success(),
             "{}",

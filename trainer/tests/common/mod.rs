@@ -5,8 +5,10 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-#[path = "../../../tests/common/bounded.rs"]
-pub mod bounded;
+/// The library's test helpers: the Python peer and the bounded waits.
+#[path = "../../../tests/common/mod.rs"]
+pub mod peer;
+use peer::bounded;
 
 pub fn trainer<S: AsRef<str>>(args: &[S]) -> Output {
     let args: Vec<&str> = args.iter().map(|a| a.as_ref()).collect();
