@@ -199,7 +199,13 @@ pub struct Cell {
     /// Position in the grid's order (the Slurm array index).
     pub index: usize,
     pub dataset: String,
-    /// The dataset file, resolved against the grid's folder.
+    /// The dataset file as the grid names it, relative to the grid file's
+    /// folder, so a kept result names no one machine's paths (results written
+    /// before it record the path they ran from).
+    #[serde(rename = "file")]
+    pub file_in_grid: PathBuf,
+    /// The same file resolved against the grid's folder, what the cell reads.
+    #[serde(skip)]
     pub file: PathBuf,
     pub task: TaskName,
     pub layout: ObservationLayout,
@@ -221,7 +227,7 @@ impl Cell {
     /// (a cluster's login and compute nodes), keeps its finished cells.
     pub fn is_same_cell_as(&self, other: &Cell) -> bool {
         self.dataset == other.dataset
-            && self.file.file_name() == other.file.file_name()
+            && self.file_in_grid.file_name() == other.file_in_grid.file_name()
             && self.task == other.task
             && self.layout == other.layout
             && self.preset == other.preset
@@ -416,6 +422,7 @@ impl Grid {
                     cells.push(Cell {
                         index: cells.len(),
                         dataset: d.name.clone(),
+                        file_in_grid: d.file.clone(),
                         file: file.clone(),
                         task: d.task,
                         layout: *layout,

@@ -14,7 +14,7 @@ use super::grid::{Budget, Cell};
 use crate::agent::EpochRecord;
 use crate::agent::Method;
 use crate::agent::MopoSettings;
-use crate::artifact::{latest_checkpoint, read_versioned_json_filled, write_json};
+use crate::artifact::{latest_checkpoint, read_versioned_json_filled, sha256_file, write_json};
 
 pub const RESULT_SCHEMA_VERSION: u32 = 1;
 const RESULT: &str = "result.json";
@@ -41,6 +41,10 @@ pub struct CellResult {
     /// before it was recorded.
     #[serde(default)]
     pub budget: Option<Budget>,
+    /// SHA-256 of the dataset file when the cell was summarised. Absent from
+    /// results written before it was recorded.
+    #[serde(default)]
+    pub dataset_sha256: Option<String>,
 }
 
 /// Where a cell stands.
@@ -96,6 +100,7 @@ pub fn summarize_run(
             .collect(),
         policy_seconds: Some(records.iter().map(|r| r.seconds.total()).sum()),
         budget: Some(budget.clone()),
+        dataset_sha256: Some(sha256_file(&cell.file)?),
     })
 }
 
@@ -136,7 +141,7 @@ pub fn cell_status(
                 "{}: written for another cell (preset {}, dataset file {}); move the old experiment away",
                 dir.display(),
                 old.preset,
-                old.file.display()
+                old.file_in_grid.display()
             )));
         }
         if let Some(then) = &result.budget {
@@ -352,6 +357,7 @@ mod tests {
             cell: Cell {
                 index,
                 dataset: dataset.into(),
+                file_in_grid: PathBuf::from(format!("{dataset}.hdf5")),
                 file: PathBuf::from(format!("{dataset}.hdf5")),
                 task: TaskName::Hopper,
                 layout: ObservationLayout::D4rl,
@@ -366,6 +372,7 @@ mod tests {
             curve: vec![(1000, 0.0)],
             policy_seconds: None,
             budget: None,
+            dataset_sha256: None,
         }
     }
 

@@ -399,6 +399,22 @@ fn a_local_grid_runs_once_resumes_and_reports() {
     // Finished cells are never rerun.
     let again = ok(&run);
     assert!(again.contains("0 to run"), "{again}");
+    // A result names its dataset as the grid does, with the file's SHA-256
+    // (coreutils' sha256sum, not nuno's hasher).
+    let result: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(out.join("hopper-random/nuno/seed-0/result.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(result["cell"]["file"], "hopper.hdf5", "{result}");
+    let sha256sum = common::peer::bounded::output_within(
+        std::process::Command::new("sha256sum").arg(dir.join("hopper.hdf5")),
+        "sha256sum",
+    );
+    let digest = String::from_utf8_lossy(&sha256sum.stdout);
+    assert_eq!(
+        result["dataset_sha256"].as_str(),
+        digest.split_whitespace().next()
+    );
 
     // A cell killed after its second epoch, before its result was written,
     // resumes there: given a longer budget, it trains the third epoch only;
