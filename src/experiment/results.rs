@@ -15,6 +15,7 @@ use crate::agent::EpochRecord;
 use crate::agent::Method;
 use crate::agent::MopoSettings;
 use crate::artifact::{latest_checkpoint, read_versioned_json_filled, sha256_file, write_json};
+use crate::shared::{Metric, MetricsTable};
 
 pub const RESULT_SCHEMA_VERSION: u32 = 1;
 const RESULT: &str = "result.json";
@@ -275,23 +276,19 @@ fn mean_std(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
 
 /// One line per finished cell.
 pub fn results_csv(results: &[CellResult]) -> String {
-    let mut csv =
-        String::from("dataset,method,seed,best_score,best_step,final_score,steps,policy_seconds\n");
-    for r in results {
-        csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{}\n",
-            r.cell.dataset,
-            r.cell.method,
-            r.cell.seed,
-            r.best_score,
-            r.best_step,
-            r.final_score,
-            r.steps,
+    MetricsTable::new()
+        .column("dataset", |r: &CellResult| r.cell.dataset.as_str().into())
+        .column("method", |r: &CellResult| r.cell.method.to_string().into())
+        .column("seed", |r: &CellResult| r.cell.seed.into())
+        .column("best_score", |r: &CellResult| r.best_score.into())
+        .column("best_step", |r: &CellResult| r.best_step.into())
+        .column("final_score", |r: &CellResult| r.final_score.into())
+        .column("steps", |r: &CellResult| r.steps.into())
+        .column("policy_seconds", |r: &CellResult| {
             r.policy_seconds
-                .map_or(String::new(), |s| format!("{s:.1}"))
-        ));
-    }
-    csv
+                .map_or_else(Metric::none, |s| Metric::fixed(s, 1))
+        })
+        .csv(results)
 }
 
 /// A Table 1/2-style markdown table: datasets as rows, methods as columns,

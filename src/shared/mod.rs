@@ -1,10 +1,11 @@
 //! What every concern may import, and which imports none of them: the batch
 //! interfaces, the cancellation flag, the atomic file writer, the names of
-//! field-less enums and the derived seeds.
+//! field-less enums, the derived seeds and the metrics table.
 
 pub mod atomic;
 pub mod batch;
 pub mod cancel;
+mod metrics_table;
 mod named_enum;
 pub mod seed;
 
@@ -14,5 +15,6 @@ pub use batch::{
     euler_maruyama, scaled_noise, step_batch,
 };
 pub use cancel::{Cancel, CancelOnDrop, Cancelled};
+pub use metrics_table::{Metric, MetricsTable};
 pub(crate) use named_enum::named_enum;
 pub use seed::{SeedStream, derive_seed};

@@ -21,7 +21,7 @@ use nuno::experiment::{
     ExploitationConfig, PredictionConfig, exploitation, prediction_error, uncertainty_by_action,
 };
 use nuno::infer::Kernel;
-use nuno::shared::BatchDynamics;
+use nuno::shared::{BatchDynamics, Metric, MetricsTable};
 
 use crate::output::write_text;
 use crate::plot::{Series, line_chart};
@@ -135,7 +135,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         particles: args.particles,
         seed: args.seed,
     };
-    let mut csv = String::from("model,data,step,rmse,windows\n");
+    // (model, data, step, rmse, windows)
+    let mut rows: Vec<(String, &str, usize, f64, usize)> = Vec::new();
     let mut curves = Vec::new();
     for model in &models {
         let splits = [
@@ -152,13 +153,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 &prediction,
             )
             .with_context(|| format!("{} on the {split} data", model.name))?;
-            for (k, (rmse, n)) in error.rmse.iter().zip(&error.windows).enumerate() {
-                csv.push_str(&format!("{},{split},{},{rmse},{n}\n", model.name, k + 1));
+            for (k, (&rmse, &n)) in error.rmse.iter().zip(&error.windows).enumerate() {
+                rows.push((model.name.clone(), split, k + 1, rmse, n));
             }
             curves.push((format!("{} ({split})", model.name), error.rmse));
         }
     }
-    write_text(&args.out.join("prediction_error.csv"), &csv)?;
+    let table = MetricsTable::new()
+        .column("model", |r: &(String, &str, usize, f64, usize)| {
+            r.0.as_str().into()
+        })
+        .column("data", |r: &(String, &str, usize, f64, usize)| r.1.into())
+        .column("step", |r: &(String, &str, usize, f64, usize)| r.2.into())
+        .column("rmse", |r: &(String, &str, usize, f64, usize)| r.3.into())
+        .column("windows", |r: &(String, &str, usize, f64, usize)| {
+            r.4.into()
+        });
+    write_text(&args.out.join("prediction_error.csv"), &table.csv(&rows))?;
     line_chart(
         &args.out.join("prediction_error.svg"),
         "Open-loop prediction error (Figure 5)",
@@ -175,7 +186,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .map(|(&l, &h)| (l as f32, h as f32))
             .collect()
     };
-    let mut csv = String::from("model,actions,mean,p10,p50,p90,max\n");
+    // (model, actions, [mean, p10, p50, p90, max])
+    let mut rows: Vec<(String, &str, [Metric; 5])> = Vec::new();
     let mut curves = Vec::new();
     for model in &models {
         let probes = uncertainty_by_action(
@@ -187,21 +199,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.seed,
         );
         for (source, eta) in probes {
-            let at = |q: f64| eta[((eta.len() - 1) as f64 * q).round() as usize];
+            let at = |q: f64| Metric::from(eta[((eta.len() - 1) as f64 * q).round() as usize]);
             let mean = eta.iter().map(|&x| f64::from(x)).sum::<f64>() / eta.len() as f64;
-            csv.push_str(&format!(
-                "{},{},{mean},{},{},{},{}\n",
-                model.name,
-                source.as_str(),
-                at(0.1),
-                at(0.5),
-                at(0.9),
-                at(1.0)
-            ));
+            let stats = [mean.into(), at(0.1), at(0.5), at(0.9), at(1.0)];
+            rows.push((model.name.clone(), source.as_str(), stats));
             curves.push((format!("{} ({})", model.name, source.as_str()), eta));
         }
     }
-    write_text(&args.out.join("uncertainty.csv"), &csv)?;
+    let mut table = MetricsTable::new()
+        .column("model", |r: &(String, &str, [Metric; 5])| {
+            r.0.as_str().into()
+        })
+        .column("actions", |r: &(String, &str, [Metric; 5])| r.1.into());
+    for (i, name) in ["mean", "p10", "p50", "p90", "max"].into_iter().enumerate() {
+        table = table.column(name, move |r: &(String, &str, [Metric; 5])| r.2[i].clone());
+    }
+    write_text(&args.out.join("uncertainty.csv"), &table.csv(&rows))?;
     let series: Vec<Series> = curves
         .iter()
         .map(|(name, eta)| Series {
@@ -229,7 +242,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             penalty: args.penalty,
             seed: args.seed,
         };
-        let mut csv = String::from("model,step,real,model,model_penalized\n");
+        // (model, step, real, model, model_penalized)
+        let mut rows: Vec<(String, usize, f64, f64, f64)> = Vec::new();
         let mut series_data = Vec::new();
         for model in &models {
             let result = exploitation(
@@ -240,13 +254,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 &config,
             )?;
             for k in 0..args.episode_steps {
-                csv.push_str(&format!(
-                    "{},{},{},{},{}\n",
-                    model.name,
+                let (real, in_model) = (result.real[k], result.model[k]);
+                rows.push((
+                    model.name.clone(),
                     k + 1,
-                    result.real[k],
-                    result.model[k],
-                    result.model_penalized[k]
+                    real,
+                    in_model,
+                    result.model_penalized[k],
                 ));
             }
             if series_data.is_empty() {
@@ -258,7 +272,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 result.model_penalized,
             ));
         }
-        write_text(&args.out.join("exploitation.csv"), &csv)?;
+        type Row = (String, usize, f64, f64, f64);
+        let table = MetricsTable::new()
+            .column("model", |r: &Row| r.0.as_str().into())
+            .column("step", |r: &Row| r.1.into())
+            .column("real", |r: &Row| r.2.into())
+            .column("model", |r: &Row| r.3.into())
+            .column("model_penalized", |r: &Row| r.4.into());
+        write_text(&args.out.join("exploitation.csv"), &table.csv(&rows))?;
         line_chart(
             &args.out.join("exploitation.svg"),
             "The policy's return: models against the real task (Figure 4)",

@@ -14,6 +14,7 @@ use nuno::artifact::{
 use nuno::data::{BehaviourLevel, LEVEL_TOLERANCE, select_behaviour};
 use nuno::envs::TaskName;
 use nuno::sde::ComputeDevice;
+use nuno::shared::{Metric, MetricsTable};
 
 use crate::data_source::task_config;
 use crate::output::write_text;
@@ -194,37 +195,56 @@ fn select(args: SelectArgs) -> anyhow::Result<()> {
 
 /// metrics.csv and the return curve, rewritten from the whole history.
 fn write_metrics(out: &Path, history: &[OnlineRecord]) -> anyhow::Result<()> {
-    let mut csv = String::from(
-        "step,updates,episodes,charts/episodic_return,eval/mean_return,eval/std_return,\
-         eval/normalized_score,losses/qf1_values,losses/qf1_loss,losses/qf2_loss,losses/actor_loss,\
-         losses/alpha,losses/alpha_loss,losses/entropy,charts/env_steps_per_second,\
-         charts/updates_per_second,time/environment,time/updates,time/evaluation\n",
-    );
-    for r in history {
-        let l = &r.losses;
-        csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.1},{:.2},{:.3},{:.3},{:.3}\n",
-            r.step,
-            r.updates,
-            r.episodes,
-            r.train_return,
-            r.eval.mean_return,
-            r.eval.std_return,
-            r.eval.normalized_score,
-            l.qf1_values,
-            l.qf1_loss,
-            l.qf2_loss,
-            l.actor_loss,
-            l.alpha,
-            l.alpha_loss,
-            l.entropy,
-            r.env_steps_per_second,
-            r.updates_per_second,
-            r.seconds.environment,
-            r.seconds.updates,
-            r.seconds.evaluation
-        ));
-    }
+    let fixed = Metric::fixed;
+    let table = MetricsTable::new()
+        .column("step", |r: &OnlineRecord| r.step.into())
+        .column("updates", |r: &OnlineRecord| r.updates.into())
+        .column("episodes", |r: &OnlineRecord| r.episodes.into())
+        .column("charts/episodic_return", |r: &OnlineRecord| {
+            r.train_return.into()
+        })
+        .column("eval/mean_return", |r: &OnlineRecord| {
+            r.eval.mean_return.into()
+        })
+        .column("eval/std_return", |r: &OnlineRecord| {
+            r.eval.std_return.into()
+        })
+        .column("eval/normalized_score", |r: &OnlineRecord| {
+            r.eval.normalized_score.into()
+        })
+        .column("losses/qf1_values", |r: &OnlineRecord| {
+            r.losses.qf1_values.into()
+        })
+        .column("losses/qf1_loss", |r: &OnlineRecord| {
+            r.losses.qf1_loss.into()
+        })
+        .column("losses/qf2_loss", |r: &OnlineRecord| {
+            r.losses.qf2_loss.into()
+        })
+        .column("losses/actor_loss", |r: &OnlineRecord| {
+            r.losses.actor_loss.into()
+        })
+        .column("losses/alpha", |r: &OnlineRecord| r.losses.alpha.into())
+        .column("losses/alpha_loss", |r: &OnlineRecord| {
+            r.losses.alpha_loss.into()
+        })
+        .column("losses/entropy", |r: &OnlineRecord| r.losses.entropy.into())
+        .column("charts/env_steps_per_second", |r: &OnlineRecord| {
+            fixed(r.env_steps_per_second, 1)
+        })
+        .column("charts/updates_per_second", |r: &OnlineRecord| {
+            fixed(r.updates_per_second, 2)
+        })
+        .column("time/environment", |r: &OnlineRecord| {
+            fixed(r.seconds.environment, 3)
+        })
+        .column("time/updates", |r: &OnlineRecord| {
+            fixed(r.seconds.updates, 3)
+        })
+        .column("time/evaluation", |r: &OnlineRecord| {
+            fixed(r.seconds.evaluation, 3)
+        });
+    let csv = table.csv(history);
     let path = out.join("metrics.csv");
     write_text(&path, &csv)?;
     let series = |name, f: fn(&OnlineRecord) -> f64| Series {

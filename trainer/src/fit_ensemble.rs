@@ -10,9 +10,10 @@ use anyhow::Context;
 use nuno::artifact::{
     EnsembleFitShape, load_ensemble_checkpoint, save_ensemble, save_ensemble_checkpoint,
 };
-use nuno::ensemble::{EnsembleConfig, EnsembleError, fit_ensemble};
+use nuno::ensemble::{EnsembleConfig, EnsembleEpoch, EnsembleError, fit_ensemble};
 use nuno::infer::Kernel;
 use nuno::sde::ComputeDevice;
+use nuno::shared::MetricsTable;
 
 use crate::data_source::DataSource;
 
@@ -126,18 +127,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(args.data.info(&dataset)),
     )?;
 
-    let mut csv = String::from("epoch,train_loss,improved");
+    let mut table = MetricsTable::new()
+        .column("epoch", |e: &EnsembleEpoch| e.epoch.into())
+        .column("train_loss", |e: &EnsembleEpoch| e.train_loss.into())
+        .column("improved", |e: &EnsembleEpoch| e.improved.into());
     for m in 0..config.members {
-        csv.push_str(&format!(",holdout_mse/{m}"));
+        table = table.column(format!("holdout_mse/{m}"), move |e: &EnsembleEpoch| {
+            e.holdout_mse[m].into()
+        });
     }
-    csv.push('\n');
-    for e in &fit.history {
-        csv.push_str(&format!("{},{},{}", e.epoch, e.train_loss, e.improved));
-        for mse in &e.holdout_mse {
-            csv.push_str(&format!(",{mse}"));
-        }
-        csv.push('\n');
-    }
+    let csv = table.csv(&fit.history);
     let path = args.out.join("ensemble_metrics.csv");
     write_text(&path, &csv)?;
     let names: Vec<String> = (0..config.members).map(|m| format!("member {m}")).collect();

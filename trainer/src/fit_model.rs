@@ -13,10 +13,11 @@ use nuno::artifact::{DynamicsProvenance, load_sde_checkpoint, save_dynamics, sav
 use nuno::envs::MujocoTask;
 use nuno::infer::Kernel;
 use nuno::sde::{
-    CalibrationConfig, ComputeDevice, DriftInputs, DynamicsSpec, EtaLossForm, FitConfig,
-    LikelihoodPath, LossConfig, Recipe, SampleNoise, SdeConfig, SdeError, ThresholdConfig,
-    calibration_report, compute_thresholds, fit_from, prediction_error,
+    CalibrationConfig, ComputeDevice, DriftInputs, DynamicsSpec, EtaLossForm, FitConfig, FitRecord,
+    LikelihoodPath, LossConfig, Recipe, SampleNoise, SdeConfig, SdeError, StepLosses,
+    ThresholdConfig, calibration_report, compute_thresholds, fit_from, prediction_error,
 };
+use nuno::shared::{Metric, MetricsTable};
 
 use crate::data_source::DataSource;
 use crate::eta_report::{action_space, calibration_charts, print_calibration};
@@ -214,13 +215,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let metrics_path = args.out.join("metrics.csv");
     let mut csv = File::create(&metrics_path)
         .with_context(|| format!("creating {}", metrics_path.display()))?;
-    writeln!(
-        csv,
-        "step,learning_rate,loss,data,sc,grad,mu,far,residual,value,one,floor,valid_nll"
-    )?;
+    let table = fit_metrics();
+    write!(csv, "{}", table.header())?;
     let mut records = Vec::new();
     let mut write_error = None;
-    let mut log = |r: &nuno::sde::FitRecord| {
+    let mut log = |r: &FitRecord| {
         bar.set_position(r.step as u64);
         let valid_nll = r.valid_nll.map_or(String::new(), |v| v.to_string());
         let l = &r.losses;
@@ -228,23 +227,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "L_data {:.2} L_sc {:.3} L_grad {:.3} valid NLL {}",
             l.data, l.sc, l.grad, valid_nll
         ));
-        if let Err(e) = writeln!(
-            csv,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
-            r.step,
-            r.learning_rate,
-            l.total,
-            l.data,
-            l.sc,
-            l.grad,
-            l.mu,
-            l.far,
-            l.residual,
-            l.value,
-            l.one,
-            l.floor,
-            valid_nll
-        ) {
+        if let Err(e) = write!(csv, "{}", table.line(r)) {
             write_error.get_or_insert(e);
         }
         records.push(r.clone());
@@ -347,4 +330,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     println!("wrote {}", args.out.display());
     Ok(())
+}
+
+/// metrics.csv's columns: one row per logged fit step.
+fn fit_metrics() -> MetricsTable<'static, FitRecord> {
+    let loss = |f: fn(&StepLosses) -> f32| move |r: &FitRecord| Metric::from(f(&r.losses));
+    MetricsTable::new()
+        .column("step", |r: &FitRecord| r.step.into())
+        .column("learning_rate", |r: &FitRecord| r.learning_rate.into())
+        .column("loss", loss(|l| l.total))
+        .column("data", loss(|l| l.data))
+        .column("sc", loss(|l| l.sc))
+        .column("grad", loss(|l| l.grad))
+        .column("mu", loss(|l| l.mu))
+        .column("far", loss(|l| l.far))
+        .column("residual", loss(|l| l.residual))
+        .column("value", loss(|l| l.value))
+        .column("one", loss(|l| l.one))
+        .column("floor", loss(|l| l.floor))
+        .column("valid_nll", |r: &FitRecord| {
+            r.valid_nll.map_or_else(Metric::none, Metric::from)
+        })
 }

@@ -21,7 +21,7 @@ use nuno::ensemble::EnsembleUncertainty;
 use nuno::envs::{ForwardVelocity, TaskConfig};
 use nuno::infer::Kernel;
 use nuno::sde::{ComputeDevice, Recipe, ThresholdConfig};
-use nuno::shared::BatchDynamics;
+use nuno::shared::{BatchDynamics, Metric, MetricsTable};
 
 use crate::output::write_text;
 use crate::plot::{Series, line_chart};
@@ -342,46 +342,73 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// metrics.csv and metrics.jsonl (CleanRL metric names) and the two plots,
 /// rewritten from the whole history so a resumed run's files stay consistent.
 fn write_metrics(out: &Path, history: &[EpochRecord]) -> anyhow::Result<()> {
-    let mut csv = String::from(
-        "epoch,step,charts/SPS,charts/normalized_score,charts/normalized_score_std,charts/episodic_return,\
-         losses/qf1_values,losses/qf1_loss,losses/qf2_loss,losses/actor_loss,losses/alpha,losses/alpha_loss,\
-         losses/entropy,rollout/mean_length,rollout/mean_eta,rollout/truncated,rollout/terminated,rollout/diverged,\
-         rollout/mean_penalized_reward,eta/policy,eta/dataset,eta/random,model_buffer,\
-         time/updates,time/rollouts,time/evaluation,time/eta_probe\n",
-    );
+    let metric = |v: f64| Metric::fixed(v, 3);
+    let table = MetricsTable::new()
+        .column("epoch", |r: &EpochRecord| r.epoch.into())
+        .column("step", |r: &EpochRecord| r.step.into())
+        .column("charts/SPS", |r: &EpochRecord| metric(r.sps))
+        .column("charts/normalized_score", |r: &EpochRecord| {
+            r.eval.normalized_score.into()
+        })
+        .column("charts/normalized_score_std", |r: &EpochRecord| {
+            r.eval.std_normalized_score.into()
+        })
+        .column("charts/episodic_return", |r: &EpochRecord| {
+            r.eval.mean_return.into()
+        })
+        .column("losses/qf1_values", |r: &EpochRecord| {
+            r.losses.qf1_values.into()
+        })
+        .column("losses/qf1_loss", |r: &EpochRecord| {
+            r.losses.qf1_loss.into()
+        })
+        .column("losses/qf2_loss", |r: &EpochRecord| {
+            r.losses.qf2_loss.into()
+        })
+        .column("losses/actor_loss", |r: &EpochRecord| {
+            r.losses.actor_loss.into()
+        })
+        .column("losses/alpha", |r: &EpochRecord| r.losses.alpha.into())
+        .column("losses/alpha_loss", |r: &EpochRecord| {
+            r.losses.alpha_loss.into()
+        })
+        .column("losses/entropy", |r: &EpochRecord| r.losses.entropy.into())
+        .column("rollout/mean_length", |r: &EpochRecord| {
+            r.rollout.mean_length.into()
+        })
+        .column("rollout/mean_eta", |r: &EpochRecord| {
+            r.rollout.mean_eta.into()
+        })
+        .column("rollout/truncated", |r: &EpochRecord| {
+            r.rollout.truncated.into()
+        })
+        .column("rollout/terminated", |r: &EpochRecord| {
+            r.rollout.terminated.into()
+        })
+        .column("rollout/diverged", |r: &EpochRecord| {
+            r.rollout.diverged.into()
+        })
+        .column("rollout/mean_penalized_reward", |r: &EpochRecord| {
+            r.rollout.mean_penalized_reward.into()
+        })
+        .column("eta/policy", |r: &EpochRecord| r.eta.policy.into())
+        .column("eta/dataset", |r: &EpochRecord| r.eta.dataset.into())
+        .column("eta/random", |r: &EpochRecord| r.eta.random.into())
+        .column("model_buffer", |r: &EpochRecord| r.model_buffer.into())
+        .column("time/updates", |r: &EpochRecord| metric(r.seconds.updates))
+        .column("time/rollouts", |r: &EpochRecord| {
+            metric(r.seconds.rollouts)
+        })
+        .column("time/evaluation", |r: &EpochRecord| {
+            metric(r.seconds.evaluation)
+        })
+        .column("time/eta_probe", |r: &EpochRecord| {
+            metric(r.seconds.eta_probe)
+        });
+    let csv = table.csv(history);
+    // The records themselves, nested as `experiment` reads them back.
     let mut jsonl = String::new();
     for r in history {
-        let (l, ro, e) = (&r.losses, &r.rollout, &r.eta);
-        csv.push_str(&format!(
-            "{},{},{:.3},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3}\n",
-            r.epoch,
-            r.step,
-            r.sps,
-            r.eval.normalized_score,
-            r.eval.std_normalized_score,
-            r.eval.mean_return,
-            l.qf1_values,
-            l.qf1_loss,
-            l.qf2_loss,
-            l.actor_loss,
-            l.alpha,
-            l.alpha_loss,
-            l.entropy,
-            ro.mean_length,
-            ro.mean_eta,
-            ro.truncated,
-            ro.terminated,
-            ro.diverged,
-            ro.mean_penalized_reward,
-            e.policy,
-            e.dataset,
-            e.random,
-            r.model_buffer,
-            r.seconds.updates,
-            r.seconds.rollouts,
-            r.seconds.evaluation,
-            r.seconds.eta_probe
-        ));
         jsonl.push_str(&serde_json::to_string(r)?);
         jsonl.push('\n');
     }
