@@ -280,6 +280,21 @@ pub struct LossConfig {
 }
 
 impl LossConfig {
+    /// The λ of each of η's terms, in the order L_sc, L_grad, L_μ, L_far, the
+    /// value term, the set-one term and the gradient floor (whose weight is
+    /// inside it: 1), as `EtaLosses::weighted` and `StepLosses::weighted_eta` sum them.
+    pub fn eta_weights(&self) -> [f32; 7] {
+        [
+            self.lambda_sc,
+            self.lambda_grad,
+            self.lambda_mu,
+            self.lambda_far,
+            self.lambda_value,
+            self.lambda_one,
+            1.0,
+        ]
+    }
+
     /// Refuses weights and sampling settings no fit can use, naming the field.
     pub fn validate(&self) -> Result<(), super::SdeError> {
         let weights = [

@@ -138,13 +138,18 @@ pub struct EtaLosses {
 impl EtaLosses {
     /// The terms' share of eq. 7, each times its λ.
     pub fn weighted(&self, config: &LossConfig) -> Tensor<1> {
-        self.sc.clone() * config.lambda_sc
-            + self.grad.clone() * config.lambda_grad
-            + self.mu.clone() * config.lambda_mu
-            + self.far.clone() * config.lambda_far
-            + self.value.clone() * config.lambda_value
-            + self.one.clone() * config.lambda_one
-            + self.floor.clone()
+        let terms = [
+            &self.sc,
+            &self.grad,
+            &self.mu,
+            &self.far,
+            &self.value,
+            &self.one,
+            &self.floor,
+        ];
+        let mut weighted = terms.into_iter().zip(config.eta_weights());
+        let (first, w) = weighted.next().expect("η has seven terms");
+        weighted.fold(first.clone() * w, |sum, (t, w)| sum + t.clone() * w)
     }
 }
 

@@ -59,13 +59,14 @@ pub struct StepLosses {
 impl StepLosses {
     /// η's terms' share of eq. 7, each times its λ ([`crate::sde::EtaLosses::weighted`]).
     pub fn weighted_eta(&self, config: &LossConfig) -> f32 {
-        self.sc * config.lambda_sc
-            + self.grad * config.lambda_grad
-            + self.mu * config.lambda_mu
-            + self.far * config.lambda_far
-            + self.value * config.lambda_value
-            + self.one * config.lambda_one
-            + self.floor
+        let terms = [
+            self.sc, self.grad, self.mu, self.far, self.value, self.one, self.floor,
+        ];
+        terms
+            .iter()
+            .zip(config.eta_weights())
+            .map(|(t, w)| t * w)
+            .sum()
     }
 }
 
