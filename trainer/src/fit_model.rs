@@ -36,8 +36,8 @@ pub struct Args {
     reward_model: bool,
     /// paper (the paper's equations and Appendix C) or code (NUNO's code where it
     /// differs: samples at sqrt(dt), steps weighed 0.9^(t−1), its 100k-step schedule,
-    /// 20 % held out, its η losses, ε(h, 1) = 1.1 × max); the flags below override
-    /// single settings.
+    /// 20 % held out, pose drift inputs, its η losses, ε(h, 1) = 1.1 × max); the flags
+    /// below override single settings.
     #[arg(long, default_value_t = Recipe::Paper)]
     recipe: Recipe,
     /// The scale of ε the model samples at: calibrated (Σ) or sqrt-dt (NUNO's code)
