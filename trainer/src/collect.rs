@@ -195,8 +195,28 @@ fn select(args: SelectArgs) -> anyhow::Result<()> {
 
 /// metrics.csv and the return curve, rewritten from the whole history.
 fn write_metrics(out: &Path, history: &[OnlineRecord]) -> anyhow::Result<()> {
-    let fixed = Metric::fixed;
-    let table = MetricsTable::new()
+    let csv = online_metrics().csv(history);
+    let path = out.join("metrics.csv");
+    write_text(&path, &csv)?;
+    let series = |name, f: fn(&OnlineRecord) -> f64| Series {
+        name,
+        points: history.iter().map(|r| (r.step as f64, f(r))).collect(),
+    };
+    line_chart(
+        &out.join("returns.svg"),
+        "Online SAC: return",
+        "environment step",
+        "return",
+        &[
+            series("evaluation (deterministic)", |r| r.eval.mean_return),
+            series("training episodes", |r| r.train_return),
+        ],
+    )
+}
+
+/// metrics.csv's columns (CleanRL's names): one row per evaluation.
+fn online_metrics() -> MetricsTable<'static, OnlineRecord> {
+    MetricsTable::new()
         .column("step", |r: &OnlineRecord| r.step.into())
         .column("updates", |r: &OnlineRecord| r.updates.into())
         .column("episodes", |r: &OnlineRecord| r.episodes.into())
@@ -230,35 +250,18 @@ fn write_metrics(out: &Path, history: &[OnlineRecord]) -> anyhow::Result<()> {
         })
         .column("losses/entropy", |r: &OnlineRecord| r.losses.entropy.into())
         .column("charts/env_steps_per_second", |r: &OnlineRecord| {
-            fixed(r.env_steps_per_second, 1)
+            Metric::fixed(r.env_steps_per_second, 1)
         })
         .column("charts/updates_per_second", |r: &OnlineRecord| {
-            fixed(r.updates_per_second, 2)
+            Metric::fixed(r.updates_per_second, 2)
         })
         .column("time/environment", |r: &OnlineRecord| {
-            fixed(r.seconds.environment, 3)
+            Metric::fixed(r.seconds.environment, 3)
         })
         .column("time/updates", |r: &OnlineRecord| {
-            fixed(r.seconds.updates, 3)
+            Metric::fixed(r.seconds.updates, 3)
         })
         .column("time/evaluation", |r: &OnlineRecord| {
-            fixed(r.seconds.evaluation, 3)
-        });
-    let csv = table.csv(history);
-    let path = out.join("metrics.csv");
-    write_text(&path, &csv)?;
-    let series = |name, f: fn(&OnlineRecord) -> f64| Series {
-        name,
-        points: history.iter().map(|r| (r.step as f64, f(r))).collect(),
-    };
-    line_chart(
-        &out.join("returns.svg"),
-        "Online SAC: return",
-        "environment step",
-        "return",
-        &[
-            series("evaluation (deterministic)", |r| r.eval.mean_return),
-            series("training episodes", |r| r.train_return),
-        ],
-    )
+            Metric::fixed(r.seconds.evaluation, 3)
+        })
 }

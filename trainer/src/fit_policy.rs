@@ -342,70 +342,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// metrics.csv and metrics.jsonl (CleanRL metric names) and the two plots,
 /// rewritten from the whole history so a resumed run's files stay consistent.
 fn write_metrics(out: &Path, history: &[EpochRecord]) -> anyhow::Result<()> {
-    let metric = |v: f64| Metric::fixed(v, 3);
-    let table = MetricsTable::new()
-        .column("epoch", |r: &EpochRecord| r.epoch.into())
-        .column("step", |r: &EpochRecord| r.step.into())
-        .column("charts/SPS", |r: &EpochRecord| metric(r.sps))
-        .column("charts/normalized_score", |r: &EpochRecord| {
-            r.eval.normalized_score.into()
-        })
-        .column("charts/normalized_score_std", |r: &EpochRecord| {
-            r.eval.std_normalized_score.into()
-        })
-        .column("charts/episodic_return", |r: &EpochRecord| {
-            r.eval.mean_return.into()
-        })
-        .column("losses/qf1_values", |r: &EpochRecord| {
-            r.losses.qf1_values.into()
-        })
-        .column("losses/qf1_loss", |r: &EpochRecord| {
-            r.losses.qf1_loss.into()
-        })
-        .column("losses/qf2_loss", |r: &EpochRecord| {
-            r.losses.qf2_loss.into()
-        })
-        .column("losses/actor_loss", |r: &EpochRecord| {
-            r.losses.actor_loss.into()
-        })
-        .column("losses/alpha", |r: &EpochRecord| r.losses.alpha.into())
-        .column("losses/alpha_loss", |r: &EpochRecord| {
-            r.losses.alpha_loss.into()
-        })
-        .column("losses/entropy", |r: &EpochRecord| r.losses.entropy.into())
-        .column("rollout/mean_length", |r: &EpochRecord| {
-            r.rollout.mean_length.into()
-        })
-        .column("rollout/mean_eta", |r: &EpochRecord| {
-            r.rollout.mean_eta.into()
-        })
-        .column("rollout/truncated", |r: &EpochRecord| {
-            r.rollout.truncated.into()
-        })
-        .column("rollout/terminated", |r: &EpochRecord| {
-            r.rollout.terminated.into()
-        })
-        .column("rollout/diverged", |r: &EpochRecord| {
-            r.rollout.diverged.into()
-        })
-        .column("rollout/mean_penalized_reward", |r: &EpochRecord| {
-            r.rollout.mean_penalized_reward.into()
-        })
-        .column("eta/policy", |r: &EpochRecord| r.eta.policy.into())
-        .column("eta/dataset", |r: &EpochRecord| r.eta.dataset.into())
-        .column("eta/random", |r: &EpochRecord| r.eta.random.into())
-        .column("model_buffer", |r: &EpochRecord| r.model_buffer.into())
-        .column("time/updates", |r: &EpochRecord| metric(r.seconds.updates))
-        .column("time/rollouts", |r: &EpochRecord| {
-            metric(r.seconds.rollouts)
-        })
-        .column("time/evaluation", |r: &EpochRecord| {
-            metric(r.seconds.evaluation)
-        })
-        .column("time/eta_probe", |r: &EpochRecord| {
-            metric(r.seconds.eta_probe)
-        });
-    let csv = table.csv(history);
+    let csv = epoch_metrics().csv(history);
     // The records themselves, nested as `experiment` reads them back.
     let mut jsonl = String::new();
     for r in history {
@@ -565,4 +502,72 @@ struct SavedThreshold {
     algorithm: String,
     threshold: f32,
     how: String,
+}
+
+/// metrics.csv's columns (CleanRL's names): one row per epoch.
+fn epoch_metrics() -> MetricsTable<'static, EpochRecord> {
+    MetricsTable::new()
+        .column("epoch", |r: &EpochRecord| r.epoch.into())
+        .column("step", |r: &EpochRecord| r.step.into())
+        .column("charts/SPS", |r: &EpochRecord| Metric::fixed(r.sps, 3))
+        .column("charts/normalized_score", |r: &EpochRecord| {
+            r.eval.normalized_score.into()
+        })
+        .column("charts/normalized_score_std", |r: &EpochRecord| {
+            r.eval.std_normalized_score.into()
+        })
+        .column("charts/episodic_return", |r: &EpochRecord| {
+            r.eval.mean_return.into()
+        })
+        .column("losses/qf1_values", |r: &EpochRecord| {
+            r.losses.qf1_values.into()
+        })
+        .column("losses/qf1_loss", |r: &EpochRecord| {
+            r.losses.qf1_loss.into()
+        })
+        .column("losses/qf2_loss", |r: &EpochRecord| {
+            r.losses.qf2_loss.into()
+        })
+        .column("losses/actor_loss", |r: &EpochRecord| {
+            r.losses.actor_loss.into()
+        })
+        .column("losses/alpha", |r: &EpochRecord| r.losses.alpha.into())
+        .column("losses/alpha_loss", |r: &EpochRecord| {
+            r.losses.alpha_loss.into()
+        })
+        .column("losses/entropy", |r: &EpochRecord| r.losses.entropy.into())
+        .column("rollout/mean_length", |r: &EpochRecord| {
+            r.rollout.mean_length.into()
+        })
+        .column("rollout/mean_eta", |r: &EpochRecord| {
+            r.rollout.mean_eta.into()
+        })
+        .column("rollout/truncated", |r: &EpochRecord| {
+            r.rollout.truncated.into()
+        })
+        .column("rollout/terminated", |r: &EpochRecord| {
+            r.rollout.terminated.into()
+        })
+        .column("rollout/diverged", |r: &EpochRecord| {
+            r.rollout.diverged.into()
+        })
+        .column("rollout/mean_penalized_reward", |r: &EpochRecord| {
+            r.rollout.mean_penalized_reward.into()
+        })
+        .column("eta/policy", |r: &EpochRecord| r.eta.policy.into())
+        .column("eta/dataset", |r: &EpochRecord| r.eta.dataset.into())
+        .column("eta/random", |r: &EpochRecord| r.eta.random.into())
+        .column("model_buffer", |r: &EpochRecord| r.model_buffer.into())
+        .column("time/updates", |r: &EpochRecord| {
+            Metric::fixed(r.seconds.updates, 3)
+        })
+        .column("time/rollouts", |r: &EpochRecord| {
+            Metric::fixed(r.seconds.rollouts, 3)
+        })
+        .column("time/evaluation", |r: &EpochRecord| {
+            Metric::fixed(r.seconds.evaluation, 3)
+        })
+        .column("time/eta_probe", |r: &EpochRecord| {
+            Metric::fixed(r.seconds.eta_probe, 3)
+        })
 }
