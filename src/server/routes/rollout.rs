@@ -22,7 +22,7 @@ use crate::server::body::{
 };
 use crate::server::rows::{Rows, split_rows};
 use crate::server::validate::{answer_within, non_negative, within};
-use crate::server::{ApiError, AppState};
+use crate::server::{ApiError, AppState, Limits, LoadedModel};
 
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -147,78 +147,17 @@ pub async fn rollout(
     let batch = r.states.len();
     within("batch (rows of states)", batch, limits.max_batch)?;
     let starts = std::mem::take(&mut r.states).into_matrix("states", obs_dim)?;
-    within("horizon", r.horizon, limits.max_horizon)?;
-    within("particles", r.particles, limits.max_particles)?;
-    within(
-        "batch × particles × horizon",
-        batch * r.particles * r.horizon,
-        limits.max_rollout_steps,
-    )?;
-    non_negative("penalty", r.penalty)?;
+    check_size(&r, batch, (obs_dim, act_dim), answer, limits)?;
     let noise_scale = r
         .noise_scale
         .unwrap_or_else(|| model.batch_dynamics().sample_noise_scale());
     non_negative("noise_scale", f64::from(noise_scale))?;
-    let rows = batch * r.particles;
-    answer_within(
-        "batch × particles × ((horizon + 1)·obs_dim + horizon·(act_dim + 4) + 2)",
-        rows * ((r.horizon + 1) * obs_dim + r.horizon * (act_dim + 4) + 2),
-        answer,
-        limits.max_answer_bytes,
-    )?;
     let sequence = match r.actions.take() {
-        None => {
-            if model.policy.is_none() {
-                return Err(ApiError::NoPolicy(id));
-            }
-            None
-        }
-        Some(actions) => {
-            if actions.len() != batch {
-                return Err(ApiError::Invalid(format!(
-                    "`actions` has {} sequences for {batch} start states",
-                    actions.len()
-                )));
-            }
-            let mut flat = Vec::with_capacity(batch * r.horizon * act_dim);
-            for (b, sequence) in actions.into_iter().enumerate() {
-                if sequence.len() != r.horizon {
-                    return Err(ApiError::Invalid(format!(
-                        "`actions[{b}]` has {} steps, the horizon is {}",
-                        sequence.len(),
-                        r.horizon
-                    )));
-                }
-                flat.extend(sequence.into_matrix(&format!("actions[{b}]"), act_dim)?);
-            }
-            Some(flat)
-        }
+        None if model.policy.is_none() => return Err(ApiError::NoPolicy(id)),
+        None => None,
+        Some(actions) => Some(flatten_sequences(actions, batch, r.horizon, act_dim)?),
     };
-    let threshold = match (r.threshold, r.alpha) {
-        (Some(_), Some(_)) => {
-            return Err(ApiError::Invalid(
-                "give `alpha` or `threshold`, not both".into(),
-            ));
-        }
-        (Some(t), None) if t.is_finite() => Some(t),
-        (Some(t), None) => {
-            return Err(ApiError::Invalid(format!(
-                "`threshold` must be finite, got {t}"
-            )));
-        }
-        (None, Some(alpha)) => {
-            let table = model.thresholds();
-            Some(table.and_then(|t| t.get(r.horizon, alpha)).ok_or_else(|| {
-                ApiError::Invalid(format!(
-                    "the model has no ε(h = {}, α = {alpha}); its table covers h ∈ {:?}, α ∈ {:?}",
-                    r.horizon,
-                    table.map(|t| t.horizons.clone()).unwrap_or_default(),
-                    table.map(|t| t.alphas.clone()).unwrap_or_default()
-                ))
-            })?)
-        }
-        (None, None) => None,
-    };
+    let threshold = resolve_threshold(r.threshold, r.alpha, r.horizon, &model)?;
     state
         .metrics
         .batch("rollout", &id, batch * r.particles * r.horizon);
@@ -258,31 +197,7 @@ pub async fn rollout(
                     noise_scale,
                 );
             }
-            let t = &out.trace;
-            let trajectories = (0..t.rows)
-                .map(|row| {
-                    let truncated = t.outcome[row] == StepOutcome::Truncated;
-                    Trajectory {
-                        start: row / r.particles,
-                        particle: row % r.particles,
-                        states: split_rows(&t.observations[row], obs_dim),
-                        actions: split_rows(&t.actions[row], act_dim),
-                        eta: t.eta[row].clone(),
-                        accumulated_eta: t.accumulated_eta[row].clone(),
-                        rewards: t.rewards[row].clone(),
-                        penalized_rewards: t.rewards[row]
-                            .iter()
-                            .zip(&t.eta[row])
-                            .map(|(&reward, &eta)| penalized_reward(reward, r.penalty, eta))
-                            .collect(),
-                        length: t.kept[row],
-                        terminal: t.outcome[row] == StepOutcome::Terminal,
-                        truncated,
-                        truncation_step: truncated.then_some(t.kept[row]),
-                        diverged: t.outcome[row] == StepOutcome::Diverged,
-                    }
-                })
-                .collect();
+            let trajectories = trajectories(&out.trace, r.penalty, r.particles, (obs_dim, act_dim));
             json_response(&RolloutResponse {
                 model: id,
                 horizon: r.horizon,
@@ -293,6 +208,122 @@ pub async fn rollout(
             })
         })
         .await
+}
+
+/// The request's horizon, particles, penalty and the size of its work and
+/// answer against the server's limits.
+fn check_size(
+    r: &RolloutRequest,
+    batch: usize,
+    (obs_dim, act_dim): (usize, usize),
+    answer: Format,
+    limits: &Limits,
+) -> Result<(), ApiError> {
+    within("horizon", r.horizon, limits.max_horizon)?;
+    within("particles", r.particles, limits.max_particles)?;
+    within(
+        "batch × particles × horizon",
+        batch * r.particles * r.horizon,
+        limits.max_rollout_steps,
+    )?;
+    non_negative("penalty", r.penalty)?;
+    answer_within(
+        "batch × particles × ((horizon + 1)·obs_dim + horizon·(act_dim + 4) + 2)",
+        batch * r.particles * ((r.horizon + 1) * obs_dim + r.horizon * (act_dim + 4) + 2),
+        answer,
+        limits.max_answer_bytes,
+    )
+}
+
+/// One open-loop sequence per start, `horizon` rows of `act_dim` each, as one
+/// row-major buffer `[batch · horizon · act_dim]`.
+fn flatten_sequences(
+    actions: Vec<Rows>,
+    batch: usize,
+    horizon: usize,
+    act_dim: usize,
+) -> Result<Vec<f32>, ApiError> {
+    if actions.len() != batch {
+        return Err(ApiError::Invalid(format!(
+            "`actions` has {} sequences for {batch} start states",
+            actions.len()
+        )));
+    }
+    let mut flat = Vec::with_capacity(batch * horizon * act_dim);
+    for (b, sequence) in actions.into_iter().enumerate() {
+        if sequence.len() != horizon {
+            return Err(ApiError::Invalid(format!(
+                "`actions[{b}]` has {} steps, the horizon is {horizon}",
+                sequence.len()
+            )));
+        }
+        flat.extend(sequence.into_matrix(&format!("actions[{b}]"), act_dim)?);
+    }
+    Ok(flat)
+}
+
+/// Where rollouts truncate: the request's own `threshold`, or the model's
+/// ε(h, α) for its `alpha`; neither, never.
+fn resolve_threshold(
+    threshold: Option<f32>,
+    alpha: Option<f64>,
+    horizon: usize,
+    model: &LoadedModel,
+) -> Result<Option<f32>, ApiError> {
+    match (threshold, alpha) {
+        (Some(_), Some(_)) => Err(ApiError::Invalid(
+            "give `alpha` or `threshold`, not both".into(),
+        )),
+        (Some(t), None) if t.is_finite() => Ok(Some(t)),
+        (Some(t), None) => Err(ApiError::Invalid(format!(
+            "`threshold` must be finite, got {t}"
+        ))),
+        (None, Some(alpha)) => {
+            let table = model.thresholds();
+            let epsilon = table.and_then(|t| t.get(horizon, alpha)).ok_or_else(|| {
+                ApiError::Invalid(format!(
+                    "the model has no ε(h = {horizon}, α = {alpha}); its table covers h ∈ {:?}, α ∈ {:?}",
+                    table.map(|t| t.horizons.clone()).unwrap_or_default(),
+                    table.map(|t| t.alphas.clone()).unwrap_or_default()
+                ))
+            })?;
+            Ok(Some(epsilon))
+        }
+        (None, None) => Ok(None),
+    }
+}
+
+/// The trace's rows as JSON trajectories, start and particle named.
+fn trajectories(
+    t: &RolloutTrace,
+    penalty: f64,
+    particles: usize,
+    (obs_dim, act_dim): (usize, usize),
+) -> Vec<Trajectory> {
+    (0..t.rows)
+        .map(|row| {
+            let truncated = t.outcome[row] == StepOutcome::Truncated;
+            Trajectory {
+                start: row / particles,
+                particle: row % particles,
+                states: split_rows(&t.observations[row], obs_dim),
+                actions: split_rows(&t.actions[row], act_dim),
+                eta: t.eta[row].clone(),
+                accumulated_eta: t.accumulated_eta[row].clone(),
+                rewards: t.rewards[row].clone(),
+                penalized_rewards: t.rewards[row]
+                    .iter()
+                    .zip(&t.eta[row])
+                    .map(|(&reward, &eta)| penalized_reward(reward, penalty, eta))
+                    .collect(),
+                length: t.kept[row],
+                terminal: t.outcome[row] == StepOutcome::Terminal,
+                truncated,
+                truncation_step: truncated.then_some(t.kept[row]),
+                diverged: t.outcome[row] == StepOutcome::Diverged,
+            }
+        })
+        .collect()
 }
 
 /// The trace as padded tensors (see [`rollout`]'s description).
