@@ -259,134 +259,20 @@ pub async fn infer(
     body: Result<RawBody, ApiError>,
 ) -> Result<Response, V2Error> {
     let body = body?;
-    let header_length = match (body.format, body.inference_header_length) {
-        (_, Some(length)) => length,
-        (Format::Json, None) => body.bytes.len(),
-        (Format::Binary, None) => {
-            return Err(ApiError::Invalid(format!(
-                "a binary infer body needs the `{INFERENCE_HEADER_LENGTH}` header (the Open \
-                 Inference Protocol's binary tensor extension); JSON bodies need none"
-            ))
-            .into());
-        }
-    };
+    let header_length = header_length(&body)?;
     let mut r: InferRequest = body.json_prefix(header_length).await?;
     let model = state.model(&id)?;
     let (obs_dim, act_dim) = (model.obs_dim(), model.act_dim());
-    // Each input's values: inline JSON, or its slice of the binary tail, in order.
-    let mut tail = &body.bytes[header_length..];
-    let mut inputs = Vec::with_capacity(r.inputs.len());
-    for t in r.inputs.iter_mut() {
-        let values = match binary_size(&t.name, t.parameters.as_ref())? {
-            Some(size) => {
-                if size > tail.len() {
-                    return Err(ApiError::Malformed(format!(
-                        "input `{}` has binary_data_size {size}, but only {} bytes are left",
-                        t.name,
-                        tail.len()
-                    ))
-                    .into());
-                }
-                let (data, rest) = tail.split_at(size);
-                tail = rest;
-                Some(data)
-            }
-            None => None,
-        };
-        inputs.push((t, values));
-    }
-    if !tail.is_empty() {
-        return Err(ApiError::Malformed(format!(
-            "{} bytes follow the last binary input",
-            tail.len()
-        ))
-        .into());
-    }
+    let mut inputs = split_binary_tail(&mut r.inputs, &body.bytes[header_length..])?;
     let max_batch = state.config.limits.max_batch;
-    let mut input = |name: &str, width: usize| -> Result<Vec<f32>, ApiError> {
-        let (t, binary) = inputs
-            .iter_mut()
-            .find(|(t, _)| t.name == name)
-            .ok_or_else(|| ApiError::Invalid(format!("input `{name}` is missing")))?;
-        if t.datatype != "FP32" {
-            return Err(ApiError::Invalid(format!(
-                "input `{name}` must be FP32, got {}",
-                t.datatype
-            )));
-        }
-        // The declared rows first: no data is converted for a batch over the limit.
-        within(
-            "batch (shape[0])",
-            t.shape.first().copied().unwrap_or(0),
-            max_batch,
-        )?;
-        let values: Vec<f32> = match (*binary, t.data.take()) {
-            (Some(bytes), _) => decode_fp32(name, bytes)?,
-            (None, Some(InputData(values))) => values,
-            (None, None) => {
-                return Err(ApiError::Invalid(format!(
-                    "input `{name}` has neither `data` nor parameters.binary_data_size"
-                )));
-            }
-        };
-        let rows = flat(name, &values, width)?;
-        if t.shape != [rows, width] {
-            return Err(ApiError::Invalid(format!(
-                "input `{name}` has shape {:?} but {} values; expected [{rows}, {width}]",
-                t.shape,
-                values.len()
-            )));
-        }
-        Ok(values)
-    };
-    let states = input("states", obs_dim)?;
-    let actions = input("actions", act_dim)?;
+    let states = input_values(&mut inputs, "states", obs_dim, max_batch)?;
+    let actions = input_values(&mut inputs, "actions", act_dim, max_batch)?;
     let batch = states.len() / obs_dim;
     if actions.len() / act_dim != batch {
         return Err(ApiError::Invalid("`states` and `actions` differ in rows".into()).into());
     }
-    let number = |key: &str, default: f64| -> Result<f64, ApiError> {
-        match r.parameters.get(key) {
-            None => Ok(default),
-            Some(v) => v
-                .as_f64()
-                .filter(|x| x.is_finite() && *x >= 0.0)
-                .ok_or_else(|| {
-                    ApiError::Invalid(format!("parameter `{key}` must be a number ≥ 0"))
-                }),
-        }
-    };
-    let flag = |parameters: Option<&serde_json::Map<String, serde_json::Value>>,
-                key: &str|
-     -> Result<Option<bool>, ApiError> {
-        match parameters.and_then(|p| p.get(key)) {
-            None => Ok(None),
-            Some(v) => v.as_bool().map(Some).ok_or_else(|| {
-                ApiError::Invalid(format!("parameter `{key}` must be true or false"))
-            }),
-        }
-    };
-    let binary_default = flag(Some(&r.parameters), "binary_data_output")?.unwrap_or(false);
-    // (name, binary?) of every output to answer, in the order asked.
-    let wanted: Vec<(String, bool)> = match &r.outputs {
-        None => OUTPUTS
-            .iter()
-            .map(|name| (name.to_string(), binary_default))
-            .collect(),
-        Some(outputs) => outputs
-            .iter()
-            .map(|o| {
-                if !OUTPUTS.contains(&o.name.as_str()) {
-                    return Err(ApiError::Invalid(format!(
-                        "output `{}` does not exist; this model answers {OUTPUTS:?}",
-                        o.name
-                    )));
-                }
-                let binary = flag(o.parameters.as_ref(), "binary_data")?;
-                Ok((o.name.clone(), binary.unwrap_or(binary_default)))
-            })
-            .collect::<Result<_, _>>()?,
-    };
+    let wanted = wanted_outputs(&r)?;
+    let number = |key: &str, default: f64| number_parameter(&r.parameters, key, default);
     let seed = number("seed", 0.0)? as u64;
     let config = ParticleConfig {
         particles: 1,
@@ -415,6 +301,154 @@ pub async fn infer(
         })
         .await?;
     Ok(response)
+}
+
+/// Where the JSON header ends: the whole body for JSON, the binary extension's
+/// header length for a binary body (which must give it).
+fn header_length(body: &RawBody) -> Result<usize, ApiError> {
+    match (body.format, body.inference_header_length) {
+        (_, Some(length)) => Ok(length),
+        (Format::Json, None) => Ok(body.bytes.len()),
+        (Format::Binary, None) => Err(ApiError::Invalid(format!(
+            "a binary infer body needs the `{INFERENCE_HEADER_LENGTH}` header (the Open \
+             Inference Protocol's binary tensor extension); JSON bodies need none"
+        ))),
+    }
+}
+
+/// An input and its slice of the binary tail (none: its values are inline JSON).
+type InputWithBytes<'a> = (&'a mut InferInput, Option<&'a [u8]>);
+
+/// Each input with its slice of the binary tail (in order, by its
+/// `binary_data_size`); the tail must be used up exactly.
+fn split_binary_tail<'a>(
+    inputs: &'a mut [InferInput],
+    mut tail: &'a [u8],
+) -> Result<Vec<InputWithBytes<'a>>, ApiError> {
+    let mut split = Vec::with_capacity(inputs.len());
+    for t in inputs.iter_mut() {
+        let values = match binary_size(&t.name, t.parameters.as_ref())? {
+            Some(size) if size > tail.len() => {
+                return Err(ApiError::Malformed(format!(
+                    "input `{}` has binary_data_size {size}, but only {} bytes are left",
+                    t.name,
+                    tail.len()
+                )));
+            }
+            Some(size) => {
+                let (data, rest) = tail.split_at(size);
+                tail = rest;
+                Some(data)
+            }
+            None => None,
+        };
+        split.push((t, values));
+    }
+    if !tail.is_empty() {
+        return Err(ApiError::Malformed(format!(
+            "{} bytes follow the last binary input",
+            tail.len()
+        )));
+    }
+    Ok(split)
+}
+
+/// Input `name`'s values, checked FP32, `[rows, width]` and within the batch limit.
+fn input_values(
+    inputs: &mut [InputWithBytes],
+    name: &str,
+    width: usize,
+    max_batch: usize,
+) -> Result<Vec<f32>, ApiError> {
+    let (t, binary) = inputs
+        .iter_mut()
+        .find(|(t, _)| t.name == name)
+        .ok_or_else(|| ApiError::Invalid(format!("input `{name}` is missing")))?;
+    if t.datatype != "FP32" {
+        return Err(ApiError::Invalid(format!(
+            "input `{name}` must be FP32, got {}",
+            t.datatype
+        )));
+    }
+    // The declared rows first: no data is converted for a batch over the limit.
+    within(
+        "batch (shape[0])",
+        t.shape.first().copied().unwrap_or(0),
+        max_batch,
+    )?;
+    let values: Vec<f32> = match (*binary, t.data.take()) {
+        (Some(bytes), _) => decode_fp32(name, bytes)?,
+        (None, Some(InputData(values))) => values,
+        (None, None) => {
+            return Err(ApiError::Invalid(format!(
+                "input `{name}` has neither `data` nor parameters.binary_data_size"
+            )));
+        }
+    };
+    let rows = flat(name, &values, width)?;
+    if t.shape != [rows, width] {
+        return Err(ApiError::Invalid(format!(
+            "input `{name}` has shape {:?} but {} values; expected [{rows}, {width}]",
+            t.shape,
+            values.len()
+        )));
+    }
+    Ok(values)
+}
+
+/// Parameter `key` as a number ≥ 0, `default` when absent.
+fn number_parameter(
+    parameters: &serde_json::Map<String, serde_json::Value>,
+    key: &str,
+    default: f64,
+) -> Result<f64, ApiError> {
+    match parameters.get(key) {
+        None => Ok(default),
+        Some(v) => v
+            .as_f64()
+            .filter(|x| x.is_finite() && *x >= 0.0)
+            .ok_or_else(|| ApiError::Invalid(format!("parameter `{key}` must be a number ≥ 0"))),
+    }
+}
+
+/// Parameter `key` as true or false, none when absent.
+fn flag_parameter(
+    parameters: Option<&serde_json::Map<String, serde_json::Value>>,
+    key: &str,
+) -> Result<Option<bool>, ApiError> {
+    match parameters.and_then(|p| p.get(key)) {
+        None => Ok(None),
+        Some(v) => v
+            .as_bool()
+            .map(Some)
+            .ok_or_else(|| ApiError::Invalid(format!("parameter `{key}` must be true or false"))),
+    }
+}
+
+/// (name, binary?) of every output to answer, in the order asked (all of them
+/// by default).
+fn wanted_outputs(r: &InferRequest) -> Result<Vec<(String, bool)>, ApiError> {
+    let binary_default =
+        flag_parameter(Some(&r.parameters), "binary_data_output")?.unwrap_or(false);
+    let Some(outputs) = &r.outputs else {
+        return Ok(OUTPUTS
+            .iter()
+            .map(|name| (name.to_string(), binary_default))
+            .collect());
+    };
+    outputs
+        .iter()
+        .map(|o| {
+            if !OUTPUTS.contains(&o.name.as_str()) {
+                return Err(ApiError::Invalid(format!(
+                    "output `{}` does not exist; this model answers {OUTPUTS:?}",
+                    o.name
+                )));
+            }
+            let binary = flag_parameter(o.parameters.as_ref(), "binary_data")?;
+            Ok((o.name.clone(), binary.unwrap_or(binary_default)))
+        })
+        .collect()
 }
 
 /// What `infer` answers, in the order of [`V2ModelMetadata::outputs`].
