@@ -99,6 +99,38 @@ pub struct Budget {
 }
 
 impl Budget {
+    /// Refuses a budget no cell can run, naming the key.
+    fn validate(&self) -> Result<(), String> {
+        if self.model_steps == 0
+            || self.policy_steps == 0
+            || self.steps_per_epoch == 0
+            || self.rollout_batch == Some(0)
+        {
+            return Err("budget: model_steps, policy_steps, steps_per_epoch and rollout_batch must be at least 1".into());
+        }
+        if self.hidden.is_empty() || self.hidden.contains(&0) {
+            return Err("budget: hidden needs positive layer sizes".into());
+        }
+        if let Some(d) = self.model_step_discount
+            && !(d > 0.0 && d <= 1.0)
+        {
+            return Err(format!(
+                "budget: model_step_discount = {d} must lie in (0, 1]"
+            ));
+        }
+        if let Some(m) = self.threshold_max_margin
+            && !(m.is_finite() && m >= 1.0)
+        {
+            return Err(format!(
+                "budget: threshold_max_margin = {m} must be finite and at least 1"
+            ));
+        }
+        if self.model_buffer_factor == Some(0) {
+            return Err("budget: model_buffer_factor = 0 must be at least 1".into());
+        }
+        Ok(())
+    }
+
     /// This budget as `method` runs it: the settings of the other kind of method
     /// at their defaults (an ensemble method fits no SDE and runs no NUNO loop;
     /// NUNO's methods run no MOPO), so a grid may change those without touching
@@ -329,34 +361,7 @@ impl Grid {
 
     /// The cells, every name checked, in the order below (seeds outermost).
     pub fn cells(&self, base: &Path) -> Result<Vec<Cell>, String> {
-        let b = &self.budget;
-        if b.model_steps == 0
-            || b.policy_steps == 0
-            || b.steps_per_epoch == 0
-            || b.rollout_batch == Some(0)
-        {
-            return Err("budget: model_steps, policy_steps, steps_per_epoch and rollout_batch must be at least 1".into());
-        }
-        if b.hidden.is_empty() || b.hidden.contains(&0) {
-            return Err("budget: hidden needs positive layer sizes".into());
-        }
-        if let Some(d) = b.model_step_discount
-            && !(d > 0.0 && d <= 1.0)
-        {
-            return Err(format!(
-                "budget: model_step_discount = {d} must lie in (0, 1]"
-            ));
-        }
-        if let Some(m) = b.threshold_max_margin
-            && !(m.is_finite() && m >= 1.0)
-        {
-            return Err(format!(
-                "budget: threshold_max_margin = {m} must be finite and at least 1"
-            ));
-        }
-        if b.model_buffer_factor == Some(0) {
-            return Err("budget: model_buffer_factor = 0 must be at least 1".into());
-        }
+        self.budget.validate()?;
         if self.datasets.is_empty() {
             return Err("the grid names no dataset".into());
         }

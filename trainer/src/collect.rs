@@ -17,7 +17,7 @@ use nuno::sde::ComputeDevice;
 use nuno::shared::{Metric, MetricsTable};
 
 use crate::data_source::task_config;
-use crate::output::write_text;
+use crate::output::{with_sac_losses, write_text};
 use crate::plot::{Series, line_chart};
 
 #[derive(Debug, Subcommand)]
@@ -216,7 +216,7 @@ fn write_metrics(out: &Path, history: &[OnlineRecord]) -> anyhow::Result<()> {
 
 /// metrics.csv's columns (CleanRL's names): one row per evaluation.
 fn online_metrics() -> MetricsTable<'static, OnlineRecord> {
-    MetricsTable::new()
+    let table = MetricsTable::new()
         .column("step", |r: &OnlineRecord| r.step.into())
         .column("updates", |r: &OnlineRecord| r.updates.into())
         .column("episodes", |r: &OnlineRecord| r.episodes.into())
@@ -231,24 +231,8 @@ fn online_metrics() -> MetricsTable<'static, OnlineRecord> {
         })
         .column("eval/normalized_score", |r: &OnlineRecord| {
             r.eval.normalized_score.into()
-        })
-        .column("losses/qf1_values", |r: &OnlineRecord| {
-            r.losses.qf1_values.into()
-        })
-        .column("losses/qf1_loss", |r: &OnlineRecord| {
-            r.losses.qf1_loss.into()
-        })
-        .column("losses/qf2_loss", |r: &OnlineRecord| {
-            r.losses.qf2_loss.into()
-        })
-        .column("losses/actor_loss", |r: &OnlineRecord| {
-            r.losses.actor_loss.into()
-        })
-        .column("losses/alpha", |r: &OnlineRecord| r.losses.alpha.into())
-        .column("losses/alpha_loss", |r: &OnlineRecord| {
-            r.losses.alpha_loss.into()
-        })
-        .column("losses/entropy", |r: &OnlineRecord| r.losses.entropy.into())
+        });
+    with_sac_losses(table, |r: &OnlineRecord| &r.losses)
         .column("charts/env_steps_per_second", |r: &OnlineRecord| {
             Metric::fixed(r.env_steps_per_second, 1)
         })

@@ -23,7 +23,7 @@ use nuno::infer::Kernel;
 use nuno::sde::{ComputeDevice, Recipe, ThresholdConfig};
 use nuno::shared::{BatchDynamics, Metric, MetricsTable};
 
-use crate::output::write_text;
+use crate::output::{with_sac_losses, write_text};
 use crate::plot::{Series, line_chart};
 use crate::resume::checkpoint_to_resume;
 
@@ -506,7 +506,7 @@ struct SavedThreshold {
 
 /// metrics.csv's columns (CleanRL's names): one row per epoch.
 fn epoch_metrics() -> MetricsTable<'static, EpochRecord> {
-    MetricsTable::new()
+    let table = MetricsTable::new()
         .column("epoch", |r: &EpochRecord| r.epoch.into())
         .column("step", |r: &EpochRecord| r.step.into())
         .column("charts/SPS", |r: &EpochRecord| Metric::fixed(r.sps, 3))
@@ -518,24 +518,8 @@ fn epoch_metrics() -> MetricsTable<'static, EpochRecord> {
         })
         .column("charts/episodic_return", |r: &EpochRecord| {
             r.eval.mean_return.into()
-        })
-        .column("losses/qf1_values", |r: &EpochRecord| {
-            r.losses.qf1_values.into()
-        })
-        .column("losses/qf1_loss", |r: &EpochRecord| {
-            r.losses.qf1_loss.into()
-        })
-        .column("losses/qf2_loss", |r: &EpochRecord| {
-            r.losses.qf2_loss.into()
-        })
-        .column("losses/actor_loss", |r: &EpochRecord| {
-            r.losses.actor_loss.into()
-        })
-        .column("losses/alpha", |r: &EpochRecord| r.losses.alpha.into())
-        .column("losses/alpha_loss", |r: &EpochRecord| {
-            r.losses.alpha_loss.into()
-        })
-        .column("losses/entropy", |r: &EpochRecord| r.losses.entropy.into())
+        });
+    with_sac_losses(table, |r: &EpochRecord| &r.losses)
         .column("rollout/mean_length", |r: &EpochRecord| {
             r.rollout.mean_length.into()
         })
