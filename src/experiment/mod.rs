@@ -15,8 +15,8 @@ pub use analysis::{
 };
 pub use grid::{Budget, Cell, CellSelection, Grid, GridDataset};
 pub use results::{
-    CellResult, CellStatus, Summary, cell_dir, cell_status, markdown_table, policy_time_left,
-    results_csv, summarize, summarize_run, write_result,
+    CellResult, CellStatus, MeanCurve, Summary, cell_dir, cell_status, markdown_table, mean_curves,
+    policy_time_left, results_csv, summarize, summarize_run, write_result,
 };
 
 /// Everything that can be wrong with an experiment.

@@ -263,6 +263,47 @@ pub fn summarize(results: &[CellResult], dataset_order: &[&str]) -> Vec<Summary>
         .collect()
 }
 
+/// One dataset × method's learning curve: the normalised score at each
+/// evaluated step, the mean over the seeds that reached it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeanCurve {
+    pub dataset: String,
+    pub method: Method,
+    pub seeds: usize,
+    /// (step, mean score), by step.
+    pub points: Vec<(usize, f64)>,
+}
+
+/// Each dataset × method's mean learning curve over its seeds, by dataset
+/// then method.
+pub fn mean_curves(results: &[CellResult]) -> Vec<MeanCurve> {
+    let mut groups: BTreeMap<(&str, Method), Vec<&CellResult>> = BTreeMap::new();
+    for r in results {
+        groups
+            .entry((&r.cell.dataset, r.cell.method))
+            .or_default()
+            .push(r);
+    }
+    groups
+        .into_iter()
+        .map(|((dataset, method), runs)| {
+            let mut steps: BTreeMap<usize, Vec<f64>> = BTreeMap::new();
+            for &(step, score) in runs.iter().flat_map(|run| &run.curve) {
+                steps.entry(step).or_default().push(score);
+            }
+            MeanCurve {
+                dataset: dataset.to_string(),
+                method,
+                seeds: runs.len(),
+                points: steps
+                    .into_iter()
+                    .map(|(step, scores)| (step, scores.iter().sum::<f64>() / scores.len() as f64))
+                    .collect(),
+            }
+        })
+        .collect()
+}
+
 /// Mean and sample standard deviation (0 for one run).
 fn mean_std(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
     let n = values.clone().count();

@@ -11,6 +11,7 @@ mod eta;
 mod eta_report;
 mod evaluation;
 mod fit;
+mod fit_report;
 mod fit_step;
 mod fused;
 mod fused_fit;
@@ -38,6 +39,7 @@ pub use evaluation::{
 pub use fit::{
     FitRecord, FitSummary, SdeFitState, fit, fit_eta, fit_from, validation_nll, window_tensors,
 };
+pub use fit_report::{FitReport, FitReportConfig, fit_report};
 pub use fit_step::{Gradients, StepDraws, StepLosses};
 pub use fused::FusedSde;
 pub use losses::{LossTerms, WindowTensors};

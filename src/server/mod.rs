@@ -7,6 +7,9 @@
 //! runtime on tokio's blocking pool, at most `Limits::compute_slots` at once,
 //! and stops between steps once its request is gone.
 
+// A handler validates, calls the library and shapes: no function grows long.
+#![warn(clippy::too_many_lines)]
+
 mod body;
 mod error;
 mod metrics;

@@ -15,14 +15,15 @@ use anyhow::Context;
 use burn::tensor::Device;
 use nuno::agent::{ActionMode, ActorPolicy};
 use nuno::artifact::{BEST_POLICY, ModelFolder, load_policy};
-use nuno::data::{DatasetFormat, NormalizerConfig, Stats, read_dataset};
+use nuno::data::{Dataset, DatasetFormat, NormalizerConfig, Stats, read_dataset};
 use nuno::envs::{MujocoTask, TaskConfig, TaskRules};
 use nuno::experiment::{
     ExploitationConfig, PredictionConfig, exploitation, prediction_error, uncertainty_by_action,
 };
 use nuno::infer::Kernel;
-use nuno::shared::{BatchDynamics, Metric, MetricsTable};
+use nuno::shared::{BatchDynamics, BatchPolicy, Metric, MetricsTable};
 
+use crate::eta_report::action_space;
 use crate::output::write_text;
 use crate::plot::{Series, line_chart};
 
@@ -82,40 +83,33 @@ struct Model {
     rules: TaskRules,
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
-    for (flag, value) in [
-        ("--horizon", args.horizon),
-        ("--windows", args.windows),
-        ("--particles", args.particles),
-        ("--probe-states", args.probe_states),
-        ("--episodes", args.episodes),
-        ("--episode-steps", args.episode_steps),
-    ] {
-        anyhow::ensure!(value > 0, "{flag} must be at least 1");
-    }
-    anyhow::ensure!(
-        args.penalty.is_finite() && args.penalty >= 0.0,
-        "--penalty must be a finite number ≥ 0, got {}",
-        args.penalty
-    );
-    let models = args
-        .models
-        .iter()
-        .map(|spec| load_model(spec))
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    let task = models[0].task;
-    if let Some(other) = models.iter().find(|m| m.task != task) {
-        anyhow::bail!(
-            "models of different tasks: {} is {} ({:?}), {} is {} ({:?})",
-            models[0].name,
-            task.name,
-            task.layout,
-            other.name,
-            other.task.name,
-            other.task.layout
+impl Args {
+    /// Refuses sizes no analysis can use, before anything is loaded.
+    fn check(&self) -> anyhow::Result<()> {
+        for (flag, value) in [
+            ("--horizon", self.horizon),
+            ("--windows", self.windows),
+            ("--particles", self.particles),
+            ("--probe-states", self.probe_states),
+            ("--episodes", self.episodes),
+            ("--episode-steps", self.episode_steps),
+        ] {
+            anyhow::ensure!(value > 0, "{flag} must be at least 1");
+        }
+        anyhow::ensure!(
+            self.penalty.is_finite() && self.penalty >= 0.0,
+            "--penalty must be a finite number ≥ 0, got {}",
+            self.penalty
         );
+        Ok(())
     }
-    let read = |path: &Path| -> anyhow::Result<nuno::data::Dataset> {
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    args.check()?;
+    let models = load_models(&args.models)?;
+    let task = models[0].task;
+    let read = |path: &Path| -> anyhow::Result<Dataset> {
         let dataset = read_dataset(path, args.format)?;
         dataset.check_task(&task, path)?;
         Ok(dataset)
@@ -126,8 +120,47 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let policy = policy.map(|p| Kernel::Fused.policy(p));
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
+    write_prediction_error(&args, &models, &dataset, ood.as_ref())?;
+    write_uncertainty(&args, &models, task, &dataset, policy.as_deref())?;
+    if let Some(policy) = &policy {
+        write_exploitation(&args, &models, task, policy.as_ref())?;
+    }
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
 
-    // Figure 5: both datasets in the in-distribution data's units.
+/// The models of `specs`, checked to be of one task.
+fn load_models(specs: &[String]) -> anyhow::Result<Vec<Model>> {
+    let models = specs
+        .iter()
+        .map(|spec| load_model(spec))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let first = &models[0];
+    if let Some(other) = models.iter().find(|m| m.task != first.task) {
+        anyhow::bail!(
+            "models of different tasks: {} is {} ({:?}), {} is {} ({:?})",
+            first.name,
+            first.task.name,
+            first.task.layout,
+            other.name,
+            other.task.name,
+            other.task.layout
+        );
+    }
+    Ok(models)
+}
+
+/// A row of prediction_error.csv: model, data, step, RMSE, windows.
+type PredictionRow<'a> = (String, &'a str, usize, f64, usize);
+
+/// Figure 5: each model's open-loop error per step on both datasets, in the
+/// in-distribution data's units.
+fn write_prediction_error(
+    args: &Args,
+    models: &[Model],
+    dataset: &Dataset,
+    ood: Option<&Dataset>,
+) -> anyhow::Result<()> {
     let scale = Stats::fit(dataset.observations.view(), &NormalizerConfig::default()).std;
     let prediction = PredictionConfig {
         horizon: args.horizon,
@@ -135,13 +168,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         particles: args.particles,
         seed: args.seed,
     };
-    // (model, data, step, rmse, windows)
-    let mut rows: Vec<(String, &str, usize, f64, usize)> = Vec::new();
+    let mut rows: Vec<PredictionRow> = Vec::new();
     let mut curves = Vec::new();
-    for model in &models {
+    for model in models {
         let splits = [
-            ("in-distribution", Some(&dataset)),
-            ("out-of-distribution", ood.as_ref()),
+            ("in-distribution", Some(dataset)),
+            ("out-of-distribution", ood),
         ];
         for (split, data) in splits {
             let Some(data) = data else { continue };
@@ -160,15 +192,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let table = MetricsTable::new()
-        .column("model", |r: &(String, &str, usize, f64, usize)| {
-            r.0.as_str().into()
-        })
-        .column("data", |r: &(String, &str, usize, f64, usize)| r.1.into())
-        .column("step", |r: &(String, &str, usize, f64, usize)| r.2.into())
-        .column("rmse", |r: &(String, &str, usize, f64, usize)| r.3.into())
-        .column("windows", |r: &(String, &str, usize, f64, usize)| {
-            r.4.into()
-        });
+        .column("model", |r: &PredictionRow| r.0.as_str().into())
+        .column("data", |r: &PredictionRow| r.1.into())
+        .column("step", |r: &PredictionRow| r.2.into())
+        .column("rmse", |r: &PredictionRow| r.3.into())
+        .column("windows", |r: &PredictionRow| r.4.into());
     write_text(&args.out.join("prediction_error.csv"), &table.csv(&rows))?;
     line_chart(
         &args.out.join("prediction_error.svg"),
@@ -176,24 +204,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "horizon step",
         "RMSE / dataset std",
         &per_step(&curves),
-    )?;
+    )
+}
 
-    // Figure 3: η by action source, as each source's sorted values.
-    let bounds: Vec<(f32, f32)> = {
-        let (low, high) = MujocoTask::new(task)?.action_bounds();
-        low.iter()
-            .zip(&high)
-            .map(|(&l, &h)| (l as f32, h as f32))
-            .collect()
-    };
-    // (model, actions, [mean, p10, p50, p90, max])
-    let mut rows: Vec<(String, &str, [Metric; 5])> = Vec::new();
+/// A row of uncertainty.csv: model, actions, [mean, p10, p50, p90, max] of η.
+type UncertaintyRow<'a> = (String, &'a str, [Metric; 5]);
+
+/// Figure 3: each model's η at dataset states by action source, as each
+/// source's sorted values.
+fn write_uncertainty(
+    args: &Args,
+    models: &[Model],
+    task: TaskConfig,
+    dataset: &Dataset,
+    policy: Option<&dyn BatchPolicy>,
+) -> anyhow::Result<()> {
+    let bounds = action_space(&MujocoTask::new(task)?);
+    let mut rows: Vec<UncertaintyRow> = Vec::new();
     let mut curves = Vec::new();
-    for model in &models {
+    for model in models {
         let probes = uncertainty_by_action(
             model.dynamics.as_ref(),
-            &dataset,
-            policy.as_deref(),
+            dataset,
+            policy,
             &bounds,
             args.probe_states,
             args.seed,
@@ -207,12 +240,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let mut table = MetricsTable::new()
-        .column("model", |r: &(String, &str, [Metric; 5])| {
-            r.0.as_str().into()
-        })
-        .column("actions", |r: &(String, &str, [Metric; 5])| r.1.into());
+        .column("model", |r: &UncertaintyRow| r.0.as_str().into())
+        .column("actions", |r: &UncertaintyRow| r.1.into());
     for (i, name) in ["mean", "p10", "p50", "p90", "max"].into_iter().enumerate() {
-        table = table.column(name, move |r: &(String, &str, [Metric; 5])| r.2[i].clone());
+        table = table.column(name, move |r: &UncertaintyRow| r.2[i].clone());
     }
     write_text(&args.out.join("uncertainty.csv"), &table.csv(&rows))?;
     let series: Vec<Series> = curves
@@ -232,64 +263,58 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "quantile",
         "η",
         &series,
-    )?;
+    )
+}
 
-    // Figure 4: the policy in each model against the real task.
-    if let Some(policy) = &policy {
-        let config = ExploitationConfig {
-            starts: args.episodes,
-            horizon: args.episode_steps,
-            penalty: args.penalty,
-            seed: args.seed,
-        };
-        // (model, step, real, model, model_penalized)
-        let mut rows: Vec<(String, usize, f64, f64, f64)> = Vec::new();
-        let mut series_data = Vec::new();
-        for model in &models {
-            let result = exploitation(
-                model.dynamics.as_ref(),
-                &model.rules,
-                task,
-                policy.as_ref(),
-                &config,
-            )?;
-            for k in 0..args.episode_steps {
-                let (real, in_model) = (result.real[k], result.model[k]);
-                rows.push((
-                    model.name.clone(),
-                    k + 1,
-                    real,
-                    in_model,
-                    result.model_penalized[k],
-                ));
-            }
-            if series_data.is_empty() {
-                series_data.push(("real task".to_string(), result.real.clone()));
-            }
-            series_data.push((format!("{}: model", model.name), result.model));
-            series_data.push((
-                format!("{}: model, r − {}·η", model.name, args.penalty),
-                result.model_penalized,
-            ));
+/// A row of exploitation.csv: model, step, real, model, model_penalized.
+type ExploitationRow = (String, usize, f64, f64, f64);
+
+/// Figure 4: the policy's mean cumulative return in each model, with and
+/// without the penalty, against the real task.
+fn write_exploitation(
+    args: &Args,
+    models: &[Model],
+    task: TaskConfig,
+    policy: &dyn BatchPolicy,
+) -> anyhow::Result<()> {
+    let config = ExploitationConfig {
+        starts: args.episodes,
+        horizon: args.episode_steps,
+        penalty: args.penalty,
+        seed: args.seed,
+    };
+    let mut rows: Vec<ExploitationRow> = Vec::new();
+    let mut curves = Vec::new();
+    for model in models {
+        let result = exploitation(model.dynamics.as_ref(), &model.rules, task, policy, &config)?;
+        for k in 0..args.episode_steps {
+            let (real, in_model) = (result.real[k], result.model[k]);
+            let penalized = result.model_penalized[k];
+            rows.push((model.name.clone(), k + 1, real, in_model, penalized));
         }
-        type Row = (String, usize, f64, f64, f64);
-        let table = MetricsTable::new()
-            .column("model", |r: &Row| r.0.as_str().into())
-            .column("step", |r: &Row| r.1.into())
-            .column("real", |r: &Row| r.2.into())
-            .column("model", |r: &Row| r.3.into())
-            .column("model_penalized", |r: &Row| r.4.into());
-        write_text(&args.out.join("exploitation.csv"), &table.csv(&rows))?;
-        line_chart(
-            &args.out.join("exploitation.svg"),
-            "The policy's return: models against the real task (Figure 4)",
-            "step",
-            "mean cumulative return",
-            &per_step(&series_data),
-        )?;
+        if curves.is_empty() {
+            curves.push(("real task".to_string(), result.real.clone()));
+        }
+        curves.push((format!("{}: model", model.name), result.model));
+        curves.push((
+            format!("{}: model, r − {}·η", model.name, args.penalty),
+            result.model_penalized,
+        ));
     }
-    println!("wrote {}", args.out.display());
-    Ok(())
+    let table = MetricsTable::new()
+        .column("model", |r: &ExploitationRow| r.0.as_str().into())
+        .column("step", |r: &ExploitationRow| r.1.into())
+        .column("real", |r: &ExploitationRow| r.2.into())
+        .column("model", |r: &ExploitationRow| r.3.into())
+        .column("model_penalized", |r: &ExploitationRow| r.4.into());
+    write_text(&args.out.join("exploitation.csv"), &table.csv(&rows))?;
+    line_chart(
+        &args.out.join("exploitation.svg"),
+        "The policy's return: models against the real task (Figure 4)",
+        "step",
+        "mean cumulative return",
+        &per_step(&curves),
+    )
 }
 
 /// Named curves of per-step values as plot series, step k + 1 at index k.

@@ -29,29 +29,34 @@ pub enum Command {
     Select(SelectArgs),
 }
 
+/// Online SAC's defaults (CleanRL's), which the flags' defaults read.
+fn online_defaults() -> OnlineSacConfig {
+    OnlineSacConfig::new(SacConfig::new())
+}
+
 #[derive(Debug, clap::Args)]
 pub struct OnlineArgs {
     #[arg(long)]
     task: TaskName,
     /// Environment steps in all (a resumed run may be given more).
-    #[arg(long, default_value_t = 1_000_000)]
+    #[arg(long, default_value_t = online_defaults().steps)]
     steps: usize,
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Steps between checkpoints (evaluation, policy, run state).
-    #[arg(long, default_value_t = 10_000)]
+    #[arg(long, default_value_t = online_defaults().checkpoint_every)]
     checkpoint_every: usize,
     /// Steps of uniformly random actions before SAC acts and updates.
-    #[arg(long, default_value_t = 5000)]
+    #[arg(long, default_value_t = online_defaults().start_steps)]
     start_steps: usize,
     /// Deterministic evaluation episodes per checkpoint.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = online_defaults().eval_episodes)]
     eval_episodes: usize,
     /// SAC batch size.
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = online_defaults().sac.batch_size)]
     batch_size: usize,
     /// Hidden sizes of the actor and critics.
-    #[arg(long, value_delimiter = ',', default_value = "256,256")]
+    #[arg(long, value_delimiter = ',', default_values_t = online_defaults().sac.actor_hidden)]
     hidden: Vec<usize>,
     /// NeoRL's observation layout (root x included).
     #[arg(long)]

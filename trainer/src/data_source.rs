@@ -7,7 +7,7 @@ use nuno::artifact::{DatasetInfo, sha256_file};
 use nuno::data::{Dataset, DatasetFormat, read_dataset};
 use nuno::envs::{TaskConfig, TaskName};
 
-#[derive(Debug, Clone, clap::Args)]
+#[derive(Debug, Clone, clap::Args, serde::Serialize)]
 pub struct DataSource {
     /// Dataset file (D4RL .hdf5, NeoRL .npz) or Minari directory.
     #[arg(long)]

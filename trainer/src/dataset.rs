@@ -144,7 +144,8 @@ fn level(kind: Kind, layout: Layout) -> anyhow::Result<Option<BehaviourLevel>> {
     })
 }
 
-fn generate_cmd(args: GenerateArgs) -> anyhow::Result<()> {
+/// Refuses flags that do not fit together, before anything is loaded.
+fn check_generate(args: &GenerateArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.transitions > 0, "--transitions must be at least 1");
     anyhow::ensure!(args.trajectories > 0, "--trajectories must be at least 1");
     anyhow::ensure!(
@@ -160,6 +161,12 @@ fn generate_cmd(args: GenerateArgs) -> anyhow::Result<()> {
         args.layout,
         args.out.display()
     );
+    Ok(())
+}
+
+fn generate_cmd(args: GenerateArgs) -> anyhow::Result<()> {
+    check_generate(&args)?;
+    let neorl = args.layout == Layout::Neorl;
     let task = task_config(args.task, neorl);
     // Everything the recipe needs is loaded and checked before any episode runs.
     let level = level(args.kind, args.layout)?;
@@ -193,34 +200,7 @@ fn generate_cmd(args: GenerateArgs) -> anyhow::Result<()> {
         }
         (Kind::MediumExpert, _) => {
             let (medium, expert) = (load(BehaviourLevel::Medium)?, load(BehaviourLevel::Expert)?);
-            let parts = [
-                from_behaviour(task, "medium", &args, &medium)?,
-                from_behaviour(task, "expert", &args, &expert)?,
-            ];
-            let mut metadata = parts[0].metadata.clone();
-            metadata.retain(|k, _| !k.starts_with("behaviour"));
-            metadata.insert("kind".into(), "medium-expert".into());
-            metadata.insert(
-                "policy".into(),
-                format!(
-                    "the medium policy (step {}), then the expert policy (step {}); actions sampled",
-                    medium.entry.pick.step, expert.entry.pick.step
-                ),
-            );
-            metadata.insert(
-                "recipe".into(),
-                "D4RL medium-expert: the medium dataset, then the expert dataset, same seed".into(),
-            );
-            for (part, prefix) in parts.iter().zip(["medium", "expert"]) {
-                for (k, v) in part
-                    .metadata
-                    .iter()
-                    .filter(|(k, _)| k.starts_with("behaviour"))
-                {
-                    metadata.insert(k.replacen("behaviour", prefix, 1), v.clone());
-                }
-            }
-            Dataset::concat(&[&parts[0], &parts[1]], metadata)?
+            medium_expert(task, &args, &medium, &expert)?
         }
         (_, Some(level)) => {
             let behaviour = load(level)?;
@@ -230,16 +210,58 @@ fn generate_cmd(args: GenerateArgs) -> anyhow::Result<()> {
         }
         (_, None) => unreachable!("every other kind has a level"),
     };
+    write_dataset(&dataset, &args.out, neorl)
+}
+
+/// D4RL's medium-expert: the medium dataset, then the expert one, on the
+/// same seed, each part's behaviour recorded under its name.
+fn medium_expert(
+    task: TaskConfig,
+    args: &GenerateArgs,
+    medium: &Behaviour,
+    expert: &Behaviour,
+) -> anyhow::Result<Dataset> {
+    let parts = [
+        from_behaviour(task, "medium", args, medium)?,
+        from_behaviour(task, "expert", args, expert)?,
+    ];
+    let mut metadata = parts[0].metadata.clone();
+    metadata.retain(|k, _| !k.starts_with("behaviour"));
+    metadata.insert("kind".into(), "medium-expert".into());
+    metadata.insert(
+        "policy".into(),
+        format!(
+            "the medium policy (step {}), then the expert policy (step {}); actions sampled",
+            medium.entry.pick.step, expert.entry.pick.step
+        ),
+    );
+    metadata.insert(
+        "recipe".into(),
+        "D4RL medium-expert: the medium dataset, then the expert dataset, same seed".into(),
+    );
+    for (part, prefix) in parts.iter().zip(["medium", "expert"]) {
+        for (k, v) in part
+            .metadata
+            .iter()
+            .filter(|(k, _)| k.starts_with("behaviour"))
+        {
+            metadata.insert(k.replacen("behaviour", prefix, 1), v.clone());
+        }
+    }
+    Ok(Dataset::concat(&[&parts[0], &parts[1]], metadata)?)
+}
+
+/// Writes `dataset` to `out`: D4RL's HDF5, or NeoRL's `.npz` with the HDF5
+/// of the same stem beside it.
+fn write_dataset(dataset: &Dataset, out: &Path, neorl: bool) -> anyhow::Result<()> {
     let written = if neorl {
-        let hdf5 = args.out.with_extension("hdf5");
-        write_neorl(&dataset, &args.out)
-            .with_context(|| format!("writing {}", args.out.display()))?;
-        write_d4rl(&dataset, &hdf5).with_context(|| format!("writing {}", hdf5.display()))?;
-        format!("{} and {}", args.out.display(), hdf5.display())
+        let hdf5 = out.with_extension("hdf5");
+        write_neorl(dataset, out).with_context(|| format!("writing {}", out.display()))?;
+        write_d4rl(dataset, &hdf5).with_context(|| format!("writing {}", hdf5.display()))?;
+        format!("{} and {}", out.display(), hdf5.display())
     } else {
-        write_d4rl(&dataset, &args.out)
-            .with_context(|| format!("writing {}", args.out.display()))?;
-        args.out.display().to_string()
+        write_d4rl(dataset, out).with_context(|| format!("writing {}", out.display()))?;
+        out.display().to_string()
     };
     println!(
         "wrote {} transitions in {} trajectories to {written}",

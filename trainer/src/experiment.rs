@@ -16,12 +16,15 @@ use nuno::agent::Method;
 use nuno::data::read_dataset;
 use nuno::envs::{ObservationLayout, TaskConfig};
 use nuno::experiment::{
-    Budget, Cell, CellResult, CellSelection, CellStatus, Grid, cell_dir, cell_status,
-    markdown_table, policy_time_left, results_csv, summarize, summarize_run, write_result,
+    Budget, Cell, CellResult, CellSelection, CellStatus, Grid, MeanCurve, cell_dir, cell_status,
+    markdown_table, mean_curves, policy_time_left, results_csv, summarize, summarize_run,
+    write_result,
 };
 
+use crate::data_source::DataSource;
 use crate::output::write_text;
 use crate::plot::{Series, line_chart};
+use crate::{fit_ensemble, fit_model, fit_policy};
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
@@ -320,95 +323,16 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
             args.cell
         )
     })?;
-    let root = &args.grid.out;
-    if let CellStatus::Done(_) = cell_status(root, cell, &grid.budget)? {
+    let (root, budget) = (&args.grid.out, &grid.budget);
+    if let CellStatus::Done(_) = cell_status(root, cell, budget)? {
         println!("{} is finished", cell.id());
         return Ok(());
     }
     let dir = cell_dir(root, cell);
     let (model, policy) = (root.join(cell.model_id()), dir.join("policy"));
-    let b = &grid.budget;
-    let exe = std::env::current_exe().context("locating nuno-trainer")?;
-    let trainer = |args: Vec<String>| -> anyhow::Result<()> {
-        let status = Process::new(&exe)
-            .args(&args)
-            .status()
-            .context("running nuno-trainer")?;
-        anyhow::ensure!(
-            status.success(),
-            "nuno-trainer {} failed ({status})",
-            args[0]
-        );
-        Ok(())
-    };
-    let path = |p: &Path| p.display().to_string();
-    // Each fit writes its JSON last: without it the fit did not finish.
-    let (subcommand, finished) = if cell.method.uses_ensemble() {
-        ("fit-ensemble", "ensemble.json")
-    } else {
-        ("fit-model", "model.json")
-    };
-    // Cells sharing the model fit it once: the first to hold the lock fits,
-    // the others wait on it and find the model there. The operating system
-    // drops the lock of a killed cell, whose successor continues the fit
-    // from its last checkpoint.
-    std::fs::create_dir_all(&model).with_context(|| format!("creating {}", model.display()))?;
-    let lock_path = model.with_extension("lock");
-    let lock = std::fs::File::create(&lock_path)
-        .with_context(|| format!("creating {}", lock_path.display()))?;
-    lock.lock()
-        .with_context(|| format!("locking {}", lock_path.display()))?;
-    if !model.join(finished).is_file() {
-        let mut fit: Vec<String> = vec![
-            subcommand.into(),
-            "--dataset".into(),
-            path(&cell.file),
-            "--task".into(),
-            cell.task.to_string(),
-            "--out".into(),
-            path(&model),
-            "--seed".into(),
-            cell.seed.to_string(),
-        ];
-        if cell.layout == ObservationLayout::Neorl {
-            fit.push("--neorl".into());
-        }
-        // A killed fit continues from its last checkpoint.
-        fit.push("--resume".into());
-        fit.extend(model_fit_options(b, cell.method));
-        trainer(fit)?;
-    }
-    drop(lock);
-    let hidden: Vec<String> = b.hidden.iter().map(usize::to_string).collect();
-    let mut fit_policy = vec![
-        "fit-policy".into(),
-        "--model".into(),
-        path(&model),
-        "--dataset".into(),
-        path(&cell.file),
-        "--preset".into(),
-        cell.preset.clone(),
-        "--steps".into(),
-        b.policy_steps.to_string(),
-        "--steps-per-epoch".into(),
-        b.steps_per_epoch.to_string(),
-        "--eval-episodes".into(),
-        b.eval_episodes.to_string(),
-        "--hidden".into(),
-        hidden.join(","),
-        "--seed".into(),
-        cell.seed.to_string(),
-        "--out".into(),
-        path(&policy),
-        "--policies".into(),
-        path(&dir),
-        "--algo".into(),
-        cell.method.as_str().into(),
-        "--resume".into(),
-    ];
-    fit_policy.extend(policy_options(b, cell.method));
-    trainer(fit_policy)?;
-    let result = summarize_run(cell, &grid.budget, &policy.join("metrics.jsonl"))?;
+    fit_cell_model(cell, budget, &model)?;
+    fit_policy::train(&policy_args(cell, budget, model, dir).plan()?)?;
+    let result = summarize_run(cell, budget, &policy.join("metrics.jsonl"))?;
     write_result(root, &result)?;
     println!(
         "{}: best normalised score {:.1} at step {}, final {:.1}",
@@ -420,50 +344,77 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `flag value` when the budget gives a value, nothing otherwise.
-fn option(flag: &str, value: Option<impl ToString>) -> Vec<String> {
-    value.map_or_else(Vec::new, |v| vec![flag.to_string(), v.to_string()])
+/// Fits the cell's model into `model` unless it is there. Cells sharing the
+/// model fit it once: the first to hold the lock fits, the others wait on it
+/// and find the model there. The operating system drops the lock of a killed
+/// cell, whose successor continues the fit from its last checkpoint.
+fn fit_cell_model(cell: &Cell, budget: &Budget, model: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(model).with_context(|| format!("creating {}", model.display()))?;
+    let lock_path = model.with_extension("lock");
+    let lock = std::fs::File::create(&lock_path)
+        .with_context(|| format!("creating {}", lock_path.display()))?;
+    lock.lock()
+        .with_context(|| format!("locking {}", lock_path.display()))?;
+    let data = DataSource {
+        dataset: cell.file.clone(),
+        format: None,
+        task: cell.task,
+        neorl: cell.layout == ObservationLayout::Neorl,
+    };
+    // Each fit writes its JSON last: without it the fit did not finish.
+    let out = model.to_path_buf();
+    if cell.method.uses_ensemble() {
+        if !model.join("ensemble.json").is_file() {
+            let mut args = fit_ensemble::Args::defaults(data, out);
+            (args.seed, args.resume) = (cell.seed, true);
+            args.max_epochs = budget.ensemble_max_epochs;
+            fit_ensemble::fit(&args.plan()?)?;
+        }
+    } else if !model.join("model.json").is_file() {
+        fit_model::fit(&model_args(cell, budget, data, out).plan()?)?;
+    }
+    Ok(())
 }
 
-/// The budget's options of `method`'s model fit (fit-model or fit-ensemble).
-fn model_fit_options(b: &Budget, method: Method) -> Vec<String> {
-    if method.uses_ensemble() {
-        return option("--max-epochs", b.ensemble_max_epochs);
-    }
-    let mut options = [
-        option("--max-steps", Some(b.model_steps)),
-        option("--likelihood", Some(b.model_likelihood)),
-        option("--recipe", Some(b.recipe)),
-        option("--sample-noise", b.model_sample_noise),
-        option("--step-discount", b.model_step_discount),
-        option("--eta-losses", b.model_eta_losses),
-        option("--threshold-max-margin", b.threshold_max_margin),
-        option("--drift-inputs", b.model_drift_inputs),
-    ]
-    .concat();
-    if method == Method::NunoR {
-        options.push("--reward-model".into());
-    }
-    options
+/// fit-model's flags for the cell's SDE: the budget's over the defaults,
+/// resuming a killed fit.
+fn model_args(cell: &Cell, b: &Budget, data: DataSource, out: PathBuf) -> fit_model::Args {
+    let mut args = fit_model::Args::defaults(data, out);
+    (args.seed, args.resume) = (cell.seed, true);
+    args.reward_model = cell.method == Method::NunoR;
+    args.max_steps = Some(b.model_steps);
+    args.likelihood = b.model_likelihood;
+    args.recipe = b.recipe;
+    args.sample_noise = b.model_sample_noise;
+    args.step_discount = b.model_step_discount;
+    args.eta_losses = b.model_eta_losses;
+    args.threshold_max_margin = b.threshold_max_margin;
+    args.drift_inputs = b.model_drift_inputs;
+    args
 }
 
-/// The budget's optional fit-policy options for `method`: the recipe and the
+/// fit-policy's flags for the cell: the budget's over the defaults, the
+/// policies in the cell's folder, resuming a killed run. The recipe and the
 /// reward's velocity are NUNO's loop (an ensemble learns its rewards), the
 /// MOPO settings MOPO's.
-fn policy_options(b: &Budget, method: Method) -> Vec<String> {
-    let shared = [
-        option("--rollout-batch", b.rollout_batch),
-        option("--model-buffer-factor", b.model_buffer_factor),
-    ];
-    let own = if method.uses_ensemble() {
-        [option("--mopo-settings", b.mopo_settings), Vec::new()]
+fn policy_args(cell: &Cell, b: &Budget, model: PathBuf, dir: PathBuf) -> fit_policy::Args {
+    let out = dir.join("policy");
+    let mut args = fit_policy::Args::defaults(model, cell.file.clone(), &cell.preset, out);
+    (args.seed, args.resume, args.algo) = (cell.seed, true, cell.method);
+    args.policies = Some(dir);
+    args.steps = b.policy_steps;
+    args.steps_per_epoch = b.steps_per_epoch;
+    args.eval_episodes = b.eval_episodes;
+    args.hidden = b.hidden.clone();
+    args.rollout_batch = b.rollout_batch;
+    args.model_buffer_factor = b.model_buffer_factor;
+    if cell.method.uses_ensemble() {
+        args.mopo_settings = b.mopo_settings;
     } else {
-        [
-            option("--recipe", Some(b.recipe)),
-            option("--forward-velocity", b.forward_velocity),
-        ]
-    };
-    [shared, own].concat().concat()
+        args.recipe = b.recipe;
+        args.forward_velocity = b.forward_velocity;
+    }
+    args
 }
 
 fn status(args: StatusArgs) -> anyhow::Result<()> {
@@ -548,37 +499,22 @@ fn report(args: GridArgs) -> anyhow::Result<()> {
 
 /// One SVG per dataset: each method's normalised score by step, the mean over its seeds.
 fn learning_curves(out: &Path, results: &[CellResult]) -> anyhow::Result<()> {
-    let mut by_dataset: BTreeMap<&str, BTreeMap<Method, Vec<&CellResult>>> = BTreeMap::new();
-    for r in results {
-        by_dataset
-            .entry(&r.cell.dataset)
-            .or_default()
-            .entry(r.cell.method)
-            .or_default()
-            .push(r);
+    let curves = mean_curves(results);
+    let mut by_dataset: BTreeMap<&str, Vec<&MeanCurve>> = BTreeMap::new();
+    for curve in &curves {
+        by_dataset.entry(&curve.dataset).or_default().push(curve);
     }
-    for (dataset, methods) in by_dataset {
-        let series: Vec<(String, Vec<(f64, f64)>)> = methods
+    for (dataset, curves) in by_dataset {
+        let names: Vec<String> = curves
             .iter()
-            .map(|(method, runs)| {
-                let mut steps: BTreeMap<usize, Vec<f64>> = BTreeMap::new();
-                for run in runs {
-                    for &(step, score) in &run.curve {
-                        steps.entry(step).or_default().push(score);
-                    }
-                }
-                let points = steps
-                    .into_iter()
-                    .map(|(s, v)| (s as f64, v.iter().sum::<f64>() / v.len() as f64))
-                    .collect();
-                (format!("{method} ({} seeds)", runs.len()), points)
-            })
+            .map(|c| format!("{} ({} seeds)", c.method, c.seeds))
             .collect();
-        let series: Vec<Series> = series
+        let series: Vec<Series> = curves
             .iter()
-            .map(|(name, points)| Series {
+            .zip(&names)
+            .map(|(c, name)| Series {
                 name,
-                points: points.clone(),
+                points: c.points.iter().map(|&(s, v)| (s as f64, v)).collect(),
             })
             .collect();
         line_chart(
@@ -590,4 +526,155 @@ fn learning_curves(out: &Path, results: &[CellResult]) -> anyhow::Result<()> {
         )?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use clap::Parser;
+    use nuno::experiment::Grid;
+
+    use super::{model_args, policy_args};
+    use crate::data_source::DataSource;
+    use crate::{fit_model, fit_policy};
+
+    /// The command lines a user would type, parsed as the trainer parses them.
+    #[derive(Parser)]
+    enum Typed {
+        FitModel(fit_model::Args),
+        FitPolicy(fit_policy::Args),
+    }
+
+    /// The budget keys every method takes.
+    const SHARED: &str = "model_steps = 300\npolicy_steps = 4500\nsteps_per_epoch = 500\neval_episodes = 3\n\
+                          hidden = [64, 32]\nrollout_batch = 700\nmodel_buffer_factor = 3\n";
+    /// The budget keys of NUNO's model and loop.
+    const NUNO: &str = "recipe = \"code\"\nmodel_likelihood = \"data\"\nmodel_sample_noise = \"calibrated\"\n\
+                        model_step_discount = 0.8\nmodel_eta_losses = \"paper\"\nthreshold_max_margin = 1.3\n\
+                        model_drift_inputs = \"z-scores\"\nforward_velocity = \"next\"\n";
+
+    /// A grid of one `method` cell under the shared budget keys and `own`.
+    fn cell_of(dir: &Path, method: &str, own: &str) -> (Grid, super::Cell) {
+        let grid = dir.join(format!("{method}.toml"));
+        let text = format!(
+            "[budget]\n{SHARED}{own}\n[[datasets]]\nname = \"h\"\nfile = \"h.hdf5\"\ntask = \"hopper\"\n\
+             preset = \"hopper-medium\"\nmethods = [\"{method}\"]\nseeds = [4]\n"
+        );
+        std::fs::write(&grid, text).unwrap();
+        let (grid, cells) = Grid::read(&grid).unwrap();
+        (grid, cells[0].clone())
+    }
+
+    fn json(value: &impl serde::Serialize) -> serde_json::Value {
+        serde_json::to_value(value).unwrap()
+    }
+
+    #[test]
+    fn a_cell_fits_what_the_same_flags_typed_would_fit() {
+        let dir = tempfile::tempdir().unwrap();
+        let (grid, cell) = cell_of(dir.path(), "nuno-r", NUNO);
+        let file = cell.file.display().to_string();
+        let data = DataSource {
+            dataset: cell.file.clone(),
+            format: None,
+            task: cell.task,
+            neorl: false,
+        };
+        let runner = model_args(&cell, &grid.budget, data, "m".into());
+        let typed = [
+            "t",
+            "fit-model",
+            "--dataset",
+            &file,
+            "--task",
+            "hopper",
+            "--out",
+            "m",
+            "--seed",
+            "4",
+            "--resume",
+            "--reward-model",
+            "--max-steps",
+            "300",
+            "--likelihood",
+            "data",
+            "--recipe",
+            "code",
+            "--sample-noise",
+            "calibrated",
+            "--step-discount",
+            "0.8",
+            "--eta-losses",
+            "paper",
+            "--threshold-max-margin",
+            "1.3",
+            "--drift-inputs",
+            "z-scores",
+        ];
+        let Typed::FitModel(typed) = Typed::parse_from(typed) else {
+            unreachable!()
+        };
+        assert_eq!(json(&runner.plan().unwrap()), json(&typed.plan().unwrap()));
+    }
+
+    #[test]
+    fn a_cell_trains_the_policy_the_same_flags_typed_would_train() {
+        let dir = tempfile::tempdir().unwrap();
+        for (method, budget, own) in [
+            (
+                "nuno",
+                NUNO,
+                vec!["--recipe", "code", "--forward-velocity", "next"],
+            ),
+            (
+                "mopo",
+                "mopo_settings = \"nuno\"\n",
+                vec!["--mopo-settings", "nuno"],
+            ),
+        ] {
+            let (grid, cell) = cell_of(dir.path(), method, budget);
+            let file = cell.file.display().to_string();
+            let runner = policy_args(&cell, &grid.budget, "m".into(), "c".into());
+            let mut typed = vec![
+                "t",
+                "fit-policy",
+                "--model",
+                "m",
+                "--dataset",
+                &file,
+                "--preset",
+                "hopper-medium",
+                "--out",
+                "c/policy",
+                "--policies",
+                "c",
+                "--algo",
+                method,
+                "--seed",
+                "4",
+                "--resume",
+                "--steps",
+                "4500",
+                "--steps-per-epoch",
+                "500",
+                "--eval-episodes",
+                "3",
+                "--hidden",
+                "64,32",
+                "--rollout-batch",
+                "700",
+                "--model-buffer-factor",
+                "3",
+            ];
+            typed.extend(own);
+            let Typed::FitPolicy(typed) = Typed::parse_from(typed) else {
+                unreachable!()
+            };
+            let plan = runner.plan().unwrap();
+            assert_eq!(json(&plan), json(&typed.plan().unwrap()), "{method}");
+            // Not a tautology of two defaults: the budget reached the plan.
+            assert_eq!(plan.config.rollout_batch, 700, "{method}");
+        }
+    }
 }

@@ -5,214 +5,325 @@
 
 use std::fs::File;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use burn::tensor::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::artifact::{DynamicsProvenance, load_sde_checkpoint, save_dynamics, save_sde_checkpoint};
-use nuno::envs::MujocoTask;
+use nuno::data::Dataset;
+use nuno::envs::{MujocoTask, TaskConfig};
 use nuno::infer::Kernel;
 use nuno::sde::{
-    CalibrationConfig, ComputeDevice, DriftInputs, DynamicsSpec, EtaLossForm, FitConfig, FitRecord,
-    LikelihoodPath, LossConfig, Recipe, SampleNoise, SdeConfig, SdeError, StepLosses,
-    ThresholdConfig, calibration_report, compute_thresholds, fit_from, prediction_error,
+    ComputeDevice, DriftInputs, DynamicsSpec, EtaLossForm, FitConfig, FitRecord, FitReport,
+    FitReportConfig, FitSummary, HorizonError, LikelihoodPath, LossConfig, NeuralSde, Recipe,
+    SampleNoise, SdeConfig, SdeError, SdeFitState, StepLosses, ThresholdConfig, fit_from,
+    fit_report,
 };
 use nuno::shared::{Metric, MetricsTable};
+use serde::Serialize;
 
 use crate::data_source::DataSource;
 use crate::eta_report::{action_space, calibration_charts, print_calibration};
 use crate::plot::{Series, line_chart};
 use crate::resume::checkpoint_to_resume;
+use crate::run_record::write_run_record;
+
+/// The fit's checkpoints, in --out.
+const FIT_CHECKPOINTS: &str = "fit-checkpoints";
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
     #[command(flatten)]
-    data: DataSource,
+    pub data: DataSource,
     /// Output model directory (dynamics.safetensors, model.json, metrics.csv, plots).
     #[arg(long)]
-    out: PathBuf,
+    pub out: PathBuf,
     /// NUNO^R: also learn the reward as a cumulative-reward state.
     #[arg(long)]
-    reward_model: bool,
+    pub reward_model: bool,
     /// paper (the paper's equations and Appendix C) or code (NUNO's code where it
     /// differs: samples at sqrt(dt), steps weighed 0.9^(t−1), its 100k-step schedule,
     /// 20 % held out, pose drift inputs, its η losses, ε(h, 1) = 1.1 × max); the flags
     /// below override single settings.
     #[arg(long, default_value_t = Recipe::Paper)]
-    recipe: Recipe,
+    pub recipe: Recipe,
     /// The scale of ε the model samples at: calibrated (Σ) or sqrt-dt (NUNO's code)
     /// (default: the recipe's). Σ stays the calibrated one-step uncertainty.
     #[arg(long)]
-    sample_noise: Option<SampleNoise>,
+    pub sample_noise: Option<SampleNoise>,
     /// η's losses: paper (eq. 3, 4: μ a network, L_grad = ‖∇η‖² + η², on the fit's
     /// schedule) or code (NUNO's `losses_diffusion.py`: one scalar μ, ½μ in L_sc,
     /// λ_grad 1e-5, mean-η and set-one terms, the gradient floor, η's own Adam at
     /// 1e-3) (default: the recipe's); --lambda-grad overrides its weight.
     #[arg(long)]
-    eta_losses: Option<EtaLossForm>,
+    pub eta_losses: Option<EtaLossForm>,
     /// What the drift networks G, H, f_res see of the state: z-scores (eq. 8) or
     /// pose (NUNO's code's `RBD_Drift`: angles as cos and sin about their mean,
     /// and G sees the pose) (default: the recipe's).
     #[arg(long)]
-    drift_inputs: Option<DriftInputs>,
+    pub drift_inputs: Option<DriftInputs>,
     /// L_data's weight of window step t is this to the power t − 1, in (0, 1]
     /// (default: the recipe's: paper 1, code 0.9).
     #[arg(long)]
-    step_discount: Option<f32>,
+    pub step_discount: Option<f32>,
     /// ε(h, α = 1) = this × the largest accumulated η, ≥ 1 (default: the recipe's:
     /// paper 1, code 1.1).
     #[arg(long)]
-    threshold_max_margin: Option<f32>,
+    pub threshold_max_margin: Option<f32>,
     /// Upper bound on gradient steps (early stopping may end sooner; default: the
     /// recipe's, paper 20 000, code 200 000).
     #[arg(long)]
-    max_steps: Option<usize>,
+    pub max_steps: Option<usize>,
     /// Validation NLL every this many steps (default: the recipe's: paper 250, code 2000).
     #[arg(long)]
-    eval_every: Option<usize>,
+    pub eval_every: Option<usize>,
     /// Early-stopping patience, in evaluations (default: the recipe's: paper 8, code 20).
     #[arg(long)]
-    patience: Option<usize>,
+    pub patience: Option<usize>,
     /// Hidden sizes of the drift networks G, H, f_res (paper: 256,256,256).
-    #[arg(long, value_delimiter = ',', default_value = "256,256,256")]
-    drift_hidden: Vec<usize>,
+    #[arg(long, value_delimiter = ',', default_values_t = SdeConfig::new().drift_hidden)]
+    pub drift_hidden: Vec<usize>,
     /// Ball radius r of L_sc's samples, in normalised units (default: the paper's 0.1).
     #[arg(long)]
-    radius: Option<f32>,
+    pub radius: Option<f32>,
     /// λ_grad, weight of L_grad (default: the η loss form's: paper 1e-4, code 1e-5).
     #[arg(long)]
-    lambda_grad: Option<f32>,
+    pub lambda_grad: Option<f32>,
     /// λ_far, weight of the far-field hinge on η (not in the paper; default 0 = off;
     /// see docs/paper-map.md before using it on high-dimensional data).
     #[arg(long)]
-    lambda_far: Option<f32>,
+    pub lambda_far: Option<f32>,
     /// Where L_data's steps start: particle (eq. 6 as written: the previous step's
     /// sample) or data (the recorded state before each step; docs/paper-map.md).
     #[arg(long, default_value_t = LikelihoodPath::Particle)]
-    likelihood: LikelihoodPath,
+    pub likelihood: LikelihoodPath,
     /// W^max of h(η): the diffusion beyond the data, in multiples of each state
     /// dimension's diffusion scale; one value for all, or one per dimension.
-    #[arg(long, value_delimiter = ',', default_value = "1")]
-    w_max: Vec<f32>,
+    #[arg(long, value_delimiter = ',', default_values_t = SdeConfig::new().w_max)]
+    pub w_max: Vec<f32>,
     /// Windows per horizon used for the CVaR thresholds.
     #[arg(long, default_value_t = ThresholdConfig::new().max_windows)]
-    threshold_windows: usize,
+    pub threshold_windows: usize,
     #[arg(long, default_value_t = 0)]
-    seed: u64,
+    pub seed: u64,
     /// Compute device: cpu, or wgpu in a build with the `wgpu` feature.
     #[arg(long, default_value_t = ComputeDevice::Cpu)]
-    device: ComputeDevice,
+    pub device: ComputeDevice,
     /// What takes the gradient steps: fused (the CPU kernels, every core) or burn
     /// (autodiff on --device); default fused on the CPU, burn on a GPU. Either
     /// resumes the other's checkpoints.
     #[arg(long)]
-    kernel: Option<Kernel>,
+    pub kernel: Option<Kernel>,
     /// Continue the fit checkpointed in --out (the same settings; --max-steps may grow).
     #[arg(long)]
-    resume: bool,
+    pub resume: bool,
 }
 
-/// The validated settings of a fit: the task (its simulator, for the action box),
-/// the model's spec, the fit and the threshold configurations (the recipe's, with
-/// single flags over it).
-fn fit_plan(args: &Args) -> anyhow::Result<(MujocoTask, DynamicsSpec, FitConfig, ThresholdConfig)> {
-    let mut loss = LossConfig::new();
-    loss.radius = args.radius.unwrap_or(loss.radius);
-    loss.lambda_far = args.lambda_far.unwrap_or(loss.lambda_far);
-    loss.likelihood = args.likelihood;
-    anyhow::ensure!(
-        !args.drift_hidden.is_empty() && args.drift_hidden.iter().all(|&h| h > 0),
-        "--drift-hidden needs positive layer sizes"
-    );
-    let task = args.data.task_config();
-    let probe = MujocoTask::new(task)?;
-    let spec = DynamicsSpec {
-        obs_dim: probe.obs_dim(),
-        act_dim: probe.act_dim(),
-        split: probe.state_split(),
-        dt: probe.dt(),
-    };
-    let mut model_config = SdeConfig::new();
-    model_config.reward_model = args.reward_model;
-    model_config.drift_hidden = args.drift_hidden.clone();
-    model_config.w_max = args.w_max.clone();
-    let mut config = FitConfig::new(model_config, loss);
-    args.recipe.apply_to_fit(&mut config, spec.dt);
-    if let Some(noise) = args.sample_noise {
-        config.model.sample_noise_scale = noise.scale(spec.dt);
-    }
-    if let Some(form) = args.eta_losses {
-        form.apply_to_fit(&mut config);
-    }
-    config.model.drift_inputs = args.drift_inputs.unwrap_or(config.model.drift_inputs);
-    config.loss.lambda_grad = args.lambda_grad.unwrap_or(config.loss.lambda_grad);
-    config.loss.step_discount = args.step_discount.unwrap_or(config.loss.step_discount);
-    config.max_steps = args.max_steps.unwrap_or(config.max_steps);
-    config.eval_every = args.eval_every.unwrap_or(config.eval_every);
-    config.patience = args.patience.unwrap_or(config.patience);
-    config.seed = args.seed;
-    config.kernel = match (args.kernel, args.device) {
-        (Some(Kernel::Fused), ComputeDevice::Wgpu) => {
-            anyhow::bail!("--kernel fused runs on the CPU: use --kernel burn with --device wgpu")
+/// What a fit-model run does, validated before the data is read: the task and
+/// the model's spec, the fit and the post-fit report (the recipe's, with single
+/// flags over it), written to `run.json` at start.
+#[derive(Debug, Serialize)]
+pub struct Plan {
+    pub data: DataSource,
+    pub task: TaskConfig,
+    pub spec: DynamicsSpec,
+    pub fit: FitConfig,
+    pub report: FitReportConfig,
+    pub device: ComputeDevice,
+    pub out: PathBuf,
+    pub resume: bool,
+}
+
+impl Args {
+    /// The flags' defaults for fitting `data` into `out`: what `fit-model
+    /// --dataset … --task … --out …` alone runs (the experiment runner sets its
+    /// budget's fields over them).
+    pub fn defaults(data: DataSource, out: PathBuf) -> Self {
+        #[derive(clap::Parser)]
+        struct Flags {
+            #[command(flatten)]
+            args: Args,
         }
-        (Some(kernel), _) => kernel,
-        (None, ComputeDevice::Cpu) => Kernel::Fused,
-        (None, ComputeDevice::Wgpu) => Kernel::Burn,
-    };
-    config
-        .loss
-        .validate()
-        .context("check --radius, --lambda-grad, --lambda-far and --step-discount")?;
-    config
-        .model
-        .validate(spec.obs_dim + usize::from(args.reward_model))
-        .context("check --w-max")?;
-    anyhow::ensure!(config.max_steps > 0, "--max-steps must be at least 1");
-    anyhow::ensure!(config.eval_every > 0, "--eval-every must be at least 1");
-    let mut threshold_config = ThresholdConfig {
-        max_windows: args.threshold_windows,
-        seed: args.seed,
-        ..ThresholdConfig::new()
-    };
-    args.recipe.apply_to_thresholds(&mut threshold_config);
-    threshold_config.max_margin = args
-        .threshold_max_margin
-        .unwrap_or(threshold_config.max_margin);
-    threshold_config
-        .validate()
-        .context("check --threshold-windows and --threshold-max-margin")?;
-    Ok((probe, spec, config, threshold_config))
+        let required = [
+            "fit-model",
+            "--dataset",
+            "-",
+            "--task",
+            "hopper",
+            "--out",
+            "-",
+        ];
+        let mut args = <Flags as clap::Parser>::parse_from(required).args;
+        (args.data, args.out) = (data, out);
+        args
+    }
+
+    /// The validated plan: every setting is checked before the data is read
+    /// or any work starts.
+    pub fn plan(self) -> anyhow::Result<Plan> {
+        anyhow::ensure!(
+            !self.drift_hidden.is_empty() && self.drift_hidden.iter().all(|&h| h > 0),
+            "--drift-hidden needs positive layer sizes"
+        );
+        let task = self.data.task_config();
+        let probe = MujocoTask::new(task)?;
+        let spec = DynamicsSpec {
+            obs_dim: probe.obs_dim(),
+            act_dim: probe.act_dim(),
+            split: probe.state_split(),
+            dt: probe.dt(),
+        };
+        let fit = self.fit_config(&spec)?;
+        let report = self.report_config()?;
+        Ok(Plan {
+            data: self.data,
+            task,
+            spec,
+            fit,
+            report,
+            device: self.device,
+            out: self.out,
+            resume: self.resume,
+        })
+    }
+
+    /// The fit: the recipe's, with single flags over it.
+    fn fit_config(&self, spec: &DynamicsSpec) -> anyhow::Result<FitConfig> {
+        let mut loss = LossConfig::new();
+        loss.radius = self.radius.unwrap_or(loss.radius);
+        loss.lambda_far = self.lambda_far.unwrap_or(loss.lambda_far);
+        loss.likelihood = self.likelihood;
+        let mut model = SdeConfig::new();
+        model.reward_model = self.reward_model;
+        model.drift_hidden = self.drift_hidden.clone();
+        model.w_max = self.w_max.clone();
+        let mut config = FitConfig::new(model, loss);
+        self.recipe.apply_to_fit(&mut config, spec.dt);
+        if let Some(noise) = self.sample_noise {
+            config.model.sample_noise_scale = noise.scale(spec.dt);
+        }
+        if let Some(form) = self.eta_losses {
+            form.apply_to_fit(&mut config);
+        }
+        config.model.drift_inputs = self.drift_inputs.unwrap_or(config.model.drift_inputs);
+        config.loss.lambda_grad = self.lambda_grad.unwrap_or(config.loss.lambda_grad);
+        config.loss.step_discount = self.step_discount.unwrap_or(config.loss.step_discount);
+        config.max_steps = self.max_steps.unwrap_or(config.max_steps);
+        config.eval_every = self.eval_every.unwrap_or(config.eval_every);
+        config.patience = self.patience.unwrap_or(config.patience);
+        config.seed = self.seed;
+        config.kernel = match (self.kernel, self.device) {
+            (Some(Kernel::Fused), ComputeDevice::Wgpu) => {
+                anyhow::bail!(
+                    "--kernel fused runs on the CPU: use --kernel burn with --device wgpu"
+                )
+            }
+            (Some(kernel), _) => kernel,
+            (None, ComputeDevice::Cpu) => Kernel::Fused,
+            (None, ComputeDevice::Wgpu) => Kernel::Burn,
+        };
+        config
+            .loss
+            .validate()
+            .context("check --radius, --lambda-grad, --lambda-far and --step-discount")?;
+        config
+            .model
+            .validate(spec.obs_dim + usize::from(self.reward_model))
+            .context("check --w-max")?;
+        anyhow::ensure!(config.max_steps > 0, "--max-steps must be at least 1");
+        anyhow::ensure!(config.eval_every > 0, "--eval-every must be at least 1");
+        Ok(config)
+    }
+
+    /// The post-fit report: the thresholds' search (the recipe's margin, single
+    /// flags over it), every part on the fit's seed.
+    fn report_config(&self) -> anyhow::Result<FitReportConfig> {
+        let mut thresholds = ThresholdConfig::new().with_max_windows(self.threshold_windows);
+        self.recipe.apply_to_thresholds(&mut thresholds);
+        thresholds.max_margin = self.threshold_max_margin.unwrap_or(thresholds.max_margin);
+        thresholds
+            .validate()
+            .context("check --threshold-windows and --threshold-max-margin")?;
+        Ok(FitReportConfig::seeded(thresholds, self.seed))
+    }
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    // Every setting is checked before the data is read or any work starts.
-    let (probe, spec, config, threshold_config) = fit_plan(&args)?;
-    let task = args.data.task_config();
-    let dataset = args.data.read()?;
-    let (train, valid) = dataset.split_by_trajectory(config.valid_fraction, config.seed);
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    fit(&args.plan()?)
+}
 
-    // Fit, with a progress bar and a metrics CSV.
-    let device = args.device.device().map_err(anyhow::Error::msg)?;
-    let bar = ProgressBar::new(config.max_steps as u64).with_style(ProgressStyle::with_template(
+/// Fits the SDE (from the last checkpoint under --resume), measures it and
+/// writes the artifact, its metrics and plots.
+pub fn fit(plan: &Plan) -> anyhow::Result<()> {
+    let dataset = plan.data.read()?;
+    let (train, valid) = dataset.split_by_trajectory(plan.fit.valid_fraction, plan.fit.seed);
+    let device = plan.device.device().map_err(anyhow::Error::msg)?;
+    let resume = resume_state(plan, &device)?;
+    write_run_record(&plan.out, "fit-model", plan, &[&plan.data.dataset])?;
+    let (model, summary, records) = fit_logged(plan, &train, &valid, resume, &device)?;
+    println!(
+        "fitted {} steps in {:.0} s; best validation NLL {:.3} at step {}",
+        summary.steps, summary.seconds, summary.best_valid_nll, summary.best_step
+    );
+    let report = fit_report(
+        &model,
+        &dataset,
+        &valid,
+        plan.fit.loss.radius,
+        &action_space(&MujocoTask::new(plan.task)?),
+        &plan.report,
+        &device,
+    )?;
+    print_calibration(&report.calibration);
+    let provenance = DynamicsProvenance {
+        task: Some(plan.task),
+        fit: Some(plan.fit.clone()),
+        thresholds: Some(report.thresholds.clone()),
+        calibration: Some(report.calibration.clone()),
+        training: Some(summary),
+        dataset: Some(plan.data.info(&dataset)),
+    };
+    save_dynamics(&plan.out, &model, provenance)?;
+    write_charts(&plan.out, &records, &report)?;
+    println!("wrote {}", plan.out.display());
+    Ok(())
+}
+
+/// The fit's state at its last checkpoint under --resume; none for a fresh
+/// fit (refused where --out holds a fit already).
+fn resume_state(plan: &Plan, device: &Device) -> anyhow::Result<Option<SdeFitState>> {
+    let checkpoints = plan.out.join(FIT_CHECKPOINTS);
+    let Some(checkpoint) = checkpoint_to_resume(&checkpoints, plan.resume, &plan.out, "a fit")?
+    else {
+        return Ok(None);
+    };
+    let state = load_sde_checkpoint(&checkpoint, &plan.fit, device)
+        .with_context(|| format!("resuming from {}", checkpoint.display()))?;
+    println!(
+        "resumed from {} (step {})",
+        checkpoint.display(),
+        state.step
+    );
+    Ok(Some(state))
+}
+
+/// Runs the fit with a progress bar, each record a line of metrics.csv (a
+/// resumed fit's file starts with the records before its checkpoint) and a
+/// checkpoint at every validation; the model, its summary and the records.
+fn fit_logged(
+    plan: &Plan,
+    train: &Dataset,
+    valid: &Dataset,
+    resume: Option<SdeFitState>,
+    device: &Device,
+) -> anyhow::Result<(NeuralSde, FitSummary, Vec<FitRecord>)> {
+    std::fs::create_dir_all(&plan.out)
+        .with_context(|| format!("creating {}", plan.out.display()))?;
+    let bar = ProgressBar::new(plan.fit.max_steps as u64).with_style(ProgressStyle::with_template(
         "{bar:30} {pos}/{len} steps {per_sec} | {msg}",
     )?);
-    let checkpoints = args.out.join("fit-checkpoints");
-    let resume = match checkpoint_to_resume(&checkpoints, args.resume, &args.out, "a fit")? {
-        Some(checkpoint) => {
-            let state = load_sde_checkpoint(&checkpoint, &config, &device)
-                .with_context(|| format!("resuming from {}", checkpoint.display()))?;
-            println!(
-                "resumed from {} (step {})",
-                checkpoint.display(),
-                state.step
-            );
-            Some(state)
-        }
-        None => None,
-    };
-    let metrics_path = args.out.join("metrics.csv");
+    let metrics_path = plan.out.join("metrics.csv");
     let mut csv = File::create(&metrics_path)
         .with_context(|| format!("creating {}", metrics_path.display()))?;
     let table = fit_metrics();
@@ -232,20 +343,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         records.push(r.clone());
     };
-    // A resumed fit's metrics start with the records before the checkpoint.
     for r in resume.iter().flat_map(|state| &state.records) {
         log(r);
     }
+    let checkpoints = plan.out.join(FIT_CHECKPOINTS);
+    let (spec, config) = (plan.spec.clone(), &plan.fit);
     let (model, summary) = fit_from(
-        &train,
-        &valid,
+        train,
+        valid,
         spec,
-        &config,
-        &device,
+        config,
+        device,
         resume,
         &mut log,
         &mut |state| {
-            save_sde_checkpoint(&checkpoints, &config, state)
+            save_sde_checkpoint(&checkpoints, config, state)
                 .map(|_| ())
                 .map_err(|e| SdeError::Checkpoint(e.to_string()))
         },
@@ -254,36 +366,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(e) = write_error {
         return Err(e).with_context(|| format!("writing {}", metrics_path.display()));
     }
-    println!(
-        "fitted {} steps in {:.0} s; best validation NLL {:.3} at step {}",
-        summary.steps, summary.seconds, summary.best_valid_nll, summary.best_step
-    );
+    Ok((model, summary, records))
+}
 
-    // Section 4.3: ε(h, α) over the whole dataset.
-    let thresholds = compute_thresholds(&model, &dataset, &threshold_config, &device)?;
-    // How Σ and truncation behave on the held-out trajectories.
-    let calibration = calibration_report(
-        &model,
-        &valid,
-        Some(&thresholds),
-        config.loss.radius,
-        &action_space(&probe),
-        &CalibrationConfig::new().with_seed(args.seed),
-        &device,
-    )?;
-    print_calibration(&calibration);
-    let provenance = DynamicsProvenance {
-        task: Some(task),
-        fit: Some(config),
-        thresholds: Some(thresholds),
-        calibration: Some(calibration.clone()),
-        training: Some(summary),
-        dataset: Some(args.data.info(&dataset)),
-    };
-    save_dynamics(&args.out, &model, provenance)?;
-
-    // Plots: loss curves and validation error by horizon.
-    let curve = |name, f: &dyn Fn(&nuno::sde::FitRecord) -> Option<f32>| Series {
+/// The fit's plots: loss curves, Σ's calibration, validation error by horizon.
+fn write_charts(out: &Path, records: &[FitRecord], report: &FitReport) -> anyhow::Result<()> {
+    let curve = |name, f: &dyn Fn(&FitRecord) -> Option<f32>| Series {
         name,
         points: records
             .iter()
@@ -291,7 +379,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .collect(),
     };
     line_chart(
-        &args.out.join("loss_curves.svg"),
+        &out.join("loss_curves.svg"),
         "Neural SDE fit",
         "gradient step",
         "loss",
@@ -302,34 +390,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             curve("L_mu", &|r| Some(r.losses.mu)),
         ],
     )?;
-    calibration_charts(&args.out, &calibration)?;
-    let errors = prediction_error(&model, &valid, 50, 256, args.seed, &device);
-    if !errors.is_empty() {
-        line_chart(
-            &args.out.join("horizon_error.svg"),
-            "Open-loop error on validation trajectories",
-            "horizon (steps)",
-            "RMSE (normalised units)",
-            &[
-                Series {
-                    name: "neural SDE",
-                    points: errors
-                        .iter()
-                        .map(|e| (e.horizon as f64, e.model_rmse))
-                        .collect(),
-                },
-                Series {
-                    name: "constant velocity",
-                    points: errors
-                        .iter()
-                        .map(|e| (e.horizon as f64, e.constant_velocity_rmse))
-                        .collect(),
-                },
-            ],
-        )?;
+    calibration_charts(out, &report.calibration)?;
+    let errors = &report.horizon_errors;
+    if errors.is_empty() {
+        return Ok(());
     }
-    println!("wrote {}", args.out.display());
-    Ok(())
+    let series = |name, f: fn(&HorizonError) -> f64| Series {
+        name,
+        points: errors.iter().map(|e| (e.horizon as f64, f(e))).collect(),
+    };
+    line_chart(
+        &out.join("horizon_error.svg"),
+        "Open-loop error on validation trajectories",
+        "horizon (steps)",
+        "RMSE (normalised units)",
+        &[
+            series("neural SDE", |e| e.model_rmse),
+            series("constant velocity", |e| e.constant_velocity_rmse),
+        ],
+    )
 }
 
 /// metrics.csv's columns: one row per logged fit step.

@@ -8,7 +8,7 @@ use anyhow::Context;
 use burn::tensor::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{
-    AleatoricAsEta, EpochRecord, LoopContext, Method, MopoSettings, PolicyLoopConfig,
+    ActionMode, AleatoricAsEta, EpochRecord, LoopContext, Method, MopoSettings, PolicyLoopConfig,
     PolicyTraining, Preset, SacConfig, Truncation, dataset_max_threshold, mopo_preset, preset,
     rollout_threshold, tatu_pessimism,
 };
@@ -22,214 +22,287 @@ use nuno::envs::{ForwardVelocity, TaskConfig};
 use nuno::infer::Kernel;
 use nuno::sde::{ComputeDevice, Recipe, ThresholdConfig};
 use nuno::shared::{BatchDynamics, Metric, MetricsTable};
+use serde::Serialize;
 
 use crate::output::{with_sac_losses, write_text};
 use crate::plot::{Series, line_chart};
 use crate::resume::checkpoint_to_resume;
+use crate::run_record::write_run_record;
+
+/// The policy loop's defaults (Appendix C), which the flags' defaults read.
+fn loop_defaults() -> PolicyLoopConfig {
+    PolicyLoopConfig::new(SacConfig::new(), 0, 0.0, 0.0)
+}
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Model directory written by `fit-model` (the policies are saved there too).
     #[arg(long)]
-    model: PathBuf,
+    pub model: PathBuf,
     /// The dataset the model was fitted on (start states and real transitions).
     #[arg(long)]
-    dataset: PathBuf,
+    pub dataset: PathBuf,
     /// Reader to use (default: detected).
     #[arg(long)]
-    format: Option<DatasetFormat>,
+    pub format: Option<DatasetFormat>,
     /// Table 3 row giving h, α and λ_pen, e.g. hopper-random or neorl-hopper-low
     /// (with --algo mopo or tatu-mopo: the same dataset's row of MOPO's h and λ).
     #[arg(long)]
-    preset: String,
+    pub preset: String,
     /// The method: nuno, nuno-r and nuno-al train in the neural SDE of fit-model,
     /// mopo and tatu-mopo in the Gaussian ensemble of fit-ensemble.
     #[arg(long, default_value_t = Method::Nuno)]
-    algo: Method,
+    pub algo: Method,
     /// TATU's pessimism coefficient (tatu-mopo; default: TATU's for the dataset, else 2).
     #[arg(long)]
-    pessimism: Option<f64>,
+    pub pessimism: Option<f64>,
     /// Total gradient steps (rounded up to whole epochs).
-    #[arg(long, default_value_t = 1_000_000)]
-    steps: usize,
+    #[arg(long, default_value_t = loop_defaults().epochs * loop_defaults().steps_per_epoch)]
+    pub steps: usize,
     /// Gradient steps per epoch (evaluation and checkpoint after each).
-    #[arg(long, default_value_t = 1000)]
-    steps_per_epoch: usize,
+    #[arg(long, default_value_t = loop_defaults().steps_per_epoch)]
+    pub steps_per_epoch: usize,
     /// Gradient steps between model rollouts.
-    #[arg(long, default_value_t = 1000)]
-    rollout_freq: usize,
+    #[arg(long, default_value_t = loop_defaults().rollout_freq)]
+    pub rollout_freq: usize,
     /// Start states per model rollout (default: NUNO's scripts' 5000; mopo and
     /// tatu-mopo: their --mopo-settings', OfflineRL-Kit's 50 000).
     #[arg(long)]
-    rollout_batch: Option<usize>,
+    pub rollout_batch: Option<usize>,
     /// mopo and tatu-mopo: offlinerl-kit (the published baseline: actor lr 1e-4
     /// with cosine decay, α lr 1e-4, 50 000 rollout starts) or nuno (NUNO's SAC
     /// settings, for ablations) [default: offlinerl-kit].
     #[arg(long)]
-    mopo_settings: Option<MopoSettings>,
+    pub mopo_settings: Option<MopoSettings>,
     /// SDE trajectories per start state.
-    #[arg(long, default_value_t = 1)]
-    particles: usize,
+    #[arg(long, default_value_t = loop_defaults().particles)]
+    pub particles: usize,
     /// paper, or code: NUNO's code's loop (a 10× model buffer, the known reward on
     /// the mean forward velocity over a step); the flags below override single settings.
     #[arg(long, default_value_t = Recipe::Paper)]
-    recipe: Recipe,
+    pub recipe: Recipe,
     /// The model buffer holds this many times rollout batch × h × particles × 5
     /// rollouts (default: the recipe's: paper 1, code 10).
     #[arg(long)]
-    model_buffer_factor: Option<usize>,
+    pub model_buffer_factor: Option<usize>,
     /// The velocity the known reward reads on D4RL observations: next (after the
     /// step) or mean (over the step, NUNO's code) (default: the recipe's).
     #[arg(long)]
-    forward_velocity: Option<ForwardVelocity>,
+    pub forward_velocity: Option<ForwardVelocity>,
     /// β, the real-data fraction of each SAC batch.
-    #[arg(long, default_value_t = 0.05)]
-    real_ratio: f64,
+    #[arg(long, default_value_t = loop_defaults().real_ratio)]
+    pub real_ratio: f64,
     /// SAC batch size.
-    #[arg(long, default_value_t = 256)]
-    batch_size: usize,
+    #[arg(long, default_value_t = loop_defaults().sac.batch_size)]
+    pub batch_size: usize,
     /// Hidden sizes of the actor and critics.
-    #[arg(long, value_delimiter = ',', default_value = "256,256")]
-    hidden: Vec<usize>,
+    #[arg(long, value_delimiter = ',', default_values_t = loop_defaults().sac.actor_hidden)]
+    pub hidden: Vec<usize>,
     /// MuJoCo evaluation episodes per epoch.
-    #[arg(long, default_value_t = 10)]
-    eval_episodes: usize,
+    #[arg(long, default_value_t = loop_defaults().eval_episodes)]
+    pub eval_episodes: usize,
     /// Override the preset's h.
     #[arg(long)]
-    horizon: Option<usize>,
+    pub horizon: Option<usize>,
     /// Override the preset's α.
     #[arg(long)]
-    cvar_alpha: Option<f64>,
+    pub cvar_alpha: Option<f64>,
     /// Override the preset's λ_pen.
     #[arg(long)]
-    penalty: Option<f64>,
+    pub penalty: Option<f64>,
     /// Do not truncate rollouts at ε(h, α) (penalty only).
     #[arg(long)]
-    no_truncation: bool,
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
+    pub no_truncation: bool,
+    #[arg(long, default_value_t = loop_defaults().seed)]
+    pub seed: u64,
     /// Run directory: checkpoints, metrics.csv, metrics.jsonl, plots.
     #[arg(long)]
-    out: PathBuf,
+    pub out: PathBuf,
     /// Where the best and last policies are written (default: --model, next to
     /// the dynamics, where the server finds them).
     #[arg(long)]
-    policies: Option<PathBuf>,
+    pub policies: Option<PathBuf>,
     /// Continue from the last checkpoint in --out.
     #[arg(long)]
-    resume: bool,
+    pub resume: bool,
     /// Compute device: cpu, or wgpu in a build with the `wgpu` feature.
     #[arg(long, default_value_t = ComputeDevice::Cpu)]
-    device: ComputeDevice,
+    pub device: ComputeDevice,
     /// What runs SAC's updates, model rollouts and evaluation episodes: the
     /// fused CPU path, or burn on --device (default: fused on cpu, burn on wgpu).
     /// Either kernel resumes the other's checkpoints.
     #[arg(long)]
-    kernel: Option<Kernel>,
+    pub kernel: Option<Kernel>,
 }
 
-/// Refuses flags no run can use, or that do not fit `--algo`, before anything is read.
-fn check_flags(args: &Args) -> anyhow::Result<()> {
-    anyhow::ensure!(args.steps > 0, "--steps must be at least 1");
-    anyhow::ensure!(
-        args.steps_per_epoch > 0,
-        "--steps-per-epoch must be at least 1"
-    );
-    anyhow::ensure!(
-        args.rollout_batch != Some(0),
-        "--rollout-batch must be at least 1"
-    );
-    anyhow::ensure!(
-        args.mopo_settings.is_none() || args.algo.uses_ensemble(),
-        "--mopo-settings sets MOPO's policy step: it needs --algo mopo or tatu-mopo"
-    );
-    anyhow::ensure!(args.particles > 0, "--particles must be at least 1");
-    anyhow::ensure!(args.batch_size > 0, "--batch-size must be at least 1");
-    anyhow::ensure!(
-        (0.0..=1.0).contains(&args.real_ratio),
-        "--real-ratio must lie in [0, 1], got {}",
-        args.real_ratio
-    );
-    anyhow::ensure!(
-        !args.hidden.is_empty() && args.hidden.iter().all(|&h| h > 0),
-        "--hidden needs positive layer sizes"
-    );
-    anyhow::ensure!(
-        args.pessimism.is_none() || args.algo == Method::TatuMopo,
-        "--pessimism is TATU's coefficient: it needs --algo tatu-mopo"
-    );
-    anyhow::ensure!(
-        !args.algo.uses_ensemble()
-            || (args.recipe == Recipe::Paper && args.forward_velocity.is_none()),
-        "--recipe and --forward-velocity set NUNO's loop: mopo and tatu-mopo roll an ensemble that learns its rewards"
-    );
-    anyhow::ensure!(
-        args.model_buffer_factor != Some(0),
-        "--model-buffer-factor must be at least 1"
-    );
-    if let Some(p) = args.pessimism {
-        anyhow::ensure!(
-            p.is_finite() && p > 0.0,
-            "--pessimism must be positive, got {p}"
-        );
+/// What a fit-policy run does, validated before anything is read: the policy
+/// loop's every setting resolved (the preset's h, α and λ_pen, the method's,
+/// the recipe's, single flags over them), written to `run.json` at start.
+#[derive(Debug, Serialize)]
+pub struct Plan {
+    pub model: PathBuf,
+    pub dataset: PathBuf,
+    pub format: Option<DatasetFormat>,
+    #[serde(skip)]
+    pub preset: &'static Preset,
+    pub method: Method,
+    pub config: PolicyLoopConfig,
+    /// TATU's pessimism coefficient (tatu-mopo only).
+    pub pessimism: Option<f64>,
+    pub device: ComputeDevice,
+    pub kernel: Kernel,
+    pub out: PathBuf,
+    pub policies: PathBuf,
+    pub resume: bool,
+}
+
+impl Args {
+    /// The flags' defaults for training in `model` on `dataset` under the
+    /// Table 3 row `preset` into `out`: what fit-policy with only those flags
+    /// runs (the experiment runner sets its budget's fields over them).
+    pub fn defaults(model: PathBuf, dataset: PathBuf, preset: &str, out: PathBuf) -> Self {
+        #[derive(clap::Parser)]
+        struct Flags {
+            #[command(flatten)]
+            args: Args,
+        }
+        let required = [
+            "fit-policy",
+            "--model",
+            "-",
+            "--dataset",
+            "-",
+            "--preset",
+            "-",
+            "--out",
+            "-",
+        ];
+        let mut args = <Flags as clap::Parser>::parse_from(required).args;
+        (args.model, args.dataset, args.out) = (model, dataset, out);
+        args.preset = preset.to_string();
+        args
     }
-    Ok(())
+
+    /// The validated plan: flags no run can use, or that do not fit `--algo`,
+    /// are refused here, before anything is read.
+    pub fn plan(self) -> anyhow::Result<Plan> {
+        self.check()?;
+        let preset = preset(&self.preset)?;
+        let sac = SacConfig::new()
+            .with_batch_size(self.batch_size)
+            .with_actor_hidden(self.hidden.clone())
+            .with_critic_hidden(self.hidden.clone());
+        let mut config = PolicyLoopConfig::from_preset(preset, sac);
+        if self.algo.uses_ensemble() {
+            // MOPO's own h and λ with the ensemble's max ‖σ‖ as the penalty; TATU
+            // adds its truncation to MOPO's, MOPO alone has none.
+            (config.horizon, config.penalty) = mopo_preset(&self.preset)?;
+            config.truncate = self.algo.truncation() != Truncation::Never;
+            config.apply_mopo_settings(self.mopo_settings.unwrap_or_default());
+        }
+        config.horizon = self.horizon.unwrap_or(config.horizon);
+        config.cvar_alpha = self.cvar_alpha.unwrap_or(config.cvar_alpha);
+        config.penalty = self.penalty.unwrap_or(config.penalty);
+        config.truncate &= !self.no_truncation;
+        config.rollout_freq = self.rollout_freq;
+        config.rollout_batch = self.rollout_batch.unwrap_or(config.rollout_batch);
+        config.particles = self.particles;
+        config.apply_recipe(self.recipe);
+        config.model_buffer_factor = self
+            .model_buffer_factor
+            .unwrap_or(config.model_buffer_factor);
+        config.forward_velocity = self.forward_velocity.unwrap_or(config.forward_velocity);
+        config.real_ratio = self.real_ratio;
+        config.steps_per_epoch = self.steps_per_epoch;
+        config.epochs = self.steps.div_ceil(self.steps_per_epoch);
+        config.eval_episodes = self.eval_episodes;
+        config.seed = self.seed;
+        let pessimism = (self.algo == Method::TatuMopo).then(|| {
+            self.pessimism
+                .unwrap_or_else(|| tatu_pessimism(&self.preset))
+        });
+        let kernel = self.kernel.unwrap_or(match self.device {
+            ComputeDevice::Cpu => Kernel::Fused,
+            ComputeDevice::Wgpu => Kernel::Burn,
+        });
+        Ok(Plan {
+            policies: self.policies.unwrap_or_else(|| self.model.clone()),
+            model: self.model,
+            dataset: self.dataset,
+            format: self.format,
+            preset,
+            method: self.algo,
+            config,
+            pessimism,
+            device: self.device,
+            kernel,
+            out: self.out,
+            resume: self.resume,
+        })
+    }
+
+    fn check(&self) -> anyhow::Result<()> {
+        anyhow::ensure!(self.steps > 0, "--steps must be at least 1");
+        anyhow::ensure!(
+            self.steps_per_epoch > 0,
+            "--steps-per-epoch must be at least 1"
+        );
+        anyhow::ensure!(
+            self.rollout_batch != Some(0),
+            "--rollout-batch must be at least 1"
+        );
+        anyhow::ensure!(
+            self.mopo_settings.is_none() || self.algo.uses_ensemble(),
+            "--mopo-settings sets MOPO's policy step: it needs --algo mopo or tatu-mopo"
+        );
+        anyhow::ensure!(self.particles > 0, "--particles must be at least 1");
+        anyhow::ensure!(self.batch_size > 0, "--batch-size must be at least 1");
+        anyhow::ensure!(
+            (0.0..=1.0).contains(&self.real_ratio),
+            "--real-ratio must lie in [0, 1], got {}",
+            self.real_ratio
+        );
+        anyhow::ensure!(
+            !self.hidden.is_empty() && self.hidden.iter().all(|&h| h > 0),
+            "--hidden needs positive layer sizes"
+        );
+        anyhow::ensure!(
+            self.pessimism.is_none() || self.algo == Method::TatuMopo,
+            "--pessimism is TATU's coefficient: it needs --algo tatu-mopo"
+        );
+        anyhow::ensure!(
+            !self.algo.uses_ensemble()
+                || (self.recipe == Recipe::Paper && self.forward_velocity.is_none()),
+            "--recipe and --forward-velocity set NUNO's loop: mopo and tatu-mopo roll an ensemble that learns its rewards"
+        );
+        anyhow::ensure!(
+            self.model_buffer_factor != Some(0),
+            "--model-buffer-factor must be at least 1"
+        );
+        if let Some(p) = self.pessimism {
+            anyhow::ensure!(
+                p.is_finite() && p > 0.0,
+                "--pessimism must be positive, got {p}"
+            );
+        }
+        Ok(())
+    }
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    check_flags(&args)?;
-    let preset = preset(&args.preset)?;
-    let device = args.device.device().map_err(anyhow::Error::msg)?;
-    let (model, task) = load_model(&args, preset, &device)?;
-    anyhow::ensure!(
-        task.name == preset.task && task.layout == preset.layout,
-        "preset {} is for {} ({:?}), the model is for {} ({:?})",
-        preset.name,
-        preset.task,
-        preset.layout,
-        task.name,
-        task.layout
-    );
-    let dataset = read_dataset(&args.dataset, args.format)?;
-    dataset.check_task(&task, &args.dataset)?;
+    train(&args.plan()?)
+}
 
-    let sac = SacConfig::new()
-        .with_batch_size(args.batch_size)
-        .with_actor_hidden(args.hidden.clone())
-        .with_critic_hidden(args.hidden.clone());
-    let mut config = PolicyLoopConfig::from_preset(preset, sac);
-    if args.algo.uses_ensemble() {
-        // MOPO's own h and λ with the ensemble's max ‖σ‖ as the penalty; TATU
-        // adds its truncation to MOPO's, MOPO alone has none.
-        (config.horizon, config.penalty) = mopo_preset(&args.preset)?;
-        config.truncate = args.algo.truncation() != Truncation::Never;
-        config.apply_mopo_settings(args.mopo_settings.unwrap_or_default());
-    }
-    config.horizon = args.horizon.unwrap_or(config.horizon);
-    config.cvar_alpha = args.cvar_alpha.unwrap_or(config.cvar_alpha);
-    config.penalty = args.penalty.unwrap_or(config.penalty);
-    config.truncate &= !args.no_truncation;
-    config.rollout_freq = args.rollout_freq;
-    config.rollout_batch = args.rollout_batch.unwrap_or(config.rollout_batch);
-    config.particles = args.particles;
-    config.apply_recipe(args.recipe);
-    config.model_buffer_factor = args
-        .model_buffer_factor
-        .unwrap_or(config.model_buffer_factor);
-    config.forward_velocity = args.forward_velocity.unwrap_or(config.forward_velocity);
-    config.real_ratio = args.real_ratio;
-    config.steps_per_epoch = args.steps_per_epoch;
-    config.epochs = args.steps.div_ceil(args.steps_per_epoch);
-    config.eval_episodes = args.eval_episodes;
-    config.seed = args.seed;
-
-    let kernel = args.kernel.unwrap_or(match args.device {
-        ComputeDevice::Cpu => Kernel::Fused,
-        ComputeDevice::Wgpu => Kernel::Burn,
-    });
-    let base = model.dynamics(kernel);
+/// Loads the model and the dataset, then trains epoch by epoch from the start
+/// or from the last checkpoint, saving the best and last policies.
+pub fn train(plan: &Plan) -> anyhow::Result<()> {
+    let device = plan.device.device().map_err(anyhow::Error::msg)?;
+    let (model, task) = load_model(plan, &device)?;
+    let dataset = read_dataset(&plan.dataset, plan.format)?;
+    dataset.check_task(&task, &plan.dataset)?;
+    let base = model.dynamics(plan.kernel);
     let aleatoric;
-    let dynamics: &dyn BatchDynamics = if args.algo == Method::NunoAl {
+    let dynamics: &dyn BatchDynamics = if plan.method == Method::NunoAl {
         aleatoric = AleatoricAsEta::new(base.as_ref());
         &aleatoric
     } else {
@@ -240,55 +313,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         dynamics,
         task,
         rules: model.rules(task)?,
-        kernel,
+        kernel: plan.kernel,
     };
-    let checkpoints = args.out.join("checkpoints");
-    let resuming = args.resume && latest_checkpoint(&checkpoints)?.is_some();
-    let threshold = truncation_threshold(&args, &config, &model, &ctx, resuming)?;
-    let mut training = PolicyTraining::new(config, &ctx, threshold, &device)?;
-    if let Some(checkpoint) = checkpoint_to_resume(&checkpoints, args.resume, &args.out, "a run")? {
-        load_checkpoint(&checkpoint, &mut training)
-            .with_context(|| format!("resuming from {}", checkpoint.display()))?;
-        println!(
-            "resumed from {} (epoch {}, step {})",
-            checkpoint.display(),
-            training.epoch,
-            training.step
-        );
-    }
-    if let Some(threshold) = training.threshold {
-        println!(
-            "{} ({}): h = {}, α = {}, λ_pen = {}, truncation threshold {threshold:.4}",
-            preset.name,
-            args.algo.as_str(),
-            training.config.horizon,
-            training.config.cvar_alpha,
-            training.config.penalty
-        );
-    }
-
-    let epochs = training.config.epochs;
-    let bar = ProgressBar::new((epochs * training.config.steps_per_epoch) as u64).with_style(
-        ProgressStyle::with_template("{bar:30} {pos}/{len} steps | {msg}")?,
-    );
+    let mut training = start(plan, &model, &ctx, &device)?;
+    write_run_record(&plan.out, "fit-policy", plan, &[&plan.dataset])?;
+    let bar = ProgressBar::new((training.config.epochs * training.config.steps_per_epoch) as u64)
+        .with_style(ProgressStyle::with_template(
+            "{bar:30} {pos}/{len} steps | {msg}",
+        )?);
     bar.set_position(training.step as u64);
-    let provenance = |record: &EpochRecord, training: &PolicyTraining| PolicyProvenance {
-        preset: Some(preset.name.to_string()),
-        dynamics_sha256: Some(model.weights_sha256().to_string()),
-        dataset_sha256: model.dataset_sha256().map(String::from),
-        training: Some(training.config.clone()),
-        epoch: record.epoch,
-        step: record.step,
-        normalized_score: Some(record.eval.normalized_score),
-        mean_return: Some(record.eval.mean_return),
-        online_training: None,
-        algorithm: Some(args.algo.as_str().to_string()),
-        truncation_threshold: training.threshold,
-    };
-    let policies = args.policies.as_ref().unwrap_or(&args.model);
-    std::fs::create_dir_all(policies)
-        .with_context(|| format!("creating {}", policies.display()))?;
-    while training.epoch < epochs {
+    std::fs::create_dir_all(&plan.policies)
+        .with_context(|| format!("creating {}", plan.policies.display()))?;
+    while training.epoch < training.config.epochs {
         let record = training.run_epoch(&ctx)?;
         bar.set_position(training.step as u64);
         bar.set_message(format!(
@@ -299,32 +335,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             record.eta.dataset,
             record.rollout.mean_length
         ));
-        let actor = training
-            .policy(nuno::agent::ActionMode::Deterministic)
-            .actor;
-        save_policy(
-            policies,
-            LAST_POLICY,
-            &actor,
-            task,
-            provenance(&record, &training),
-        )?;
-        let best = training
-            .history
-            .iter()
-            .map(|r| r.eval.normalized_score)
-            .fold(f64::NEG_INFINITY, f64::max);
-        if record.eval.normalized_score >= best {
-            save_policy(
-                policies,
-                BEST_POLICY,
-                &actor,
-                task,
-                provenance(&record, &training),
-            )?;
-        }
-        save_checkpoint(&checkpoints, &training)?;
-        write_metrics(&args.out, &training.history)?;
+        save_policies(plan, &model, task, &record, &training)?;
+        save_checkpoint(&plan.out.join("checkpoints"), &training)?;
+        write_metrics(&plan.out, &training.history)?;
     }
     bar.finish();
     if let Some(last) = training.history.last() {
@@ -333,8 +346,75 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             last.epoch,
             last.step,
             last.eval.normalized_score,
-            policies.display()
+            plan.policies.display()
         );
+    }
+    Ok(())
+}
+
+/// The training state: fresh, with its truncation threshold, or continued
+/// from the last checkpoint under `--resume`.
+fn start(
+    plan: &Plan,
+    model: &ModelFolder,
+    ctx: &LoopContext,
+    device: &Device,
+) -> anyhow::Result<PolicyTraining> {
+    let checkpoints = plan.out.join("checkpoints");
+    let resuming = plan.resume && latest_checkpoint(&checkpoints)?.is_some();
+    let threshold = truncation_threshold(plan, model, ctx, resuming)?;
+    let mut training = PolicyTraining::new(plan.config.clone(), ctx, threshold, device)?;
+    if let Some(checkpoint) = checkpoint_to_resume(&checkpoints, plan.resume, &plan.out, "a run")? {
+        load_checkpoint(&checkpoint, &mut training)
+            .with_context(|| format!("resuming from {}", checkpoint.display()))?;
+        println!(
+            "resumed from {} (epoch {}, step {})",
+            checkpoint.display(),
+            training.epoch,
+            training.step
+        );
+    }
+    if let Some(threshold) = training.threshold {
+        let c = &training.config;
+        println!(
+            "{} ({}): h = {}, α = {}, λ_pen = {}, truncation threshold {threshold:.4}",
+            plan.preset.name, plan.method, c.horizon, c.cvar_alpha, c.penalty
+        );
+    }
+    Ok(training)
+}
+
+/// The last policy after every epoch, and the best so far when this epoch's
+/// score ties or beats every earlier one, each with what it was trained on.
+fn save_policies(
+    plan: &Plan,
+    model: &ModelFolder,
+    task: TaskConfig,
+    record: &EpochRecord,
+    training: &PolicyTraining,
+) -> anyhow::Result<()> {
+    let provenance = || PolicyProvenance {
+        preset: Some(plan.preset.name.to_string()),
+        dynamics_sha256: Some(model.weights_sha256().to_string()),
+        dataset_sha256: model.dataset_sha256().map(String::from),
+        training: Some(training.config.clone()),
+        epoch: record.epoch,
+        step: record.step,
+        normalized_score: Some(record.eval.normalized_score),
+        mean_return: Some(record.eval.mean_return),
+        online_training: None,
+        algorithm: Some(plan.method.to_string()),
+        truncation_threshold: training.threshold,
+    };
+    let actor = training.policy(ActionMode::Deterministic).actor;
+    save_policy(&plan.policies, LAST_POLICY, &actor, task, provenance())?;
+    let best = training
+        .history
+        .iter()
+        .map(|r| r.eval.normalized_score)
+        .fold(f64::NEG_INFINITY, f64::max);
+    if record.eval.normalized_score >= best {
+        save_policy(&plan.policies, BEST_POLICY, &actor, task, provenance())?;
     }
     Ok(())
 }
@@ -382,16 +462,13 @@ fn write_metrics(out: &Path, history: &[EpochRecord]) -> anyhow::Result<()> {
 
 /// The model folder `--algo` trains in, checked to hold the kind it reads (a
 /// neural SDE for NUNO's methods, a Gaussian ensemble for MOPO's), with its
-/// task (a model.json from before tasks were recorded: the preset's).
-fn load_model(
-    args: &Args,
-    preset: &Preset,
-    device: &Device,
-) -> anyhow::Result<(ModelFolder, TaskConfig)> {
-    let dir = &args.model;
+/// task (a model.json from before tasks were recorded: the preset's), checked
+/// against the preset's.
+fn load_model(plan: &Plan, device: &Device) -> anyhow::Result<(ModelFolder, TaskConfig)> {
+    let dir = &plan.model;
     let folder = ModelFolder::load(dir, device)
         .with_context(|| format!("loading the model in {}", dir.display()))?;
-    let algo = args.algo;
+    let algo = plan.method;
     let folder = match folder {
         ModelFolder::NeuralSde { .. } if algo.uses_ensemble() => anyhow::bail!(
             "--algo {algo} trains in a Gaussian ensemble (ensemble.json, from fit-ensemble); {} holds a neural SDE",
@@ -418,11 +495,21 @@ fn load_model(
         }
         folder => folder,
     };
+    let preset = plan.preset;
     let task = folder.task().unwrap_or(TaskConfig {
         name: preset.task,
         layout: preset.layout,
         ..TaskConfig::d4rl(preset.task)
     });
+    anyhow::ensure!(
+        task.name == preset.task && task.layout == preset.layout,
+        "preset {} is for {} ({:?}), the model is for {} ({:?})",
+        preset.name,
+        preset.task,
+        preset.layout,
+        task.name,
+        task.layout
+    );
     Ok((folder, task))
 }
 
@@ -431,32 +518,31 @@ fn load_model(
 /// disagreement over the dataset. The computed ones are kept in
 /// `threshold.json` in --out, which a resumed run reads instead of recomputing.
 fn truncation_threshold(
-    args: &Args,
-    config: &PolicyLoopConfig,
+    plan: &Plan,
     model: &ModelFolder,
     ctx: &LoopContext,
     resuming: bool,
 ) -> anyhow::Result<Option<f32>> {
+    let (config, algo) = (&plan.config, plan.method);
     if !config.truncate {
         return Ok(None);
     }
-    if args.algo.truncation() == Truncation::ModelTable {
+    if algo.truncation() == Truncation::ModelTable {
         return Ok(config.threshold_from(model.thresholds())?);
     }
-    let path = args.out.join("threshold.json");
+    let path = plan.out.join("threshold.json");
     if resuming && path.is_file() {
         let saved: SavedThreshold = serde_json::from_str(&std::fs::read_to_string(&path)?)
             .with_context(|| format!("reading {}", path.display()))?;
         anyhow::ensure!(
-            saved.algorithm == args.algo.as_str(),
-            "{} was computed for {}, this run is {}",
+            saved.algorithm == algo.as_str(),
+            "{} was computed for {}, this run is {algo}",
             path.display(),
             saved.algorithm,
-            args.algo.as_str()
         );
         return Ok(Some(saved.threshold));
     }
-    let (threshold, how) = match args.algo.truncation() {
+    let (threshold, how) = match algo.truncation() {
         Truncation::AleatoricCvar => {
             let thresholds = ThresholdConfig::new().with_seed(config.seed);
             let value = rollout_threshold(
@@ -474,9 +560,7 @@ fn truncation_threshold(
             (value, how)
         }
         Truncation::DatasetDisagreement => {
-            let pessimism = args
-                .pessimism
-                .unwrap_or_else(|| tatu_pessimism(&args.preset));
+            let pessimism = plan.pessimism.expect("a TATU plan has its pessimism");
             let value = dataset_max_threshold(ctx.dynamics, ctx.dataset, pessimism, 10_000)?;
             let how = format!(
                 "the ensemble's largest disagreement over the dataset's {} transitions / pessimism {pessimism}",
@@ -486,9 +570,9 @@ fn truncation_threshold(
         }
         Truncation::ModelTable | Truncation::Never => unreachable!("handled above"),
     };
-    std::fs::create_dir_all(&args.out)?;
+    std::fs::create_dir_all(&plan.out)?;
     let saved = SavedThreshold {
-        algorithm: args.algo.as_str().to_string(),
+        algorithm: algo.to_string(),
         threshold,
         how,
     };

@@ -2,6 +2,9 @@
 //! thin layer that parses flags, calls the library and reports; no algorithm
 //! code lives here.
 
+// A subcommand is flags → a plan → one library call: no function grows long.
+#![warn(clippy::too_many_lines)]
+
 mod analyze;
 mod collect;
 mod data_source;
@@ -15,6 +18,7 @@ mod fit_policy;
 mod output;
 mod plot;
 mod resume;
+mod run_record;
 
 use std::process::ExitCode;
 

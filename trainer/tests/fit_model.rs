@@ -1,6 +1,6 @@
 //! `nuno-trainer fit-model`'s η loss, h(η) and threshold flags: bad values are named before any
-//! work starts, and nothing is written; a fit checkpoints at every validation and `--resume`
-//! continues it.
+//! work starts, and nothing is written; a fit records its resolved settings in run.json,
+//! checkpoints at every validation, and `--resume` continues it.
 
 mod common;
 
@@ -90,14 +90,47 @@ fn fit_model_checkpoints_and_resumes() {
             .map(|l| l.split(',').next().unwrap().parse().unwrap())
             .collect()
     };
-    ok(&args("20", &[]));
+    let first = ok(&args("20", &[]));
     let latest = std::fs::read_to_string(out.join("fit-checkpoints/LATEST")).unwrap();
     assert_eq!(latest.trim(), "step-0000020");
+    // run.json: the resolved plan (the flags and the defaults they left), the
+    // dataset by coreutils' sha256sum, printed as well.
+    let record = || -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(out.join("run.json")).unwrap()).unwrap()
+    };
+    let run = record();
+    assert!(first.contains("the run's settings"), "{first}");
+    assert_eq!(run["command"], "fit-model");
+    assert_eq!(run["plan"]["fit"]["max_steps"], 20, "{run}");
+    assert_eq!(
+        run["plan"]["fit"]["model"]["drift_hidden"],
+        serde_json::json!([16, 16])
+    );
+    assert_eq!(
+        run["plan"]["fit"]["patience"], 8,
+        "the paper recipe's: {run}"
+    );
+    assert_eq!(run["plan"]["report"]["thresholds"]["max_windows"], 32);
+    let sha256sum = common::peer::bounded::output_within(
+        std::process::Command::new("sha256sum").arg(&dataset),
+        "sha256sum",
+    );
+    let digest = String::from_utf8_lossy(&sha256sum.stdout);
+    assert_eq!(
+        run["datasets"][0]["sha256"].as_str(),
+        digest.split_whitespace().next()
+    );
 
     let again = fails(&args("30", &[]));
     assert!(again.contains("--resume"), "{again}");
+    assert_eq!(
+        record()["plan"]["fit"]["max_steps"],
+        20,
+        "a refused run kept the record"
+    );
     let resumed = ok(&args("30", &["--resume"]));
     assert!(resumed.contains("(step 20)"), "{resumed}");
+    assert_eq!(record()["plan"]["fit"]["max_steps"], 30);
     let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
     assert_eq!(valid_steps(&metrics), [10, 20, 30], "{metrics}");
     let model: serde_json::Value =

@@ -61,11 +61,32 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
     let rows = |path: &Path| std::fs::read_to_string(path).unwrap().lines().count() - 1;
     assert_eq!(rows(&run.join("metrics.csv")), 2);
 
-    // A second run into the same directory must not clobber it.
+    // run.json holds the resolved plan: Table 3's hopper-random row (h 10,
+    // α 1, λ_pen 0.001) under the flags' budget.
+    let record = || -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(run.join("run.json")).unwrap()).unwrap()
+    };
+    let plan = &record()["plan"];
+    assert_eq!(plan["method"], "nuno", "{plan}");
+    let config = &plan["config"];
+    assert_eq!(
+        (
+            &config["horizon"],
+            &config["cvar_alpha"],
+            &config["penalty"]
+        ),
+        (&10.into(), &1.0.into(), &0.001.into()),
+        "{config}"
+    );
+    assert_eq!(config["epochs"], 2, "{config}");
+
+    // A second run into the same directory must not clobber it (nor its record).
     let err = fails(&fit(20, &[]));
     assert!(err.contains("--resume"), "{err}");
+    assert_eq!(record()["plan"]["config"]["epochs"], 2);
     // Resuming extends the run: two epochs kept, one more added.
     let stdout = ok(&fit(30, &["--resume"]));
+    assert_eq!(record()["plan"]["config"]["epochs"], 3);
     assert!(
         stdout.contains("resumed from") && stdout.contains("epoch 2"),
         "{stdout}"
