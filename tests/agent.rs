@@ -6,7 +6,7 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 use nuno::agent::{
     ActorConfig, LoopContext, MopoSettings, PRESETS, PolicyLoopConfig, PolicyTraining,
-    RandomNetworkPolicy, RolloutActions, RolloutConfig, Sac, SacConfig, StepOutcome, preset,
+    PortableActor, RolloutActions, RolloutConfig, Sac, SacConfig, StepOutcome, preset,
     rollout_model,
 };
 use nuno::artifact::{
@@ -501,7 +501,7 @@ fn shipped_model() -> (nuno::sde::NeuralSde, nuno::artifact::DynamicsMetadata) {
 }
 
 fn small_dataset() -> Dataset {
-    let policy = RandomNetworkPolicy::new(11, 3, &[64, 64], 4);
+    let policy = PortableActor::rlkit_random(11, 3, &[64, 64], 4);
     let config = GenerateConfig::new(TaskConfig::d4rl(TaskName::Hopper), "random", 3000, 4);
     generate(&config, &policy, "test", &|_| {}).unwrap()
 }

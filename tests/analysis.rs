@@ -2,7 +2,7 @@
 //! known answers: a model that predicts no change, one whose uncertainty is
 //! the action's norm, and the real task stepped here.
 
-use nuno::agent::RandomNetworkPolicy;
+use nuno::agent::PortableActor;
 use nuno::data::{Dataset, GenerateConfig, WindowSampler, generate};
 use nuno::envs::{MujocoTask, TaskConfig, TaskName, TaskRules};
 use nuno::experiment::{
@@ -58,7 +58,7 @@ fn task() -> TaskConfig {
 }
 
 fn data() -> Dataset {
-    let policy = RandomNetworkPolicy::new(11, 3, &[32, 32], 3);
+    let policy = PortableActor::rlkit_random(11, 3, &[32, 32], 3);
     generate(
         &GenerateConfig::new(task(), "random", 3000, 3),
         &policy,

@@ -7,7 +7,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use ndarray::{Array1, Array2};
-use nuno::agent::RandomNetworkPolicy;
+use nuno::agent::PortableActor;
 use nuno::data::{
     DataError, Dataset, DatasetFormat, DatasetParts, GenerateConfig, Normalizer, NormalizerConfig,
     StartStateSampler, TransitionSampler, WindowSampler, generate, read_d4rl, read_dataset,
@@ -20,9 +20,9 @@ use serde::Deserialize;
 
 fn small_hopper_dataset(transitions: usize, seed: u64) -> Dataset {
     let task = TaskConfig::d4rl(TaskName::Hopper);
-    let policy = RandomNetworkPolicy::new(11, 3, &[32, 32], seed);
+    let policy = PortableActor::rlkit_random(11, 3, &[32, 32], seed);
     let config = GenerateConfig::new(task, "random", transitions, seed);
-    generate(&config, &policy, &policy.description(), &|_| {}).unwrap()
+    generate(&config, &policy, &policy.rlkit_description(), &|_| {}).unwrap()
 }
 
 /// The D4RL/NeoRL/Minari fixtures of tests/python/datasets.py, written once per test.
@@ -474,7 +474,7 @@ fn split_by_trajectory_keeps_trajectories_whole() {
 #[test]
 fn a_task_probe_matches_generated_widths() {
     let task = MujocoTask::new(TaskConfig::neorl(TaskName::Walker2d)).unwrap();
-    let policy = RandomNetworkPolicy::new(task.obs_dim(), task.act_dim(), &[16], 0);
+    let policy = PortableActor::rlkit_random(task.obs_dim(), task.act_dim(), &[16], 0);
     let config = GenerateConfig::new(*task.config(), "random", 50, 0);
     let dataset = generate(&config, &policy, "test", &|_| {}).unwrap();
     assert_eq!(dataset.obs_dim(), 18);

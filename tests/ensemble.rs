@@ -469,11 +469,11 @@ fn stepped_as_dynamics_it_samples_the_system_and_reports_its_spread() {
 
 #[test]
 fn a_saved_ensemble_loads_to_the_same_steps_and_refuses_damage() {
-    use nuno::agent::RandomNetworkPolicy;
+    use nuno::agent::PortableActor;
     use nuno::data::{GenerateConfig, generate};
     use nuno::envs::{TaskConfig, TaskName};
     let task = TaskConfig::d4rl(TaskName::Hopper);
-    let policy = RandomNetworkPolicy::new(11, 3, &[32, 32], 0);
+    let policy = PortableActor::rlkit_random(11, 3, &[32, 32], 0);
     let hopper = generate(
         &GenerateConfig::new(task, "random", 1000, 0),
         &policy,

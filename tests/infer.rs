@@ -6,10 +6,10 @@
 use std::path::Path;
 
 use burn::tensor::Device;
-use nuno::agent::FusedActor;
 use nuno::agent::{
     ActionMode, ActorConfig, ActorPolicy, RolloutActions, RolloutConfig, rollout_model,
 };
+use nuno::agent::{FusedActor, PortableActor};
 use nuno::artifact::{BEST_POLICY, load_dynamics, load_policy};
 use nuno::data::{Dataset, GenerateConfig, generate};
 use nuno::envs::{MujocoTask, TaskConfig, TaskName, TaskRules};
@@ -68,7 +68,7 @@ fn hopper_spec() -> DynamicsSpec {
 }
 
 fn hopper_data() -> Dataset {
-    let policy = nuno::agent::RandomNetworkPolicy::new(11, 3, &[64, 64], 7);
+    let policy = nuno::agent::PortableActor::rlkit_random(11, 3, &[64, 64], 7);
     let config = GenerateConfig::new(TaskConfig::d4rl(TaskName::Hopper), "random", 2000, 7);
     generate(&config, &policy, "test", &|_| {}).unwrap()
 }
@@ -233,8 +233,9 @@ fn both_kernels_refuse_batches_of_the_wrong_shape_the_same_way() {
     );
 }
 
+/// The fused actor, and the portable one datasets are generated with, against burn.
 #[test]
-fn fused_actions_match_burn_deterministic_and_sampled() {
+fn fused_and_portable_actions_match_burn_deterministic_and_sampled() {
     let device = Device::flex();
     let random = ActorConfig::new(11, 3, vec![-1.0, -0.5, 0.0], vec![1.0, 2.0, 0.5]).init(&device);
     let (shipped, _) = load_policy(&shipped(), BEST_POLICY, &device).unwrap();
@@ -246,24 +247,30 @@ fn fused_actions_match_burn_deterministic_and_sampled() {
                 mode,
             };
             let fused = FusedActor::new(&burn);
+            let portable = PortableActor::new(&burn);
             for batch in batches() {
                 let obs = normal(batch * 11, &mut rng);
                 let seed = rng.random();
-                let a = fused.act(&obs, &mut ChaCha8Rng::seed_from_u64(seed));
                 let b = burn.act(&obs, &mut ChaCha8Rng::seed_from_u64(seed));
-                assert_close(&format!("{name} {mode:?} batch {batch}"), &a, &b);
-                // log π(a|s) as D4RL records it: the fused path's scalar
-                // formula against burn's tensor graph (`Actor::sample`).
-                let a = fused.act_logged(&obs, &mut ChaCha8Rng::seed_from_u64(seed));
-                let b = burn.act_logged(&obs, &mut ChaCha8Rng::seed_from_u64(seed));
-                assert_close(&format!("{name} {mode:?} logged"), &a.actions, &b.actions);
-                match (a.log_probs, b.log_probs, mode) {
-                    (None, None, ActionMode::Deterministic) => {}
-                    (Some(a), Some(b), ActionMode::Sampled) => {
-                        assert_eq!(a.len(), batch);
-                        assert_close(&format!("{name} log π batch {batch}"), &a, &b);
+                // log π(a|s) as D4RL records it: the scalar formula against
+                // burn's tensor graph (`Actor::sample`).
+                let b_logged = burn.act_logged(&obs, &mut ChaCha8Rng::seed_from_u64(seed));
+                let kernels: [(&str, &dyn BatchPolicy); 2] =
+                    [("fused", &fused), ("portable", &portable)];
+                for (kernel, policy) in kernels {
+                    let what = format!("{kernel} {name} {mode:?} batch {batch}");
+                    let a = policy.act(&obs, &mut ChaCha8Rng::seed_from_u64(seed));
+                    assert_close(&what, &a, &b);
+                    let a = policy.act_logged(&obs, &mut ChaCha8Rng::seed_from_u64(seed));
+                    assert_close(&format!("{what} logged"), &a.actions, &b_logged.actions);
+                    match (a.log_probs, b_logged.log_probs.clone(), mode) {
+                        (None, None, ActionMode::Deterministic) => {}
+                        (Some(a), Some(b), ActionMode::Sampled) => {
+                            assert_eq!(a.len(), batch);
+                            assert_close(&format!("{what} log π"), &a, &b);
+                        }
+                        other => panic!("{what}: log-probabilities {other:?}"),
                     }
-                    other => panic!("{name} {mode:?}: log-probabilities {other:?}"),
                 }
             }
         }

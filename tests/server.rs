@@ -1438,7 +1438,7 @@ async fn the_burn_kernel_answers_with_burns_numbers() {
 async fn a_gaussian_ensemble_is_served_by_the_same_routes() {
     use nuno::ensemble::{EnsembleConfig, EnsembleDynamics, EnsembleUncertainty, fit_ensemble};
     let task = TaskConfig::d4rl(TaskName::Hopper);
-    let policy = nuno::agent::RandomNetworkPolicy::new(11, 3, &[32, 32], 0);
+    let policy = nuno::agent::PortableActor::rlkit_random(11, 3, &[32, 32], 0);
     let data = nuno::data::generate(
         &nuno::data::GenerateConfig::new(task, "random", 1000, 0),
         &policy,

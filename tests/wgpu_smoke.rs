@@ -20,7 +20,7 @@ fn wgpu_matches_cpu_and_fits() {
         split: task.state_split(),
         dt: task.dt(),
     };
-    let policy = nuno::agent::RandomNetworkPolicy::new(11, 3, &[32], 0);
+    let policy = nuno::agent::PortableActor::rlkit_random(11, 3, &[32], 0);
     let config =
         nuno::data::GenerateConfig::new(TaskConfig::d4rl(TaskName::Hopper), "random", 3000, 0);
     let dataset = nuno::data::generate(&config, &policy, "smoke", &|_| {}).unwrap();

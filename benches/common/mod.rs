@@ -5,7 +5,7 @@
 
 use std::time::Instant;
 
-use nuno::agent::RandomNetworkPolicy;
+use nuno::agent::PortableActor;
 use nuno::data::{Dataset, GenerateConfig, generate};
 use nuno::envs::{MujocoTask, TaskConfig, TaskName};
 use nuno::sde::{DynamicsSpec, PhysicalScales};
@@ -31,7 +31,7 @@ impl Hopper {
             split: task.state_split(),
             dt: task.dt(),
         };
-        let policy = RandomNetworkPolicy::new(OBS, ACT, &[256, 256], 0);
+        let policy = PortableActor::rlkit_random(OBS, ACT, &[256, 256], 0);
         let config = GenerateConfig::new(TaskConfig::d4rl(TaskName::Hopper), "random", 20_000, 0);
         let dataset = generate(&config, &policy, "bench", &|_| {}).expect("dataset");
         let scales = PhysicalScales::measure(&dataset, &spec, &Default::default());

@@ -14,8 +14,8 @@ mod model_step;
 mod online_sac;
 mod policy;
 mod policy_loop;
+mod portable_actor;
 mod presets;
-mod random_network;
 mod sac;
 mod uncertainty;
 
@@ -37,11 +37,11 @@ pub use policy_loop::{
     ActorLrDecay, EpochRecord, EtaProbe, EvalSummary, LoopContext, MopoSettings, PhaseSeconds,
     PolicyLoopConfig, PolicyTraining,
 };
+pub use portable_actor::PortableActor;
 pub use presets::{
     MOPO_PRESETS, PRESETS, Preset, TATU_DEFAULT_PESSIMISM, TATU_PESSIMISM, mopo_preset, preset,
     tatu_pessimism,
 };
-pub use random_network::RandomNetworkPolicy;
 pub use sac::{Sac, SacAdam, SacConfig, SacLosses};
 pub use uncertainty::{AleatoricAsEta, dataset_max_threshold, rollout_threshold};
 

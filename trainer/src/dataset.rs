@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use anyhow::Context;
 use clap::{Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
-use nuno::agent::{ActionMode, ActorPolicy, FusedActor, OnlineSacConfig, RandomNetworkPolicy};
+use nuno::agent::{ActionMode, ActorPolicy, OnlineSacConfig, PortableActor};
 use nuno::artifact::{
     Behaviour, load_behaviour, read_online_run, read_run_transitions, run_policies,
 };
@@ -178,13 +178,17 @@ fn generate_cmd(args: GenerateArgs) -> anyhow::Result<()> {
     let dataset = match (args.kind, level) {
         (Kind::Random, _) => {
             let probe = MujocoTask::new(task)?;
-            let policy =
-                RandomNetworkPolicy::new(probe.obs_dim(), probe.act_dim(), &[256, 256], args.seed);
+            let policy = PortableActor::rlkit_random(
+                probe.obs_dim(),
+                probe.act_dim(),
+                &[256, 256],
+                args.seed,
+            );
             let config = GenerateConfig::new(task, "random", args.transitions, args.seed);
             record(
                 &config,
                 &policy,
-                &policy.description(),
+                &policy.rlkit_description(),
                 &DatasetMetadata::new(),
             )?
         }
@@ -283,7 +287,8 @@ fn from_behaviour(
         config.budget = Budget::Episodes(args.trajectories);
     }
     config.policy_layout = behaviour.metadata.task.layout;
-    let policy = FusedActor::new(&ActorPolicy {
+    // Portable arithmetic: the same recipe gives the same bytes on any CPU.
+    let policy = PortableActor::new(&ActorPolicy {
         actor: behaviour.actor.clone(),
         mode: ActionMode::Sampled,
     });

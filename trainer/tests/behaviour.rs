@@ -231,6 +231,20 @@ fn behaviour_recipes_make_d4rl_and_neorl_datasets() {
         std::fs::read(p("medium.hdf5")).unwrap(),
         std::fs::read(p("medium-again.hdf5")).unwrap()
     );
+    // The same bytes on another kind of CPU: the policy's arithmetic does not
+    // depend on the vector instructions there are (here, capped to none). The
+    // fused actor fails this on AVX-512 machines (its register-blocked row
+    // kernel adds in another order); AVX2's row loop happens to agree.
+    let capped = generate("medium", &p("medium-portable.hdf5"), &small);
+    let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_nuno-trainer"));
+    command.args(&capped).env("NUNO_SIMD", "portable");
+    let output = common::peer::bounded::output_within(&mut command, "dataset generate");
+    assert!(output.status.success(), "{output:?}");
+    assert_eq!(
+        std::fs::read(p("medium.hdf5")).unwrap(),
+        std::fs::read(p("medium-portable.hdf5")).unwrap(),
+        "NUNO_SIMD=portable generated other bytes"
+    );
     assert_ne!(
         read(&p("medium-seed-1.hdf5")).observations,
         medium.observations
