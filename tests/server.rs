@@ -1,5 +1,6 @@
-//! The model server end to end: the real router on 127.0.0.1:0, called with
-//! reqwest. Happy paths with value checks against the library, every bad-input
+//! The model server end to end: the real router, called in process with
+//! tower's `oneshot`, or on 127.0.0.1:0 with reqwest where a test needs a
+//! socket (other processes' clients, shared clients, closed connections). Happy paths with value checks against the library, every bad-input
 //! case, auth, concurrency, metrics, KServe v2, reload, and the committed spec.
 #![cfg(feature = "server")]
 
@@ -18,11 +19,12 @@ use nuno::infer::Kernel;
 use nuno::sde::FusedSde;
 use nuno::server::{
     ActResponse, AppState, BINARY, ComputeHook, EvaluateResponse, Limits, ModelDetail, ModelList,
-    RolloutResponse, ServerConfig, StepResponse, ValidateResponse, openapi_json, serve,
+    RolloutResponse, ServerConfig, StepResponse, ValidateResponse, app, openapi_json, serve,
 };
 use nuno::shared::{BatchDynamics, BatchPolicy};
 use reqwest::StatusCode;
 use serde_json::{Value, json};
+use tower::ServiceExt;
 
 const MODEL: &str = "hopper-random";
 
@@ -61,38 +63,65 @@ fn models_dir() -> tempfile::TempDir {
     dir
 }
 
+/// How a test reaches the server.
+enum Transport {
+    /// The router called in process with tower's `oneshot`: no socket.
+    InProcess(axum::Router),
+    /// `serve` on 127.0.0.1:0, for what needs a socket: peers in other
+    /// processes, a client shared between tasks, connections that close.
+    Socket {
+        base: String,
+        client: reqwest::Client,
+    },
+}
+
+/// An answer as the test reads it, whichever the transport.
+struct Answer {
+    status: StatusCode,
+    headers: reqwest::header::HeaderMap,
+    body: Vec<u8>,
+}
+
+impl Answer {
+    fn json(&self) -> Value {
+        serde_json::from_slice(&self.body).unwrap_or(Value::Null)
+    }
+}
+
 struct Server {
-    base: String,
-    client: reqwest::Client,
+    transport: Transport,
     _models: tempfile::TempDir,
     models_path: PathBuf,
 }
 
 impl Server {
+    /// The server in process (see [`Transport`]).
     async fn start(limits: Limits, token: Option<&str>) -> Self {
-        Self::start_with_kernel(limits, token, Kernel::default()).await
+        Self::start_with_config(limits, |config| config.token = token.map(String::from)).await
     }
 
-    async fn start_with_kernel(limits: Limits, token: Option<&str>, kernel: Kernel) -> Self {
-        Self::start_with_config(limits, |config| {
-            config.token = token.map(String::from);
-            config.kernel = kernel;
-        })
-        .await
-    }
-
-    /// A server on `limits`, with whatever else `adjust` sets.
-    async fn start_with_config(limits: Limits, adjust: impl FnOnce(&mut ServerConfig)) -> Self {
-        let (server, loaded) = Self::start_on(models_dir(), limits, adjust).await;
+    /// The server on a socket (see [`Transport`]).
+    async fn listening(limits: Limits, token: Option<&str>) -> Self {
+        let adjust = |config: &mut ServerConfig| config.token = token.map(String::from);
+        let (server, loaded) = Self::start_on(models_dir(), limits, adjust, true).await;
         assert_eq!(loaded, vec![MODEL.to_string(), "no-policy".to_string()]);
         server
     }
 
-    /// A server on the models in `models`, and the ids it loaded.
+    /// In process, on `limits`, with whatever else `adjust` sets.
+    async fn start_with_config(limits: Limits, adjust: impl FnOnce(&mut ServerConfig)) -> Self {
+        let (server, loaded) = Self::start_on(models_dir(), limits, adjust, false).await;
+        assert_eq!(loaded, vec![MODEL.to_string(), "no-policy".to_string()]);
+        server
+    }
+
+    /// A server on the models in `models`, on a socket when `listen`, and
+    /// the ids it loaded.
     async fn start_on(
         models: tempfile::TempDir,
         limits: Limits,
         adjust: impl FnOnce(&mut ServerConfig),
+        listen: bool,
     ) -> (Self, Vec<String>) {
         let mut config = ServerConfig {
             models_dir: models.path().to_path_buf(),
@@ -103,72 +132,103 @@ impl Server {
         };
         adjust(&mut config);
         let (state, report) = AppState::new(config);
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-        let base = format!("http://{}", listener.local_addr().unwrap());
-        tokio::spawn(serve(state, listener));
+        let transport = if listen {
+            let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+            let base = format!("http://{}", listener.local_addr().unwrap());
+            tokio::spawn(serve(state, listener));
+            Transport::Socket {
+                base,
+                // A fresh connection per request: the server may close one after an
+                // error answer (a refused body it never read), and a pooled connection
+                // reused in that instant fails with hyper's IncompleteMessage.
+                client: reqwest::Client::builder()
+                    .pool_max_idle_per_host(0)
+                    .timeout(common::bounded::HANG_BOUND)
+                    .build()
+                    .unwrap(),
+            }
+        } else {
+            Transport::InProcess(app(state))
+        };
         let server = Self {
-            base,
-            // A fresh connection per request: the server may close one after an
-            // error answer (a refused body it never read), and a pooled connection
-            // reused in that instant fails with hyper's IncompleteMessage.
-            client: reqwest::Client::builder()
-                .pool_max_idle_per_host(0)
-                .timeout(common::bounded::HANG_BOUND)
-                .build()
-                .unwrap(),
+            transport,
             models_path: models.path().to_path_buf(),
             _models: models,
         };
         (server, report.loaded)
     }
 
-    async fn post(&self, path: &str, body: &Value) -> (StatusCode, Value) {
-        let r = self
-            .client
-            .post(format!("{}{path}", self.base))
-            .json(body)
-            .send()
-            .await
-            .unwrap();
-        let status = r.status();
-        (status, r.json().await.unwrap())
+    /// The socket's base URL and client: the test must have started the
+    /// server [`listening`](Self::listening).
+    fn socket(&self) -> (&str, &reqwest::Client) {
+        match &self.transport {
+            Transport::Socket { base, client } => (base, client),
+            Transport::InProcess(_) => panic!("this test needs Server::listening"),
+        }
     }
 
-    async fn post_raw(
+    /// `method path` with `headers` and `body`, through either transport.
+    async fn request(
         &self,
+        method: &str,
         path: &str,
-        content_type: &str,
-        body: impl Into<reqwest::Body>,
-    ) -> reqwest::Response {
-        self.client
-            .post(format!("{}{path}", self.base))
-            .header("content-type", content_type)
-            .body(body)
-            .send()
-            .await
-            .unwrap()
+        headers: &[(&str, &str)],
+        body: Vec<u8>,
+    ) -> Answer {
+        match &self.transport {
+            Transport::InProcess(router) => {
+                let mut request = axum::http::Request::builder().method(method).uri(path);
+                for (name, value) in headers {
+                    request = request.header(*name, *value);
+                }
+                let request = request.body(axum::body::Body::from(body)).unwrap();
+                let response = router.clone().oneshot(request).await.unwrap();
+                let (parts, body) = response.into_parts();
+                let body = axum::body::to_bytes(body, usize::MAX).await.unwrap();
+                Answer {
+                    status: parts.status,
+                    headers: parts.headers,
+                    body: body.to_vec(),
+                }
+            }
+            Transport::Socket { base, client } => {
+                let method = reqwest::Method::from_bytes(method.as_bytes()).unwrap();
+                let mut request = client.request(method, format!("{base}{path}")).body(body);
+                for (name, value) in headers {
+                    request = request.header(*name, *value);
+                }
+                let response = request.send().await.unwrap();
+                Answer {
+                    status: response.status(),
+                    headers: response.headers().clone(),
+                    body: response.bytes().await.unwrap().to_vec(),
+                }
+            }
+        }
+    }
+
+    async fn post(&self, path: &str, body: &Value) -> (StatusCode, Value) {
+        let bytes = serde_json::to_vec(body).unwrap();
+        let answer = self
+            .request("POST", path, &[("content-type", "application/json")], bytes)
+            .await;
+        (answer.status, answer.json())
+    }
+
+    async fn post_raw(&self, path: &str, content_type: &str, body: impl Into<Vec<u8>>) -> Answer {
+        let headers = [("content-type", content_type)];
+        self.request("POST", path, &headers, body.into()).await
     }
 
     /// The Prometheus text of `/metrics`.
     async fn metrics(&self) -> String {
-        let r = self
-            .client
-            .get(format!("{}/metrics", self.base))
-            .send()
-            .await
-            .unwrap();
-        r.text().await.unwrap()
+        let answer = self.request("GET", "/metrics", &[], Vec::new()).await;
+        String::from_utf8(answer.body).unwrap()
     }
 
     async fn get(&self, path: &str) -> (StatusCode, Value) {
-        let r = self
-            .client
-            .get(format!("{}{path}", self.base))
-            .send()
-            .await
-            .unwrap();
-        let status = r.status();
-        (status, r.json().await.unwrap_or(Value::Null))
+        let answer = self.request("GET", path, &[], Vec::new()).await;
+        (answer.status, answer.json())
     }
 }
 
@@ -307,12 +367,9 @@ async fn step_matches_the_library_in_json_and_binary() {
     let response = server
         .post_raw(&format!("/v1/models/{MODEL}/step"), BINARY, bytes)
         .await;
-    assert_eq!(response.status(), StatusCode::OK);
-    assert_eq!(
-        response.headers()["content-type"],
-        "application/octet-stream"
-    );
-    let body = response.bytes().await.unwrap();
+    assert_eq!(response.status, StatusCode::OK);
+    assert_eq!(response.headers["content-type"], "application/octet-stream");
+    let body = response.body;
     let out = nuno::artifact::parse_safetensors(&body, Path::new("response")).unwrap();
     assert_eq!(out["next_states"].0, vec![4, 3, 11]);
     let json_next: Vec<f32> = r.next_states.concat().concat();
@@ -341,8 +398,8 @@ async fn step_matches_the_library_in_json_and_binary() {
     let response = server
         .post_raw(&format!("/v1/models/{MODEL}/step"), "application/json", cut)
         .await;
-    assert_eq!(response.status(), StatusCode::BAD_REQUEST);
-    let body: Value = response.json().await.unwrap();
+    assert_eq!(response.status, StatusCode::BAD_REQUEST);
+    let body = response.json();
     assert_eq!(error_code(&body), "malformed_body", "{body}");
 }
 
@@ -609,16 +666,16 @@ async fn bad_input_gets_a_named_4xx() {
     let r = server
         .post_raw(&step, "application/json", "{\"states\": [[")
         .await;
-    assert_eq!(r.status(), StatusCode::BAD_REQUEST);
+    assert_eq!(r.status, StatusCode::BAD_REQUEST);
     let r = server.post_raw(&step, "text/csv", "states=1").await;
-    assert_eq!(r.status(), StatusCode::UNSUPPORTED_MEDIA_TYPE);
+    assert_eq!(r.status, StatusCode::UNSUPPORTED_MEDIA_TYPE);
     let r = server.post_raw(&step, BINARY, "not safetensors").await;
-    assert_eq!(r.status(), StatusCode::BAD_REQUEST);
+    assert_eq!(r.status, StatusCode::BAD_REQUEST);
     let r = server
         .post_raw(&step, "application/json", vec![b' '; 2 << 20])
         .await;
-    assert_eq!(r.status(), StatusCode::PAYLOAD_TOO_LARGE);
-    let body: Value = r.json().await.unwrap();
+    assert_eq!(r.status, StatusCode::PAYLOAD_TOO_LARGE);
+    let body = r.json();
     assert_eq!(error_code(&body), "body_too_large");
     let (status, body) = server.get("/v1/nothing").await;
     assert_eq!(
@@ -632,7 +689,7 @@ async fn bad_input_gets_a_named_4xx() {
     ]);
     let bytes = nuno::artifact::safetensors_bytes(&tensors, None).unwrap();
     let r = server.post_raw(&step, BINARY, bytes).await;
-    assert_eq!(r.status(), StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -646,33 +703,28 @@ async fn token_guards_everything_but_health() {
         (status, error_code(&body)),
         (StatusCode::UNAUTHORIZED, "unauthorized")
     );
-    let r = server
-        .client
-        .get(format!("{}/v1/models", server.base))
-        .bearer_auth("wrong")
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status(), StatusCode::UNAUTHORIZED);
+    let with_token = |path: &str, token: &str| {
+        let bearer = format!("Bearer {token}");
+        let server = &server;
+        let path = path.to_string();
+        async move {
+            let headers = [("authorization", bearer.as_str())];
+            server
+                .request("GET", &path, &headers, Vec::new())
+                .await
+                .status
+        }
+    };
+    assert_eq!(
+        with_token("/v1/models", "wrong").await,
+        StatusCode::UNAUTHORIZED
+    );
     // A prefix or an extension of the token is no token.
     for near in ["s3cre", "s3cretX", "S3cret", ""] {
-        let r = server
-            .client
-            .get(format!("{}/v1/models", server.base))
-            .bearer_auth(near)
-            .send()
-            .await
-            .unwrap();
-        assert_eq!(r.status(), StatusCode::UNAUTHORIZED, "{near:?}");
+        let status = with_token("/v1/models", near).await;
+        assert_eq!(status, StatusCode::UNAUTHORIZED, "{near:?}");
     }
-    let r = server
-        .client
-        .get(format!("{}/v1/models", server.base))
-        .bearer_auth("s3cret")
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status(), StatusCode::OK);
+    assert_eq!(with_token("/v1/models", "s3cret").await, StatusCode::OK);
     // KServe routes refuse in the protocol's error shape, `{"error": "<message>"}`.
     let (status, body) = server.get(&format!("/v2/models/{MODEL}")).await;
     assert_eq!(status, StatusCode::UNAUTHORIZED);
@@ -683,29 +735,19 @@ async fn token_guards_everything_but_health() {
     // The spec and the docs list every route: with a token, they need it too.
     for path in ["/openapi.json", "/docs"] {
         assert_eq!(server.get(path).await.0, StatusCode::UNAUTHORIZED, "{path}");
-        let r = server
-            .client
-            .get(format!("{}{path}", server.base))
-            .bearer_auth("s3cret")
-            .send()
-            .await
-            .unwrap();
-        assert_eq!(r.status(), StatusCode::OK, "{path}");
+        assert_eq!(with_token(path, "s3cret").await, StatusCode::OK, "{path}");
     }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn concurrent_requests_metrics_kserve_and_reload() {
-    let server = Server::start(limits(), None).await;
+    let server = Server::listening(limits(), None).await;
+    let (base, client) = server.socket();
     let step = format!("/v1/models/{MODEL}/step");
     let request = |seed: u64| json!({"states": upright(64), "actions": actions(64), "seed": seed});
     let mut tasks = Vec::new();
     for seed in 0..16u64 {
-        let (client, url, body) = (
-            server.client.clone(),
-            format!("{}{step}", server.base),
-            request(seed % 4),
-        );
+        let (client, url, body) = (client.clone(), format!("{base}{step}"), request(seed % 4));
         tasks.push(tokio::spawn(async move {
             let r = client.post(url).json(&body).send().await.unwrap();
             assert_eq!(r.status(), StatusCode::OK);
@@ -926,7 +968,7 @@ fn committed_openapi_spec_is_current() {
     ignore = "needs the Python venv (`make venv`); `make test` runs it"
 )]
 async fn kserves_python_client_infers_in_json_and_binary() {
-    let server = Server::start(limits(), None).await;
+    let server = Server::listening(limits(), None).await;
     let (states, acts) = (upright(5), actions(5));
     let body = json!({"states": states, "actions": acts, "seed": 3, "penalty": 0.5});
     let (status, step) = server
@@ -936,7 +978,7 @@ async fn kserves_python_client_infers_in_json_and_binary() {
     let step: StepResponse = serde_json::from_value(step).unwrap();
 
     let work = tempfile::tempdir().unwrap();
-    let (base, dir) = (server.base.clone(), work.path().to_path_buf());
+    let (base, dir) = (server.socket().0.to_string(), work.path().to_path_buf());
     let args = [
         base,
         MODEL.to_string(),
@@ -1002,15 +1044,15 @@ async fn malformed_binary_infer_bodies_are_refused_by_name() {
     ]})
     .to_string();
     let send = |body: Vec<u8>, length: Option<usize>| {
-        let mut request = server
-            .client
-            .post(format!("{}{infer}", server.base))
-            .header("content-type", BINARY)
-            .body(body);
-        if let Some(length) = length {
-            request = request.header("inference-header-content-length", length.to_string());
+        let (server, infer) = (&server, infer.clone());
+        async move {
+            let length = length.map(|l| l.to_string());
+            let mut headers = vec![("content-type", BINARY)];
+            if let Some(length) = &length {
+                headers.push(("inference-header-content-length", length.as_str()));
+            }
+            server.request("POST", &infer, &headers, body).await
         }
-        request.send()
     };
     let mut body = header.clone().into_bytes();
     body.extend(std::iter::repeat_n(0u8, 40)); // 4 bytes short of the states
@@ -1035,9 +1077,9 @@ async fn malformed_binary_infer_bodies_are_refused_by_name() {
         ),
     ];
     for (body, length, status, needle) in cases {
-        let r = send(body, length).await.unwrap();
-        assert_eq!(r.status(), status, "{needle}");
-        let answer: Value = r.json().await.unwrap();
+        let r = send(body, length).await;
+        assert_eq!(r.status, status, "{needle}");
+        let answer = r.json();
         let message = answer["error"].as_str().unwrap();
         assert!(message.contains(needle), "{message}");
     }
@@ -1060,7 +1102,7 @@ async fn the_server_keeps_the_contract_of_its_own_spec() {
         max_episodes: 2,
         ..Limits::default()
     };
-    let server = Server::start(limits, None).await;
+    let server = Server::listening(limits, None).await;
     let (_, spec) = server.get("/openapi.json").await;
     let schemas = &spec["components"]["schemas"];
     assert_eq!(
@@ -1080,7 +1122,7 @@ async fn the_server_keeps_the_contract_of_its_own_spec() {
         2
     );
     let work = tempfile::tempdir().unwrap();
-    let (base, dir) = (server.base.clone(), work.path().to_path_buf());
+    let (base, dir) = (server.socket().0.to_string(), work.path().to_path_buf());
     tokio::task::spawn_blocking(move || {
         common::run_python("contract.py", &[base.as_str(), MODEL, "50"], &dir)
     })
@@ -1094,10 +1136,10 @@ async fn the_server_keeps_the_contract_of_its_own_spec() {
     ignore = "needs the Python venv (`make venv`); `make test` runs it"
 )]
 async fn a_client_generated_from_the_spec_calls_the_server() {
-    let server = Server::start(limits(), None).await;
+    let server = Server::listening(limits(), None).await;
     let work = tempfile::tempdir().unwrap();
     let spec = Path::new(env!("CARGO_MANIFEST_DIR")).join("openapi/openapi.json");
-    let (base, dir) = (server.base.clone(), work.path().to_path_buf());
+    let (base, dir) = (server.socket().0.to_string(), work.path().to_path_buf());
     tokio::task::spawn_blocking(move || {
         common::run_python("openapi_client.py", &[spec.to_str().unwrap(), &base], &dir)
     })
@@ -1227,7 +1269,7 @@ async fn answers_over_the_byte_budget_are_refused_before_any_work() {
     let response = server
         .post_raw(&format!("/v1/models/{MODEL}/step"), BINARY, bytes)
         .await;
-    assert_eq!(response.status(), StatusCode::OK);
+    assert_eq!(response.status, StatusCode::OK);
     // A rollout counts (horizon + 1) states and horizon actions, η, Ση and rewards per row.
     let rollout = json!({"states": upright(5), "horizon": 10, "particles": 8});
     let (status, answer) = server
@@ -1248,23 +1290,17 @@ async fn rollouts_answer_in_binary_with_the_json_numbers() {
     let h = 8;
     let request =
         json!({"states": upright(3), "horizon": h, "particles": 2, "seed": 5, "threshold": 1.5});
-    let path = format!("{}/v1/models/{MODEL}/rollout", server.base);
-    let (status, body) = server
-        .post(&format!("/v1/models/{MODEL}/rollout"), &request)
-        .await;
+    let path = format!("/v1/models/{MODEL}/rollout");
+    let (status, body) = server.post(&path, &request).await;
     assert_eq!(status, StatusCode::OK, "{body}");
     let json: RolloutResponse = serde_json::from_value(body).unwrap();
+    let headers = [("accept", BINARY), ("content-type", "application/json")];
     let r = server
-        .client
-        .post(&path)
-        .header("accept", BINARY)
-        .json(&request)
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status(), StatusCode::OK);
-    assert_eq!(r.headers()["content-type"], BINARY);
-    let bytes = r.bytes().await.unwrap();
+        .request("POST", &path, &headers, request.to_string().into_bytes())
+        .await;
+    assert_eq!(r.status, StatusCode::OK);
+    assert_eq!(r.headers["content-type"], BINARY);
+    let bytes = r.body;
     let t = nuno::artifact::parse_safetensors(&bytes, Path::new("answer")).unwrap();
     assert_eq!(t["states"].0, vec![6, h + 1, 11]);
     assert_eq!(t["eta"].0, vec![6, h]);
@@ -1399,7 +1435,7 @@ async fn the_binary_serves_and_stops_cleanly_on_sigterm() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_burn_kernel_answers_with_burns_numbers() {
-    let server = Server::start_with_kernel(limits(), None, Kernel::Burn).await;
+    let server = Server::start_with_config(limits(), |config| config.kernel = Kernel::Burn).await;
     let (states, actions) = (upright(3), vec![vec![0.3f32, -0.2, 0.9]; 3]);
     let request = json!({"states": states, "actions": actions, "noise_scale": 0.0});
     let (status, body) = server
@@ -1464,7 +1500,7 @@ async fn a_gaussian_ensemble_is_served_by_the_same_routes() {
     let models = tempfile::tempdir().unwrap();
     copy_model(&models.path().join(MODEL));
     nuno::artifact::save_ensemble(&models.path().join("mopo"), &fit, &config, task, None).unwrap();
-    let (server, loaded) = Server::start_on(models, limits(), |_| {}).await;
+    let (server, loaded) = Server::start_on(models, limits(), |_| {}, false).await;
     assert_eq!(loaded, vec![MODEL.to_string(), "mopo".to_string()]);
 
     let (_, list) = server.get("/v1/models").await;
@@ -1549,7 +1585,7 @@ async fn step_and_rollout_sample_at_the_models_recorded_scale() {
     let scale = 0.008f32.sqrt();
     json["model"]["sample_noise_scale"] = json!(scale);
     std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
-    let (server, _) = Server::start_on(models, limits(), |_| {}).await;
+    let (server, _) = Server::start_on(models, limits(), |_| {}, false).await;
     let (_, detail) = server.get(&format!("/v1/models/{MODEL}")).await;
     assert_eq!(
         detail["sample_noise_scale"].as_f64().map(|v| v as f32),

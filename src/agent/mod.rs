@@ -43,7 +43,9 @@ pub use presets::{
     tatu_pessimism,
 };
 pub use sac::{Sac, SacAdam, SacConfig, SacLosses};
-pub use uncertainty::{AleatoricAsEta, dataset_max_threshold, rollout_threshold};
+pub use uncertainty::{
+    AleatoricAsEta, RunThreshold, dataset_max_threshold, rollout_threshold, run_threshold,
+};
 
 /// Everything that can go wrong setting up or running policy optimisation.
 #[derive(Debug, thiserror::Error)]

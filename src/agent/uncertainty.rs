@@ -9,10 +9,12 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::AgentError;
+use super::method::{Method, Truncation};
 use super::model_rollout::{RolloutActions, RolloutConfig, rollout_model};
+use super::policy_loop::{LoopContext, PolicyLoopConfig};
 use crate::data::{Dataset, WindowSampler};
 use crate::envs::TaskRules;
-use crate::sde::ThresholdConfig;
+use crate::sde::{ThresholdConfig, ThresholdTable};
 use crate::shared::{BatchDynamics, BatchShape, ModelStep};
 
 /// NUNO^al (Appendix D): the model unchanged (its diffusion still σ + h(η)),
@@ -146,4 +148,82 @@ pub fn dataset_max_threshold(
         return Err(AgentError::Threshold("the dataset is empty".into()));
     }
     Ok((f64::from(largest) / pessimism) as f32)
+}
+
+/// Transitions stepped together while [`dataset_max_threshold`] scans a dataset.
+const DATASET_SCAN_CHUNK: usize = 10_000;
+
+/// A run's truncation threshold, and how it was found (what a run records).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunThreshold {
+    pub value: f32,
+    pub how: String,
+}
+
+impl Truncation {
+    /// Whether a run computes its threshold (so a resumed run should reuse
+    /// the value rather than spend the time again), rather than reading it
+    /// from the model's table or having none.
+    pub fn computed_per_run(self) -> bool {
+        matches!(
+            self,
+            Truncation::AleatoricCvar | Truncation::DatasetDisagreement
+        )
+    }
+}
+
+/// Where `method`'s rollouts truncate under `config` (none when truncation is
+/// off): NUNO's ε(h, α) read from the model's `table`; NUNO^al's computed on
+/// ‖σ‖ the same way (Appendix D); TATU's from the ensemble's largest
+/// disagreement over the dataset over `pessimism`, which TATU needs.
+pub fn run_threshold(
+    method: Method,
+    config: &PolicyLoopConfig,
+    table: Option<&ThresholdTable>,
+    ctx: &LoopContext,
+    pessimism: Option<f64>,
+) -> Result<Option<RunThreshold>, AgentError> {
+    if !config.truncate {
+        return Ok(None);
+    }
+    let (value, how) = match method.truncation() {
+        Truncation::Never => return Ok(None),
+        Truncation::ModelTable => {
+            let value = config.threshold_from(table)?;
+            let how = format!(
+                "ε(h = {}, α = {}) from the model's table",
+                config.horizon, config.cvar_alpha
+            );
+            (value.expect("truncation is on"), how)
+        }
+        Truncation::AleatoricCvar => {
+            let thresholds = ThresholdConfig::new().with_seed(config.seed);
+            let value = rollout_threshold(
+                ctx.dynamics,
+                &ctx.rules,
+                ctx.dataset,
+                config.horizon,
+                config.cvar_alpha,
+                &thresholds,
+            )?;
+            let how = format!(
+                "CVaR at α = {} of ‖σ‖ accumulated over h = {} along {} particles of up to {} dataset windows",
+                config.cvar_alpha, config.horizon, thresholds.particles, thresholds.max_windows
+            );
+            (value, how)
+        }
+        Truncation::DatasetDisagreement => {
+            let pessimism = pessimism.ok_or_else(|| {
+                AgentError::Threshold("TATU's threshold needs its pessimism coefficient".into())
+            })?;
+            let value =
+                dataset_max_threshold(ctx.dynamics, ctx.dataset, pessimism, DATASET_SCAN_CHUNK)?;
+            let how = format!(
+                "the ensemble's largest disagreement over the dataset's {} transitions / pessimism {pessimism}",
+                ctx.dataset.len()
+            );
+            (value, how)
+        }
+    };
+    Ok(Some(RunThreshold { value, how }))
 }

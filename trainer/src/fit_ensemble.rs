@@ -18,6 +18,7 @@ use nuno::shared::MetricsTable;
 use serde::Serialize;
 
 use crate::data_source::DataSource;
+use crate::flag_defaults::with_defaults;
 use crate::output::write_text;
 use crate::plot::{Series, line_chart};
 use crate::resume::checkpoint_to_resume;
@@ -73,12 +74,7 @@ impl Args {
     /// --dataset … --task … --out …` alone runs (the experiment runner sets its
     /// budget's fields over them).
     pub fn defaults(data: DataSource, out: PathBuf) -> Self {
-        #[derive(clap::Parser)]
-        struct Flags {
-            #[command(flatten)]
-            args: Args,
-        }
-        let required = [
+        let mut args: Args = with_defaults(&[
             "fit-ensemble",
             "--dataset",
             "-",
@@ -86,8 +82,7 @@ impl Args {
             "hopper",
             "--out",
             "-",
-        ];
-        let mut args = <Flags as clap::Parser>::parse_from(required).args;
+        ]);
         (args.data, args.out) = (data, out);
         args
     }

@@ -25,6 +25,7 @@ use serde::Serialize;
 
 use crate::data_source::DataSource;
 use crate::eta_report::{action_space, calibration_charts, print_calibration};
+use crate::flag_defaults::with_defaults;
 use crate::plot::{Series, line_chart};
 use crate::resume::checkpoint_to_resume;
 use crate::run_record::write_run_record;
@@ -140,12 +141,7 @@ impl Args {
     /// --dataset … --task … --out …` alone runs (the experiment runner sets its
     /// budget's fields over them).
     pub fn defaults(data: DataSource, out: PathBuf) -> Self {
-        #[derive(clap::Parser)]
-        struct Flags {
-            #[command(flatten)]
-            args: Args,
-        }
-        let required = [
+        let mut args: Args = with_defaults(&[
             "fit-model",
             "--dataset",
             "-",
@@ -153,8 +149,7 @@ impl Args {
             "hopper",
             "--out",
             "-",
-        ];
-        let mut args = <Flags as clap::Parser>::parse_from(required).args;
+        ]);
         (args.data, args.out) = (data, out);
         args
     }

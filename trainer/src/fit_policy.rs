@@ -9,8 +9,8 @@ use burn::tensor::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{
     ActionMode, AleatoricAsEta, EpochRecord, LoopContext, Method, MopoSettings, PolicyLoopConfig,
-    PolicyTraining, Preset, SacConfig, Truncation, dataset_max_threshold, mopo_preset, preset,
-    rollout_threshold, tatu_pessimism,
+    PolicyTraining, Preset, SacConfig, Truncation, mopo_preset, preset, run_threshold,
+    tatu_pessimism,
 };
 use nuno::artifact::{
     BEST_POLICY, LAST_POLICY, ModelFolder, PolicyProvenance, latest_checkpoint, load_checkpoint,
@@ -20,10 +20,11 @@ use nuno::data::{DatasetFormat, read_dataset};
 use nuno::ensemble::EnsembleUncertainty;
 use nuno::envs::{ForwardVelocity, TaskConfig};
 use nuno::infer::Kernel;
-use nuno::sde::{ComputeDevice, Recipe, ThresholdConfig};
+use nuno::sde::{ComputeDevice, Recipe};
 use nuno::shared::{BatchDynamics, Metric, MetricsTable};
 use serde::Serialize;
 
+use crate::flag_defaults::with_defaults;
 use crate::output::{with_sac_losses, write_text};
 use crate::plot::{Series, line_chart};
 use crate::resume::checkpoint_to_resume;
@@ -161,12 +162,7 @@ impl Args {
     /// Table 3 row `preset` into `out`: what fit-policy with only those flags
     /// runs (the experiment runner sets its budget's fields over them).
     pub fn defaults(model: PathBuf, dataset: PathBuf, preset: &str, out: PathBuf) -> Self {
-        #[derive(clap::Parser)]
-        struct Flags {
-            #[command(flatten)]
-            args: Args,
-        }
-        let required = [
+        let mut args: Args = with_defaults(&[
             "fit-policy",
             "--model",
             "-",
@@ -176,8 +172,7 @@ impl Args {
             "-",
             "--out",
             "-",
-        ];
-        let mut args = <Flags as clap::Parser>::parse_from(required).args;
+        ]);
         (args.model, args.dataset, args.out) = (model, dataset, out);
         args.preset = preset.to_string();
         args
@@ -513,71 +508,46 @@ fn load_model(plan: &Plan, device: &Device) -> anyhow::Result<(ModelFolder, Task
     Ok((folder, task))
 }
 
-/// What the run's rollouts truncate at: NUNO's ε(h, α) from the model's table;
-/// NUNO^al's computed on ‖σ‖ the same way; TATU's from the ensemble's
-/// disagreement over the dataset. The computed ones are kept in
-/// `threshold.json` in --out, which a resumed run reads instead of recomputing.
+/// What the run's rollouts truncate at (`agent::run_threshold`). A threshold
+/// the run computes (NUNO^al's, TATU's) is kept in `threshold.json` in --out,
+/// which a resumed run reads instead of computing it again.
 fn truncation_threshold(
     plan: &Plan,
     model: &ModelFolder,
     ctx: &LoopContext,
     resuming: bool,
 ) -> anyhow::Result<Option<f32>> {
-    let (config, algo) = (&plan.config, plan.method);
-    if !config.truncate {
-        return Ok(None);
-    }
-    if algo.truncation() == Truncation::ModelTable {
-        return Ok(config.threshold_from(model.thresholds())?);
-    }
+    let method = plan.method;
+    let computed = plan.config.truncate && method.truncation().computed_per_run();
     let path = plan.out.join("threshold.json");
-    if resuming && path.is_file() {
+    if computed && resuming && path.is_file() {
         let saved: SavedThreshold = serde_json::from_str(&std::fs::read_to_string(&path)?)
             .with_context(|| format!("reading {}", path.display()))?;
         anyhow::ensure!(
-            saved.algorithm == algo.as_str(),
-            "{} was computed for {}, this run is {algo}",
+            saved.algorithm == method.as_str(),
+            "{} was computed for {}, this run is {method}",
             path.display(),
             saved.algorithm,
         );
         return Ok(Some(saved.threshold));
     }
-    let (threshold, how) = match algo.truncation() {
-        Truncation::AleatoricCvar => {
-            let thresholds = ThresholdConfig::new().with_seed(config.seed);
-            let value = rollout_threshold(
-                ctx.dynamics,
-                &ctx.rules,
-                ctx.dataset,
-                config.horizon,
-                config.cvar_alpha,
-                &thresholds,
-            )?;
-            let how = format!(
-                "CVaR at α = {} of ‖σ‖ accumulated over h = {} along {} particles of up to {} dataset windows",
-                config.cvar_alpha, config.horizon, thresholds.particles, thresholds.max_windows
-            );
-            (value, how)
-        }
-        Truncation::DatasetDisagreement => {
-            let pessimism = plan.pessimism.expect("a TATU plan has its pessimism");
-            let value = dataset_max_threshold(ctx.dynamics, ctx.dataset, pessimism, 10_000)?;
-            let how = format!(
-                "the ensemble's largest disagreement over the dataset's {} transitions / pessimism {pessimism}",
-                ctx.dataset.len()
-            );
-            (value, how)
-        }
-        Truncation::ModelTable | Truncation::Never => unreachable!("handled above"),
-    };
-    std::fs::create_dir_all(&plan.out)?;
-    let saved = SavedThreshold {
-        algorithm: algo.to_string(),
-        threshold,
-        how,
-    };
-    write_text(&path, &serde_json::to_string_pretty(&saved)?)?;
-    Ok(Some(threshold))
+    let threshold = run_threshold(
+        method,
+        &plan.config,
+        model.thresholds(),
+        ctx,
+        plan.pessimism,
+    )?;
+    if let (true, Some(t)) = (computed, &threshold) {
+        std::fs::create_dir_all(&plan.out)?;
+        let saved = SavedThreshold {
+            algorithm: method.to_string(),
+            threshold: t.value,
+            how: t.how.clone(),
+        };
+        write_text(&path, &serde_json::to_string_pretty(&saved)?)?;
+    }
+    Ok(threshold.map(|t| t.value))
 }
 
 /// `threshold.json`: a baseline's computed truncation threshold.

@@ -15,6 +15,7 @@ mod experiment;
 mod fit_ensemble;
 mod fit_model;
 mod fit_policy;
+mod flag_defaults;
 mod output;
 mod plot;
 mod resume;
