@@ -1,22 +1,32 @@
 //! The MuJoCo tasks NUNO is benchmarked on (hopper, halfcheetah, walker2d with
 //! D4RL-v2 semantics, and NeoRL's variant that observes root x), their D4RL
-//! normalised scores, and a parallel evaluator that runs a policy in them.
+//! normalised scores, and a parallel evaluator that runs a policy in them;
+//! and any other system described as data (`system.rs`: names, dt, the
+//! action box, eq. 8's pairs, a reward expression, termination bounds).
 
 mod evaluator;
 mod mujoco_task;
 mod rules;
 mod score;
+mod system;
 mod task;
 
 pub use evaluator::{EvaluationConfig, EvaluationReport, evaluate, evaluate_or_cancel};
 pub use mujoco_task::{MujocoTask, TaskConfig, Transition};
 pub use rules::{ForwardVelocity, TaskRules};
 pub use score::ScoreReference;
+pub use system::{ObservationBound, RewardExpression, SystemReward, SystemSpec};
 pub use task::{HealthRule, ObservationLayout, ResetNoise, StateSplit, TaskName, TaskSpec};
 
 /// Everything that can go wrong in a task or an evaluation.
 #[derive(Debug, thiserror::Error)]
 pub enum EnvError {
+    /// A system file that cannot be read or does not describe a system.
+    #[error("{}: {message}", file.display())]
+    System {
+        file: std::path::PathBuf,
+        message: String,
+    },
     #[error("unknown task `{0}` (expected one of: hopper, halfcheetah, walker2d)")]
     UnknownTask(String),
     #[error("MuJoCo could not build the {task} model: {message}")]

@@ -1,0 +1,459 @@
+//! A system described as data: a TOML file naming its observations and
+//! actions, the time between observations, the action box, the kinematic
+//! pairs of eq. 8's prior (d position/dt = velocity), the angles a
+//! pose-aware drift sees through cos and sin, its reward (learned from the
+//! dataset, NUNO^R, or an expression over the names) and when an episode
+//! ends. Everything is checked when the file is read; a bad file is refused
+//! naming the key and the reason.
+//!
+//! ```toml
+//! name = "my-arm"
+//! dt = 0.04
+//! observations = ["x", "theta", "x_dot", "theta_dot"]
+//! actions = ["force"]
+//! action_low = [-3.0]
+//! action_high = [3.0]
+//!
+//! [physics]                  # optional: without it the drift is learned alone
+//! pairs = [["x", "x_dot"], ["theta", "theta_dot"]]
+//! angles = ["theta"]         # optional
+//!
+//! [reward]                   # exactly one of the two
+//! expression = "1.0 - 0.001 * force^2"   # or: learned = true
+//!
+//! [termination]              # optional: omitted, an episode never ends
+//! bounds = { theta = [-0.2, 0.2] }
+//! ```
+//!
+//! Observations may come in any order: the state split is built from the
+//! names. A position without a velocity, or a velocity without a position,
+//! is left to the learned drift. Reward expressions read each observation by
+//! its name, the next state's as `next_<name>`, and each action by its name;
+//! they are parsed once (the `exmex` crate: `+ - * / ^`, parentheses, `sin`,
+//! `cos`, `exp`, `abs`, `sqrt`, …, every number a float) and evaluated row by
+//! row over a batch.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+use exmex::prelude::*;
+use serde::Deserialize;
+
+use super::EnvError;
+use super::task::StateSplit;
+
+/// The file as written; checked into a [`SystemSpec`].
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SystemFile {
+    name: String,
+    dt: f64,
+    observations: Vec<String>,
+    actions: Vec<String>,
+    action_low: Vec<f64>,
+    action_high: Vec<f64>,
+    physics: Option<PhysicsFile>,
+    reward: RewardFile,
+    termination: Option<TerminationFile>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PhysicsFile {
+    #[serde(default)]
+    pairs: Vec<[String; 2]>,
+    #[serde(default)]
+    angles: Vec<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RewardFile {
+    learned: Option<bool>,
+    expression: Option<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TerminationFile {
+    #[serde(default)]
+    bounds: BTreeMap<String, [f64; 2]>,
+}
+
+/// A checked system description.
+#[derive(Debug, Clone)]
+pub struct SystemSpec {
+    pub name: String,
+    /// Seconds between consecutive observations.
+    pub dt: f64,
+    pub observations: Vec<String>,
+    pub actions: Vec<String>,
+    pub action_low: Vec<f64>,
+    pub action_high: Vec<f64>,
+    /// Positions (the pairs' first names) with their velocities; every other
+    /// observation is a velocity of the learned drift; the angles by index.
+    pub split: StateSplit,
+    pub reward: SystemReward,
+    /// An episode ends when one of these observations leaves its interval.
+    pub bounds: Vec<ObservationBound>,
+}
+
+/// Where a system's reward comes from.
+#[derive(Debug, Clone)]
+pub enum SystemReward {
+    /// NUNO^R: the model learns the dataset's rewards.
+    Learned,
+    /// Known: an expression over the observation, next-observation and action names.
+    Expression(Box<RewardExpression>),
+}
+
+/// `low ≤ observation[index] ≤ high` while an episode lasts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObservationBound {
+    pub index: usize,
+    pub low: f64,
+    pub high: f64,
+}
+
+/// Where an expression's variable is read from, per row.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Input {
+    Observation(usize),
+    NextObservation(usize),
+    Action(usize),
+}
+
+/// A reward expression, parsed once, with its variables resolved to columns.
+#[derive(Debug, Clone)]
+pub struct RewardExpression {
+    text: String,
+    expression: FlatEx<f64>,
+    /// In the order of `expression.var_names()` (alphabetical).
+    inputs: Vec<Input>,
+}
+
+impl RewardExpression {
+    /// The expression as written.
+    pub fn text(&self) -> &str {
+        &self.text
+    }
+
+    /// The reward of each transition: `observations`, `actions` and
+    /// `next_observations` are `[rows, width]`, row-major.
+    ///
+    /// # Panics
+    /// When the three do not hold the same number of rows of the system's
+    /// widths (the caller's shape check comes first).
+    pub fn rewards(
+        &self,
+        (observations, actions, next_observations): (&[f32], &[f32], &[f32]),
+        (obs_dim, act_dim): (usize, usize),
+    ) -> Vec<f32> {
+        let rows = observations.len() / obs_dim;
+        assert_eq!(observations.len(), rows * obs_dim, "observation rows");
+        assert_eq!(actions.len(), rows * act_dim, "action rows");
+        assert_eq!(
+            next_observations.len(),
+            rows * obs_dim,
+            "next observation rows"
+        );
+        let mut values = vec![0.0; self.inputs.len()];
+        (0..rows)
+            .map(|r| {
+                for (value, input) in values.iter_mut().zip(&self.inputs) {
+                    *value = f64::from(match *input {
+                        Input::Observation(i) => observations[r * obs_dim + i],
+                        Input::NextObservation(i) => next_observations[r * obs_dim + i],
+                        Input::Action(i) => actions[r * act_dim + i],
+                    });
+                }
+                // Every variable was resolved when the expression was read,
+                // so evaluation cannot miss one; a NaN stays a NaN.
+                self.expression.eval(&values).unwrap_or(f64::NAN) as f32
+            })
+            .collect()
+    }
+}
+
+impl SystemSpec {
+    /// Reads and checks the system file at `path`.
+    pub fn read(path: &Path) -> Result<Self, EnvError> {
+        let text = std::fs::read_to_string(path).map_err(|e| EnvError::System {
+            file: path.to_path_buf(),
+            message: format!("cannot read it: {e}"),
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Checks the system file `text` (read from `file`, for messages).
+    pub fn parse(text: &str, file: &Path) -> Result<Self, EnvError> {
+        let error = |message: String| EnvError::System {
+            file: file.to_path_buf(),
+            message,
+        };
+        let raw: SystemFile = toml::from_str(text).map_err(|e| error(e.to_string()))?;
+        raw.check().map_err(error)
+    }
+
+    pub fn obs_dim(&self) -> usize {
+        self.observations.len()
+    }
+
+    pub fn act_dim(&self) -> usize {
+        self.actions.len()
+    }
+
+    /// Whether an episode ends at `observation` (one row). The bounds are
+    /// compared in f32, the observations' precision, so a bound written as
+    /// 0.2 holds an observation of 0.2.
+    pub fn terminated(&self, observation: &[f32]) -> bool {
+        self.bounds.iter().any(|b| {
+            let x = observation[b.index];
+            !(b.low as f32..=b.high as f32).contains(&x)
+        })
+    }
+}
+
+impl SystemFile {
+    fn check(self) -> Result<SystemSpec, String> {
+        if self.name.trim().is_empty() {
+            return Err("name: must not be empty".into());
+        }
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return Err(format!(
+                "dt: must be a positive number of seconds, got {}",
+                self.dt
+            ));
+        }
+        let names = Names::new(&self.observations, &self.actions)?;
+        check_action_box(&self.action_low, &self.action_high, self.actions.len())?;
+        let split = match &self.physics {
+            Some(physics) => physics.split(&names)?,
+            None => StateSplit {
+                positions: Vec::new(),
+                velocities: (0..self.observations.len()).collect(),
+                position_velocity: Vec::new(),
+                angles: Vec::new(),
+            },
+        };
+        let reward = self.reward.check(&names)?;
+        let bounds = match &self.termination {
+            Some(termination) => termination.bounds(&names)?,
+            None => Vec::new(),
+        };
+        Ok(SystemSpec {
+            name: self.name,
+            dt: self.dt,
+            observations: self.observations,
+            actions: self.actions,
+            action_low: self.action_low,
+            action_high: self.action_high,
+            split,
+            reward,
+            bounds,
+        })
+    }
+}
+
+/// The system's names, checked unique, by kind.
+struct Names<'a> {
+    observations: &'a [String],
+    actions: &'a [String],
+}
+
+impl<'a> Names<'a> {
+    fn new(observations: &'a [String], actions: &'a [String]) -> Result<Self, String> {
+        if observations.is_empty() {
+            return Err("observations: name at least one".into());
+        }
+        if actions.is_empty() {
+            return Err("actions: name at least one".into());
+        }
+        let mut seen = BTreeSet::new();
+        for (key, name) in observations
+            .iter()
+            .map(|n| ("observations", n))
+            .chain(actions.iter().map(|n| ("actions", n)))
+        {
+            if !is_identifier(name) {
+                return Err(format!(
+                    "{key}: `{name}` is not a name (letters, digits and _, not starting with a digit)"
+                ));
+            }
+            if name.starts_with("next_") {
+                return Err(format!(
+                    "{key}: `{name}`: names may not start with next_ (it names the next state's values in expressions)"
+                ));
+            }
+            if !seen.insert(name.as_str()) {
+                return Err(format!(
+                    "{key}: `{name}` is named twice (names are unique across observations and actions)"
+                ));
+            }
+        }
+        Ok(Self {
+            observations,
+            actions,
+        })
+    }
+
+    /// The observation called `name`, for `key`'s message.
+    fn observation(&self, key: &str, name: &str) -> Result<usize, String> {
+        self.observations
+            .iter()
+            .position(|n| n == name)
+            .ok_or_else(|| {
+                format!(
+                    "{key}: `{name}` is not an observation ({})",
+                    self.observations.join(", ")
+                )
+            })
+    }
+
+    fn action(&self, name: &str) -> Option<usize> {
+        self.actions.iter().position(|n| n == name)
+    }
+}
+
+fn is_identifier(name: &str) -> bool {
+    let mut chars = name.chars();
+    chars
+        .next()
+        .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+        && chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
+}
+
+fn check_action_box(low: &[f64], high: &[f64], width: usize) -> Result<(), String> {
+    for (key, values) in [("action_low", low), ("action_high", high)] {
+        if values.len() != width {
+            return Err(format!(
+                "{key}: {} values for {width} actions",
+                values.len()
+            ));
+        }
+    }
+    for (i, (l, h)) in low.iter().zip(high).enumerate() {
+        if !(l.is_finite() && h.is_finite() && l < h) {
+            return Err(format!(
+                "action_low, action_high: action {i} has the interval [{l}, {h}]; each needs finite low < high"
+            ));
+        }
+    }
+    Ok(())
+}
+
+impl PhysicsFile {
+    /// Positions in the pairs' order, each with its velocity; the other
+    /// observations are velocities; the angles among the positions.
+    fn split(&self, names: &Names) -> Result<StateSplit, String> {
+        let mut positions = Vec::new();
+        let mut position_velocity = Vec::new();
+        let mut paired = BTreeSet::new();
+        for [position, velocity] in &self.pairs {
+            let (p, v) = (
+                names.observation("physics.pairs", position)?,
+                names.observation("physics.pairs", velocity)?,
+            );
+            if p == v || !paired.insert(p) || !paired.insert(v) {
+                return Err(format!(
+                    "physics.pairs: [`{position}`, `{velocity}`]: each observation may be in one pair, once"
+                ));
+            }
+            positions.push(p);
+            position_velocity.push(v);
+        }
+        let velocities = (0..names.observations.len())
+            .filter(|i| !positions.contains(i))
+            .collect();
+        let mut angles = Vec::new();
+        for angle in &self.angles {
+            let a = names.observation("physics.angles", angle)?;
+            if !positions.contains(&a) {
+                return Err(format!(
+                    "physics.angles: `{angle}` is not the position of a pair (an angle's drift is its velocity)"
+                ));
+            }
+            if angles.contains(&a) {
+                return Err(format!("physics.angles: `{angle}` is named twice"));
+            }
+            angles.push(a);
+        }
+        Ok(StateSplit {
+            positions,
+            velocities,
+            position_velocity,
+            angles,
+        })
+    }
+}
+
+impl RewardFile {
+    fn check(self, names: &Names) -> Result<SystemReward, String> {
+        match (self.learned, self.expression) {
+            (Some(true), None) => Ok(SystemReward::Learned),
+            (Some(true), Some(_)) => {
+                Err("reward: give learned = true or an expression, not both".into())
+            }
+            (_, Some(text)) => Ok(SystemReward::Expression(Box::new(RewardExpression::parse(
+                text, names,
+            )?))),
+            _ => Err("reward: give learned = true or an expression".into()),
+        }
+    }
+}
+
+impl RewardExpression {
+    fn parse(text: String, names: &Names) -> Result<Self, String> {
+        let expression = FlatEx::<f64>::parse(&text).map_err(|e| {
+            format!(
+                "reward.expression: `{text}` does not parse: {}",
+                short(&e.to_string())
+            )
+        })?;
+        let inputs = expression
+            .var_names()
+            .iter()
+            .map(|name| {
+                let observation = |n: &str| names.observations.iter().position(|o| o == n);
+                if let Some(i) = observation(name) {
+                    Ok(Input::Observation(i))
+                } else if let Some(i) = name.strip_prefix("next_").and_then(observation) {
+                    Ok(Input::NextObservation(i))
+                } else if let Some(i) = names.action(name) {
+                    Ok(Input::Action(i))
+                } else {
+                    Err(format!(
+                        "reward.expression: `{name}` is not an observation, next_<observation> or action name"
+                    ))
+                }
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(Self {
+            text,
+            expression,
+            inputs,
+        })
+    }
+}
+
+/// exmex's parse errors print its operator tables: the sentence before them.
+fn short(message: &str) -> &str {
+    message.split(", Operator").next().unwrap_or(message)
+}
+
+impl TerminationFile {
+    fn bounds(&self, names: &Names) -> Result<Vec<ObservationBound>, String> {
+        self.bounds
+            .iter()
+            .map(|(name, &[low, high])| {
+                let index = names.observation("termination.bounds", name)?;
+                if !(low.is_finite() && high.is_finite() && low < high) {
+                    return Err(format!(
+                        "termination.bounds: `{name}` has [{low}, {high}]; it needs finite low < high"
+                    ));
+                }
+                Ok(ObservationBound { index, low, high })
+            })
+            .collect()
+    }
+}
