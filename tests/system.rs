@@ -1,7 +1,9 @@
-//! Systems described as data (`envs::SystemSpec`): the issue's example file
-//! reads into the split, reward and bounds its names say, in any observation
-//! order; reward expressions give a hand computation's values over a batch;
-//! every kind of bad file is refused naming the key and the reason.
+//! Systems described as data (`envs::SystemSpec`) and their CSV logs
+//! (`data::read_csv_log`): the issue's example file reads into the split,
+//! reward and bounds its names say, in any observation order; reward
+//! expressions give a hand computation's values over a batch; a log's rows
+//! become the transitions a hand reading gives; every kind of bad file or log
+//! is refused naming the key, or the line and the column, and the reason.
 
 use std::path::Path;
 
@@ -192,4 +194,139 @@ fn bad_files_are_refused_naming_the_key_and_the_reason() {
             .contains("no/such/system.toml: cannot read it"),
         "{missing}"
     );
+}
+
+/// A CSV log of the example system (its header, then `rows`) in `dir`.
+fn csv_log(dir: &Path, header: &str, rows: &[&str]) -> std::path::PathBuf {
+    let path = dir.join("log.csv");
+    std::fs::write(&path, format!("{header}\n{}\n", rows.join("\n"))).unwrap();
+    path
+}
+
+const HEADER: &str = "t,episode,theta_dot,x,x_dot,theta,force,reward,terminal,timeout,note";
+
+#[test]
+fn a_csv_log_reads_into_the_transitions_its_rows_make() {
+    let spec = parse(CART_POLE).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    // Two episodes: 3 rows (2 transitions, ended at a time limit), then 2
+    // rows (1 transition, terminal); columns in another order than the
+    // system's, an extra one ignored, quoted fields read as CSV.
+    let rows = [
+        "0.00,a,0.1,1.0,0.5,0.01,1.0,0.9,0,0,\"first, row\"",
+        "0.04,a,0.2,1.1,0.6,0.02,-1.0,0.8,0,0,",
+        "0.08,a,0.3,1.2,0.7,0.03,0.0,0.0,0,1,",
+        "0.00,b,0.0,0.0,0.0,0.10,2.0,0.5,0,0,",
+        "0.04,b,0.0,0.0,0.0,0.25,0.0,0.0,1,0,",
+    ];
+    let data = nuno::data::read_csv_log(&csv_log(dir.path(), HEADER, &rows), &spec).unwrap();
+    assert_eq!(data.len(), 3);
+    // The system's order: x, theta, x_dot, theta_dot.
+    assert_eq!(data.observations.row(0).to_vec(), [1.0, 0.01, 0.5, 0.1]);
+    assert_eq!(
+        data.next_observations.row(1).to_vec(),
+        [1.2, 0.03, 0.7, 0.3]
+    );
+    assert_eq!(data.observations.row(2).to_vec(), [0.0, 0.1, 0.0, 0.0]);
+    assert_eq!(data.actions.column(0).to_vec(), [1.0, -1.0, 2.0]);
+    assert_eq!(data.rewards.to_vec(), [0.9, 0.8, 0.5]);
+    assert_eq!(data.terminals, [false, false, true]);
+    assert_eq!(data.timeouts, [false, true, false]);
+    assert_eq!(data.trajectories().len(), 2);
+
+    // Without a reward column, the system's expression gives the rewards:
+    // 1 − 0.001·f² − (θ' − θ)²/4 by hand.
+    let header = "episode,theta_dot,x,x_dot,theta,force";
+    let rows = ["a,0.1,1.0,0.5,0.01,1.0", "a,0.2,1.1,0.6,0.03,-1.0"];
+    let data = nuno::data::read_csv_log(&csv_log(dir.path(), header, &rows), &spec).unwrap();
+    let by_hand = 1.0 - 0.001 - (0.03f64 - 0.01).powi(2) / 4.0;
+    assert!(
+        (f64::from(data.rewards[0]) - by_hand).abs() < 1e-6,
+        "{}",
+        data.rewards[0]
+    );
+    // A learned reward needs the column.
+    let learned = CART_POLE.replace(
+        r#"expression = "1.0 - 0.001 * force^2 - (next_theta - theta)^2 / 4""#,
+        "learned = true",
+    );
+    let learned = parse(&learned).unwrap();
+    let error =
+        nuno::data::read_csv_log(&csv_log(dir.path(), header, &rows), &learned).unwrap_err();
+    assert!(error.to_string().contains("no `reward` column"), "{error}");
+}
+
+#[test]
+fn bad_csv_logs_are_refused_naming_the_line_and_the_column() {
+    let spec = parse(CART_POLE).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let good = "0.04,a,0.2,1.1,0.6,0.02,-1.0,0.8,0,0,";
+    let cases = [
+        (
+            HEADER.replace(",force", ",torque"),
+            vec![good],
+            "line 1: no column `force`",
+        ),
+        (
+            HEADER.replace("episode,", "run,"),
+            vec![good],
+            "no column `episode`",
+        ),
+        (
+            HEADER.into(),
+            vec![good, "0.08,a,0.2,1.1,NaN,0.02,-1.0,0.8,0,0,"],
+            "line 3, column `x_dot`: NaN is not finite",
+        ),
+        (
+            HEADER.into(),
+            vec![good, "0.08,a,0.2,1.1,fast,0.02,-1.0,0.8,0,0,"],
+            "line 3, column `x_dot`: `fast` is not a number",
+        ),
+        (
+            HEADER.into(),
+            vec![good, "0.08,a,0.2,1.1,0.6,0.02,-1.0,0.8,yes,0,"],
+            "line 3, column `terminal`: `yes` is not 0 or 1",
+        ),
+        (
+            HEADER.into(),
+            vec![good, "0.04,a,0.2,1.1,0.6,0.02,-1.0,0.8,0,0,"],
+            "line 3, column `t`: 0.04 does not increase",
+        ),
+        (
+            HEADER.into(),
+            vec![
+                good,
+                "0.08,a,0.2,1.1,0.6,0.02,-1.0,0.8,0,0,",
+                "0.00,b,0.2,1.1,0.6,0.02,-1.0,0.8,0,0,",
+                "0.04,a,0.2,1.1,0.6,0.02,-1.0,0.8,0,0,",
+            ],
+            "line 5: episode `a` continues after another episode",
+        ),
+        (
+            HEADER.into(),
+            vec![
+                "0.04,a,0.2,1.1,0.6,0.02,-1.0,0.8,1,0,",
+                "0.08,a,0.2,1.1,0.6,0.02,-1.0,0.8,0,0,",
+            ],
+            "line 2: a terminal or timeout flag before the episode's last row",
+        ),
+        (HEADER.into(), vec![good, "0.08,a,0.2"], "line 3:"),
+        (
+            format!("{HEADER},x"),
+            vec![good],
+            "column `x` appears twice",
+        ),
+    ];
+    for (header, rows, needle) in cases {
+        let error = nuno::data::read_csv_log(&csv_log(dir.path(), &header, &rows), &spec)
+            .expect_err(needle)
+            .to_string();
+        assert!(
+            error.contains("log.csv") && error.contains(needle),
+            "wanted `{needle}`, got: {error}"
+        );
+    }
+    // One row per episode makes no transition.
+    let error = nuno::data::read_csv_log(&csv_log(dir.path(), HEADER, &[good]), &spec).unwrap_err();
+    assert!(error.to_string().contains("no transitions"), "{error}");
 }

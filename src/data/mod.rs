@@ -1,9 +1,10 @@
-//! Offline datasets: readers for D4RL (HDF5), NeoRL (`.npz`) and Minari (HDF5
-//! episodes), a writer in D4RL's exact layout, the random-policy generator,
-//! the per-dimension normaliser, and the samplers that fitting and policy
-//! optimisation draw from.
+//! Offline datasets: readers for D4RL (HDF5), NeoRL (`.npz`), Minari (HDF5
+//! episodes) and a described system's CSV log, a writer in D4RL's exact
+//! layout, the random-policy generator, the per-dimension normaliser, and the
+//! samplers that fitting and policy optimisation draw from.
 
 mod behaviour;
+mod csv_log;
 mod d4rl;
 mod dataset;
 mod format;
@@ -17,6 +18,7 @@ mod sampler;
 use std::path::PathBuf;
 
 pub use behaviour::{BehaviourLevel, BehaviourPick, LEVEL_TOLERANCE, select_behaviour};
+pub use csv_log::read_csv_log;
 pub use d4rl::{read_d4rl, write_d4rl};
 pub use dataset::{Dataset, DatasetMetadata, DatasetParts, Trajectory};
 pub use format::{DatasetFormat, read_dataset};
