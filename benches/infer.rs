@@ -6,7 +6,10 @@
 //! - the Euler–Maruyama step at batch 1, 256, 4096, 50000 (drift, σ, η, h(η));
 //! - MOPO's ensemble step at rollout batches, burn and fused;
 //! - a 10-step rollout with the policy (sampled actions) at batch 50000, through
-//!   `agent::rollout_model`, the loop SAC and the server use.
+//!   `agent::rollout_model`, the loop SAC and the server use;
+//! - the same rollout with hopper's reward and termination written as a
+//!   system file (an expression and bounds, `envs::SystemSpec`) instead of the
+//!   compiled rules, and the expression alone against one model step.
 //!
 //! Run: `cargo bench --bench infer` (peer, same run:
 //! `.bench-venv/bin/python ../shared/bench/nuno_reference.py --envs hopper`).
@@ -24,7 +27,7 @@ use nuno::agent::{
 use nuno::ensemble::{
     EnsembleDynamics, EnsembleFit, EnsembleUncertainty, GaussianEnsemble, Scaler,
 };
-use nuno::envs::{TaskConfig, TaskName, TaskRules};
+use nuno::envs::{Rules, SystemReward, SystemSpec, TaskConfig, TaskName, TaskRules};
 use nuno::infer::{Dense, Rows};
 use nuno::sde::FusedSde;
 use nuno::sde::{NeuralSde, SdeConfig};
@@ -216,11 +219,11 @@ fn main() {
     };
     let fused_policy = FusedActor::new(&burn_policy);
     let policies: [&dyn BatchPolicy; 2] = [&burn_policy, &fused_policy];
-    let rules = TaskRules::new(
+    let rules = Rules::from(TaskRules::new(
         TaskConfig::d4rl(TaskName::Hopper),
         &hopper.spec.split,
         hopper.spec.dt,
-    );
+    ));
     let batch = 50_000;
     let starts = hopper.states(batch);
     let plan = RolloutConfig {
@@ -246,6 +249,82 @@ fn main() {
         println!(
             "| {name} | {batch} | {:.0} |",
             out.stats.transitions as f64 / start.elapsed().as_secs_f64()
+        );
+    }
+    system_rules(&hopper, &fused_model, &fused_policy, &starts, &plan);
+}
+
+/// Hopper's D4RL reward and termination as a system file would write them.
+const HOPPER_AS_DATA: &str = r#"
+name = "hopper-as-data"
+dt = 0.008
+observations = ["z", "angle", "thigh", "leg", "foot", "vx", "vz", "vangle", "vthigh", "vleg", "vfoot"]
+actions = ["a_thigh", "a_leg", "a_foot"]
+action_low = [-1.0, -1.0, -1.0]
+action_high = [1.0, 1.0, 1.0]
+
+[reward]
+expression = "next_vx + 1 - 0.001 * (a_thigh^2 + a_leg^2 + a_foot^2)"
+
+[termination]
+bounds = { z = [0.7, 1e9], angle = [-0.2, 0.2], thigh = [-100, 100], leg = [-100, 100], foot = [-100, 100], vx = [-100, 100], vz = [-100, 100], vangle = [-100, 100], vthigh = [-100, 100], vleg = [-100, 100], vfoot = [-100, 100] }
+"#;
+
+/// The rollout under compiled rules and under the system file's; the
+/// expression's reward over a batch against one fused model step.
+fn system_rules(
+    hopper: &Hopper,
+    model: &dyn BatchDynamics,
+    policy: &dyn BatchPolicy,
+    starts: &[f32],
+    plan: &RolloutConfig,
+) {
+    let spec = SystemSpec::parse(HOPPER_AS_DATA, std::path::Path::new("bench")).unwrap();
+    let compiled = Rules::from(TaskRules::new(
+        TaskConfig::d4rl(TaskName::Hopper),
+        &hopper.spec.split,
+        hopper.spec.dt,
+    ));
+    let as_data = Rules::System(std::sync::Arc::new(spec.clone()));
+    println!();
+    println!("| 10-step rollout, fused (hopper) | rules | transitions/s |");
+    println!("|---|---|---|");
+    for (name, rules) in [("compiled", &compiled), ("system file", &as_data)] {
+        let start = Instant::now();
+        let out = rollout_model(
+            model,
+            RolloutActions::Policy(policy),
+            rules,
+            starts,
+            plan,
+            &mut ChaCha8Rng::seed_from_u64(0),
+        );
+        println!(
+            "| {name} | {} | {:.0} |",
+            spec.name,
+            out.stats.transitions as f64 / start.elapsed().as_secs_f64()
+        );
+    }
+    let SystemReward::Expression(expression) = &spec.reward else {
+        unreachable!("the file gives an expression")
+    };
+    println!();
+    println!("| batch | expression reward µs | fused EM step µs | reward / step |");
+    println!("|---|---|---|---|");
+    for batch in [256usize, 4096, 50_000] {
+        let (obs, actions) = (hopper.states(batch), hopper.actions(batch));
+        let noise = vec![0.0; batch * OBS];
+        let reward = seconds_per_call(|| {
+            std::hint::black_box(expression.rewards((&obs, &actions, &obs), (OBS, ACT)));
+        });
+        let step = seconds_per_call(|| {
+            std::hint::black_box(model.step(&obs, &actions, &noise));
+        });
+        println!(
+            "| {batch} | {:.1} | {:.1} | {:.1} % |",
+            reward * 1e6,
+            step * 1e6,
+            100.0 * reward / step
         );
     }
 }

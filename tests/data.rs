@@ -13,7 +13,7 @@ use nuno::data::{
     StartStateSampler, TransitionSampler, WindowSampler, generate, read_d4rl, read_dataset,
     read_minari, read_neorl, write_d4rl,
 };
-use nuno::envs::{MujocoTask, TaskConfig, TaskName};
+use nuno::envs::{MujocoTask, System, TaskConfig, TaskName};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
@@ -290,7 +290,7 @@ fn bad_files_are_refused_with_what_is_wrong() {
     let wide = d.join("wide_obs.hdf5");
     let dataset = read_d4rl(&wide).unwrap();
     let err = dataset
-        .check_task(&TaskConfig::d4rl(TaskName::Hopper), &wide)
+        .check_system(&System::Task(TaskConfig::d4rl(TaskName::Hopper)), &wide)
         .unwrap_err();
     assert!(matches!(
         err,
@@ -320,7 +320,10 @@ fn neorl_and_minari_files_are_read() {
     assert!(neorl.terminals[4] && !neorl.timeouts[4]);
     assert!(neorl.timeouts[11] && neorl.timeouts[15]);
     neorl
-        .check_task(&TaskConfig::neorl(TaskName::Hopper), &d.join("neorl.npz"))
+        .check_system(
+            &System::Task(TaskConfig::neorl(TaskName::Hopper)),
+            &d.join("neorl.npz"),
+        )
         .unwrap();
     assert_eq!(
         DatasetFormat::detect(&d.join("neorl.npz")),
@@ -479,6 +482,6 @@ fn a_task_probe_matches_generated_widths() {
     let dataset = generate(&config, &policy, "test", &|_| {}).unwrap();
     assert_eq!(dataset.obs_dim(), 18);
     dataset
-        .check_task(task.config(), Path::new("generated"))
+        .check_system(&System::Task(*task.config()), Path::new("generated"))
         .unwrap();
 }

@@ -471,7 +471,7 @@ fn stepped_as_dynamics_it_samples_the_system_and_reports_its_spread() {
 fn a_saved_ensemble_loads_to_the_same_steps_and_refuses_damage() {
     use nuno::agent::PortableActor;
     use nuno::data::{GenerateConfig, generate};
-    use nuno::envs::{TaskConfig, TaskName};
+    use nuno::envs::{System, TaskConfig, TaskName};
     let task = TaskConfig::d4rl(TaskName::Hopper);
     let policy = PortableActor::rlkit_random(11, 3, &[32, 32], 0);
     let hopper = generate(
@@ -493,11 +493,18 @@ fn a_saved_ensemble_loads_to_the_same_steps_and_refuses_damage() {
     .unwrap();
     let dir = tempfile::tempdir().unwrap();
     // The synthetic system's ensemble does not fit hopper's widths.
-    let error = nuno::artifact::save_ensemble(dir.path(), &fitted(), &small_config(), task, None)
-        .unwrap_err()
-        .to_string();
+    let error = nuno::artifact::save_ensemble(
+        dir.path(),
+        &fitted(),
+        &small_config(),
+        &System::Task(task),
+        None,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(error.contains("takes 3 inputs"), "{error}");
-    let saved = nuno::artifact::save_ensemble(dir.path(), &fit, &config, task, None).unwrap();
+    let saved = nuno::artifact::save_ensemble(dir.path(), &fit, &config, &System::Task(task), None)
+        .unwrap();
     assert_eq!(
         (saved.kind.as_str(), saved.obs_dim, saved.act_dim),
         ("gaussian-ensemble", 11, 3)
@@ -535,7 +542,7 @@ fn a_saved_ensemble_loads_to_the_same_steps_and_refuses_damage() {
         folder,
         nuno::artifact::ModelFolder::GaussianEnsemble { .. }
     ));
-    assert_eq!(folder.task(), Some(task));
+    assert_eq!(folder.system().unwrap(), Some(System::Task(task)));
     for kernel in [nuno::infer::Kernel::Burn, nuno::infer::Kernel::Fused] {
         let stepped = folder.dynamics(kernel).step(&states, &actions, &noise);
         for (a, b) in stepped.next_states.iter().zip(&step(&fit).next_states) {

@@ -12,7 +12,7 @@ use nuno::agent::{
 use nuno::agent::{FusedActor, PortableActor};
 use nuno::artifact::{BEST_POLICY, load_dynamics, load_policy};
 use nuno::data::{Dataset, GenerateConfig, generate};
-use nuno::envs::{MujocoTask, TaskConfig, TaskName, TaskRules};
+use nuno::envs::{MujocoTask, Rules, TaskConfig, TaskName, TaskRules};
 use nuno::infer::{
     Dense, GEMM_MIN_ROWS, MAX_TILE_ROWS, Rows, SimdLevel, detected_simd_level, simd_level,
 };
@@ -288,11 +288,11 @@ fn fused_ten_step_rollouts_match_burn_with_fixed_noise() {
     };
     let fused_policy = FusedActor::new(&burn_policy);
     let fused_model = FusedSde::new(&model);
-    let rules = TaskRules::new(
+    let rules = Rules::from(TaskRules::new(
         TaskConfig::d4rl(TaskName::Hopper),
         &model.spec().split,
         model.spec().dt,
-    );
+    ));
     let data = hopper_data();
     let starts: Vec<f32> = (0..40)
         .flat_map(|i| data.observations.row(i * 37).to_vec())

@@ -14,7 +14,7 @@ use burn::tensor::Device;
 use nuno::agent::FusedActor;
 use nuno::agent::{ActionMode, ActorConfig, ActorPolicy};
 use nuno::artifact::{BEST_POLICY, PolicyProvenance, load_dynamics, save_policy};
-use nuno::envs::{TaskConfig, TaskName, TaskRules};
+use nuno::envs::{Rules, System, TaskConfig, TaskName, TaskRules};
 use nuno::infer::Kernel;
 use nuno::sde::FusedSde;
 use nuno::server::{
@@ -56,7 +56,7 @@ fn models_dir() -> tempfile::TempDir {
         &dir.path().join(MODEL),
         BEST_POLICY,
         &actor,
-        task,
+        &System::Task(task),
         PolicyProvenance::default(),
     )
     .unwrap();
@@ -321,11 +321,11 @@ async fn step_matches_the_library_in_json_and_binary() {
             assert!((r.sigma[b][i] - direct.sigma[b * 11 + i]).abs() < 1e-6);
         }
         assert!((r.eta[b] - direct.eta[b]).abs() < 1e-6);
-        let rules = TaskRules::new(
+        let rules = Rules::from(TaskRules::new(
             metadata.provenance.task.unwrap(),
             &metadata.spec.split,
             metadata.spec.dt,
-        );
+        ));
         for p in 0..3 {
             let reward = rules.reward(&states[b], action, &r.next_states[b][p]);
             assert!((r.rewards[b][p] - reward).abs() < 1e-5);
@@ -1499,7 +1499,14 @@ async fn a_gaussian_ensemble_is_served_by_the_same_routes() {
     .unwrap();
     let models = tempfile::tempdir().unwrap();
     copy_model(&models.path().join(MODEL));
-    nuno::artifact::save_ensemble(&models.path().join("mopo"), &fit, &config, task, None).unwrap();
+    nuno::artifact::save_ensemble(
+        &models.path().join("mopo"),
+        &fit,
+        &config,
+        &System::Task(task),
+        None,
+    )
+    .unwrap();
     let (server, loaded) = Server::start_on(models, limits(), |_| {}, false).await;
     assert_eq!(loaded, vec![MODEL.to_string(), "mopo".to_string()]);
 

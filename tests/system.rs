@@ -330,3 +330,92 @@ fn bad_csv_logs_are_refused_naming_the_line_and_the_column() {
     let error = nuno::data::read_csv_log(&csv_log(dir.path(), HEADER, &[good]), &spec).unwrap_err();
     assert!(error.to_string().contains("no transitions"), "{error}");
 }
+
+#[test]
+fn an_npz_with_d4rl_keys_reads_as_d4rl_reads_it() {
+    use ndarray::{Array1, Array2};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("log.npz");
+    // Five rows, no `next_observations`: a terminal at row 1, a time limit at
+    // row 4. Next states come from the following rows, and each trajectory's
+    // last row, whose next state is unknown, is dropped (D4RL's rule).
+    let observations = Array2::from_shape_fn((5, 2), |(i, j)| (10 * i + j) as f32);
+    let mut npz = ndarray_npy::NpzWriter::new(std::fs::File::create(&path).unwrap());
+    npz.add_array("observations", &observations).unwrap();
+    npz.add_array("actions", &Array2::from_shape_fn((5, 1), |(i, _)| i as f64))
+        .unwrap();
+    npz.add_array("rewards", &Array1::from(vec![0.5f32, 1.5, 2.5, 3.5, 4.5]))
+        .unwrap();
+    npz.add_array(
+        "terminals",
+        &Array1::from(vec![false, true, false, false, false]),
+    )
+    .unwrap();
+    npz.add_array(
+        "timeouts",
+        &Array1::from(vec![false, false, false, false, true]),
+    )
+    .unwrap();
+    npz.finish().unwrap();
+    let data = nuno::data::read_dataset(&path, None).unwrap();
+    // Row 0 → 1 (row 1 ends its trajectory, so row 0 now ends it), rows 2 → 3 → 4.
+    assert_eq!(data.len(), 3);
+    assert_eq!(data.observations.column(0).to_vec(), [0.0, 20.0, 30.0]);
+    assert_eq!(
+        data.next_observations.column(1).to_vec(),
+        [11.0, 31.0, 41.0]
+    );
+    assert_eq!(data.actions.column(0).to_vec(), [0.0, 2.0, 3.0]);
+    assert_eq!(data.rewards.to_vec(), [0.5, 2.5, 3.5]);
+    assert_eq!(data.trajectories().len(), 2);
+}
+
+/// A log of x_dot = v and theta_dot = w held constant per episode, with
+/// positions advancing by exactly v·dt and w·dt: the declared pairs hold.
+fn constant_velocity_log(dir: &Path, dt: f64) -> std::path::PathBuf {
+    let mut rows = Vec::new();
+    for (e, (v, w)) in [(1.0, -0.5), (-2.0, 0.25)].into_iter().enumerate() {
+        for k in 0..20 {
+            let t = f64::from(k) * dt;
+            rows.push(format!("{e},{},{},{v},{w},0.5", v * t, w * t));
+        }
+    }
+    let rows: Vec<&str> = rows.iter().map(String::as_str).collect();
+    csv_log(dir, "episode,x,theta,x_dot,theta_dot,force", &rows)
+}
+
+#[test]
+fn the_check_finds_a_wrong_dt_and_a_wrong_pair() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = parse(CART_POLE).unwrap();
+    let log = constant_velocity_log(dir.path(), 0.04);
+    let data = nuno::data::read_csv_log(&log, &spec).unwrap();
+    let report = nuno::data::check_system(&data, &spec);
+    assert!(report.passed(), "{report:?}");
+    assert_eq!((report.transitions, report.episodes), (38, 2));
+    for pair in &report.pairs {
+        assert!(pair.best() < 1e-5, "{pair:?}");
+        assert!((pair.fitted_dt - 0.04).abs() < 1e-6, "{pair:?}");
+    }
+    // The same log declared at half its step: (Δx / 0.02) = 2·v, an error of 1.
+    let half = parse(&CART_POLE.replace("dt = 0.04", "dt = 0.02")).unwrap();
+    let report = nuno::data::check_system(&data, &half);
+    assert!(!report.passed());
+    assert!(
+        (report.pairs[0].against_velocity - 1.0).abs() < 1e-4,
+        "{report:?}"
+    );
+    assert!((report.pairs[0].fitted_dt - 0.04).abs() < 1e-6);
+    // Velocities paired with the wrong positions.
+    let swapped = parse(&CART_POLE.replace(
+        r#"pairs = [["x", "x_dot"], ["theta", "theta_dot"]]"#,
+        r#"pairs = [["x", "theta_dot"], ["theta", "x_dot"]]"#,
+    ))
+    .unwrap();
+    assert!(!nuno::data::check_system(&data, &swapped).passed());
+    // An action outside the box is counted.
+    let narrow = parse(&CART_POLE.replace("action_high = [3.0]", "action_high = [0.4]")).unwrap();
+    let report = nuno::data::check_system(&data, &narrow);
+    assert_eq!(report.actions_outside_box, [38]);
+    assert!(!report.passed());
+}

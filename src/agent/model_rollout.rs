@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::model_step::penalized_reward;
-use crate::envs::TaskRules;
+use crate::envs::Rules;
 use crate::shared::cancel::{Cancel, Cancelled};
 use crate::shared::{BatchDynamics, BatchPolicy, TransitionBatch, scaled_noise};
 
@@ -106,7 +106,7 @@ pub struct ModelRollout {
 pub fn rollout_model(
     dynamics: &dyn BatchDynamics,
     source: RolloutActions,
-    rules: &TaskRules,
+    rules: &Rules,
     starts: &[f32],
     config: &RolloutConfig,
     rng: &mut ChaCha8Rng,
@@ -123,7 +123,7 @@ pub fn rollout_model(
 pub fn rollout_model_or_cancel(
     dynamics: &dyn BatchDynamics,
     source: RolloutActions,
-    rules: &TaskRules,
+    rules: &Rules,
     starts: &[f32],
     config: &RolloutConfig,
     rng: &mut ChaCha8Rng,

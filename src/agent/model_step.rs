@@ -5,7 +5,7 @@
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::envs::TaskRules;
+use crate::envs::Rules;
 use crate::shared::{BatchDynamics, euler_maruyama, scaled_noise};
 
 /// A batch step's results, row-major; `b` items, `p` particles, `d` = obs_dim.
@@ -51,7 +51,7 @@ pub struct ParticleConfig {
 /// Steps `observations` (`[b, obs_dim]`) under `actions` (`[b, act_dim]`).
 pub fn step_particles(
     dynamics: &dyn BatchDynamics,
-    rules: &TaskRules,
+    rules: &Rules,
     observations: &[f32],
     actions: &[f32],
     config: ParticleConfig,

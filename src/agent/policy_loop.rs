@@ -25,9 +25,7 @@ use super::model_rollout::{RolloutActions, RolloutConfig, RolloutStats, rollout_
 use super::presets::Preset;
 use super::sac::{Sac, SacConfig, SacLosses};
 use crate::data::{Dataset, StartStateSampler, TransitionSampler};
-use crate::envs::{
-    EvaluationConfig, EvaluationReport, ForwardVelocity, TaskConfig, TaskRules, evaluate,
-};
+use crate::envs::{EvaluationConfig, EvaluationReport, ForwardVelocity, Rules, System, evaluate};
 use crate::infer::Kernel;
 use crate::sde::{CODE_MODEL_BUFFER_FACTOR, Recipe, ThresholdTable};
 use crate::shared::{BatchDynamics, BatchPolicy, SeedStream, TransitionBatch, derive_seed};
@@ -113,9 +111,14 @@ pub struct PolicyLoopConfig {
     /// Epochs (1000 × 1000 steps = the paper's 1M).
     #[config(default = 1000)]
     pub epochs: usize,
-    /// MuJoCo evaluation episodes per epoch.
+    /// MuJoCo evaluation episodes per epoch (for a system without a
+    /// simulator: the policy's rollouts in the model).
     #[config(default = 10)]
     pub eval_episodes: usize,
+    /// Steps of each in-model evaluation rollout, where the system has no
+    /// simulator (D4RL's episode limit).
+    #[config(default = 1000)]
+    pub model_eval_horizon: usize,
     /// Dataset states on which η of policy, dataset and random actions is compared.
     #[config(default = 1000)]
     pub eta_probe_states: usize,
@@ -217,9 +220,35 @@ pub struct EtaProbe {
 pub struct EvalSummary {
     pub mean_return: f64,
     pub std_return: f64,
-    /// `charts/normalized_score` (D4RL × 100).
+    /// `charts/normalized_score` (D4RL × 100; 0 in the model, which has no references).
     pub normalized_score: f64,
     pub std_normalized_score: f64,
+    /// The returns are the model's own estimate: the deterministic policy
+    /// rolled in the model from dataset episode starts (a system without a
+    /// simulator). Absent from records written before systems.
+    #[serde(default)]
+    pub in_model: bool,
+}
+
+impl EvalSummary {
+    /// What [`EvalSummary::score`] is, for messages and charts.
+    pub fn score_name(&self) -> &'static str {
+        if self.in_model {
+            "return in the model"
+        } else {
+            "normalised score"
+        }
+    }
+
+    /// What the best policy is chosen by: the normalised score in the real
+    /// task, the mean return in the model.
+    pub fn score(&self) -> f64 {
+        if self.in_model {
+            self.mean_return
+        } else {
+            self.normalized_score
+        }
+    }
 }
 
 impl From<&EvaluationReport> for EvalSummary {
@@ -229,6 +258,7 @@ impl From<&EvaluationReport> for EvalSummary {
             std_return: report.std_return,
             normalized_score: report.mean_normalized_score,
             std_normalized_score: report.std_normalized_score,
+            in_model: false,
         }
     }
 }
@@ -276,8 +306,9 @@ pub struct LoopContext<'a> {
     pub dataset: &'a Dataset,
     /// The model as rollouts step it (see [`Kernel::dynamics`]).
     pub dynamics: &'a dyn BatchDynamics,
-    pub task: TaskConfig,
-    pub rules: TaskRules,
+    /// The task evaluation episodes run in, or a system without a simulator.
+    pub system: System,
+    pub rules: Rules,
     /// What runs SAC's updates, and the policy in rollouts and evaluation episodes.
     pub kernel: Kernel,
 }
@@ -324,14 +355,8 @@ impl PolicyTraining {
                 act_dim
             )));
         }
-        let task = crate::envs::MujocoTask::new(ctx.task)?;
-        let (low, high) = task.action_bounds();
-        let actor = ActorConfig::new(
-            obs_dim,
-            act_dim,
-            low.iter().map(|&x| x as f32).collect(),
-            high.iter().map(|&x| x as f32).collect(),
-        );
+        let (low, high) = ctx.system.shape()?.action_space().into_iter().unzip();
+        let actor = ActorConfig::new(obs_dim, act_dim, low, high);
         let sac = crate::nn::seeded_init(device, config.seed, || {
             Sac::new(actor, config.sac.clone(), device)
         });
@@ -455,15 +480,67 @@ impl PolicyTraining {
         batch
     }
 
-    /// The deterministic policy in the real task; episode seeds differ per epoch.
+    /// The deterministic policy in the real task, or in the model where the
+    /// system has no simulator; episode seeds differ per epoch.
     fn evaluate(&self, ctx: &LoopContext) -> Result<EvalSummary, AgentError> {
         if self.config.eval_episodes == 0 {
             return Ok(EvalSummary::default());
         }
         let seed = derive_seed(self.config.seed, SeedStream::EvalEpoch(self.epoch as u64));
-        let config = EvaluationConfig::new(ctx.task, self.config.eval_episodes, seed);
         let policy = ctx.kernel.policy(self.policy(ActionMode::Deterministic));
+        let Some(task) = ctx.system.simulator() else {
+            return Ok(self.evaluate_in_model(ctx, policy.as_ref(), seed));
+        };
+        let config = EvaluationConfig::new(task, self.config.eval_episodes, seed);
         Ok(EvalSummary::from(&evaluate(policy.as_ref(), &config)?))
+    }
+
+    /// The model's estimate of the policy's return: `eval_episodes` rollouts
+    /// of `model_eval_horizon` steps from dataset episode starts, sampled at
+    /// the model's noise, unpenalised and never truncated by η.
+    fn evaluate_in_model(
+        &self,
+        ctx: &LoopContext,
+        policy: &dyn BatchPolicy,
+        seed: u64,
+    ) -> EvalSummary {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let episodes = ctx.dataset.trajectories();
+        let obs_dim = ctx.dataset.obs_dim();
+        let starts: Vec<f32> = (0..self.config.eval_episodes)
+            .flat_map(|_| {
+                let start = episodes[rng.random_range(0..episodes.len())].start;
+                ctx.dataset.observations.row(start).to_vec()
+            })
+            .collect();
+        debug_assert_eq!(starts.len(), self.config.eval_episodes * obs_dim);
+        let config = RolloutConfig {
+            horizon: self.config.model_eval_horizon,
+            particles: 1,
+            penalty: 0.0,
+            threshold: None,
+            noise_scale: ctx.dynamics.sample_noise_scale(),
+        };
+        let rollout = rollout_model(
+            ctx.dynamics,
+            RolloutActions::Policy(policy),
+            &ctx.rules,
+            &starts,
+            &config,
+            &mut rng,
+        );
+        let returns: Vec<f64> = (rollout.trace.rewards.iter())
+            .map(|r| r.iter().map(|&x| f64::from(x)).sum())
+            .collect();
+        let n = returns.len().max(1) as f64;
+        let mean = returns.iter().sum::<f64>() / n;
+        let var = returns.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n;
+        EvalSummary {
+            mean_return: mean,
+            std_return: var.sqrt(),
+            in_model: true,
+            ..EvalSummary::default()
+        }
     }
 
     /// η of policy, dataset and uniformly random actions on the same dataset

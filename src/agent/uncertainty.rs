@@ -13,7 +13,7 @@ use super::method::{Method, Truncation};
 use super::model_rollout::{RolloutActions, RolloutConfig, rollout_model};
 use super::policy_loop::{LoopContext, PolicyLoopConfig};
 use crate::data::{Dataset, WindowSampler};
-use crate::envs::TaskRules;
+use crate::envs::Rules;
 use crate::sde::{ThresholdConfig, ThresholdTable};
 use crate::shared::{BatchDynamics, BatchShape, ModelStep};
 
@@ -63,7 +63,7 @@ impl BatchDynamics for AleatoricAsEta<'_> {
 /// with the steps it took.
 pub fn rollout_threshold(
     dynamics: &dyn BatchDynamics,
-    rules: &TaskRules,
+    rules: &Rules,
     dataset: &Dataset,
     horizon: usize,
     alpha: f64,

@@ -61,7 +61,7 @@ pub fn save_behaviour(
     level: BehaviourLevel,
     pick: &BehaviourPick,
 ) -> Result<PathBuf, ArtifactError> {
-    let task = policy.metadata.task.name;
+    let task = policy.metadata.simulated_task(run)?.name;
     let dir = behaviour_dir(root, task);
     std::fs::create_dir_all(&dir).map_err(|e| ArtifactError::io(&dir, e))?;
     let index_path = dir.join(LEVELS);
@@ -123,15 +123,15 @@ pub fn load_behaviour(
         ))
     })?;
     let (actor, metadata) = load_policy(&dir, level.as_str(), device)?;
-    if metadata.task.name != task || index.task != task {
+    let policy_task = metadata.simulated_task(&dir)?;
+    if policy_task.name != task || index.task != task {
         return Err(ArtifactError::Invalid(format!(
             "{}: `{level}` is a policy for {}, not {task}",
             dir.display(),
-            metadata.task.name
+            policy_task.name
         )));
     }
-    let probe =
-        MujocoTask::new(metadata.task).map_err(|e| ArtifactError::Invalid(e.to_string()))?;
+    let probe = MujocoTask::new(policy_task).map_err(|e| ArtifactError::Invalid(e.to_string()))?;
     let c = &actor.config;
     if (c.obs_dim, c.act_dim) != (probe.obs_dim(), probe.act_dim()) {
         return Err(ArtifactError::Invalid(format!(
@@ -139,7 +139,7 @@ pub fn load_behaviour(
             dir.display(),
             c.obs_dim,
             c.act_dim,
-            metadata.task.layout,
+            policy_task.layout,
             probe.obs_dim(),
             probe.act_dim()
         )));

@@ -19,7 +19,9 @@ use super::sac_state::{
 use super::safetensors_file::safetensors_bytes;
 use super::tensors::NamedTensors;
 use super::{ArtifactError, sha256_hex};
-use crate::agent::{ActorLrDecay, EpochRecord, PolicyLoopConfig, PolicyTraining, ReplayBuffer};
+use crate::agent::{
+    ActorLrDecay, EpochRecord, PolicyLoopConfig, PolicyTraining, ReplayBuffer, SacConfig,
+};
 use crate::envs::ForwardVelocity;
 use crate::shared::TransitionBatch;
 
@@ -104,7 +106,8 @@ fn buffer_tensors(buffer: &ReplayBuffer) -> NamedTensors {
 /// Fields of the `PolicyLoopConfig` at `pointer` that files written before
 /// them lack, with the meaning those runs had: a model buffer of 1 × its
 /// rollouts, the known reward on the velocity after the step, a constant actor
-/// learning rate.
+/// learning rate, and (never used by those runs, which had a simulator) the
+/// in-model evaluation's default horizon.
 pub(super) fn fill_older_loop_fields(value: &mut serde_json::Value, pointer: &str) {
     if let Some(fields) = value.pointer_mut(pointer).and_then(|v| v.as_object_mut()) {
         fields
@@ -116,6 +119,11 @@ pub(super) fn fill_older_loop_fields(value: &mut serde_json::Value, pointer: &st
         fields
             .entry("actor_lr_decay")
             .or_insert(serde_json::json!(ActorLrDecay::Constant));
+        fields
+            .entry("model_eval_horizon")
+            .or_insert(serde_json::json!(
+                PolicyLoopConfig::new(SacConfig::new(), 0, 0.0, 0.0).model_eval_horizon
+            ));
     }
 }
 

@@ -48,7 +48,11 @@ pub struct DatasetInfo {
 /// Provenance saved alongside the weights.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct DynamicsProvenance {
+    /// The built-in task it models, or none for a system described in a file.
     pub task: Option<TaskConfig>,
+    /// The system file's text, for a model of a system described as data.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub system: Option<String>,
     pub fit: Option<FitConfig>,
     pub thresholds: Option<ThresholdTable>,
     pub training: Option<FitSummary>,

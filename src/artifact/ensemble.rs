@@ -18,7 +18,7 @@ use super::json_file::{read_checked_weights, read_versioned_json, write_json};
 use super::safetensors_file::{safetensors_bytes, write_bytes};
 use super::tensors::{collect_tensors, load_tensors};
 use crate::ensemble::{EnsembleConfig, EnsembleFit, GaussianEnsemble, Scaler};
-use crate::envs::{MujocoTask, TaskConfig};
+use crate::envs::{System, TaskConfig};
 use crate::nn::seeded_init;
 
 pub const ENSEMBLE_SCHEMA_VERSION: u32 = 1;
@@ -31,7 +31,12 @@ pub struct EnsembleMetadata {
     pub schema_version: u32,
     /// Always `gaussian-ensemble` (what `/v1/models/{id}` will call its kind).
     pub kind: String,
-    pub task: TaskConfig,
+    /// The built-in task it models, or none for a system described in a file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub task: Option<TaskConfig>,
+    /// The system file's text, for a model of a system described as data.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub system: Option<String>,
     pub obs_dim: usize,
     pub act_dim: usize,
     pub config: EnsembleConfig,
@@ -51,15 +56,18 @@ pub fn save_ensemble(
     dir: &Path,
     fit: &EnsembleFit,
     config: &EnsembleConfig,
-    task: TaskConfig,
+    system: &System,
     dataset: Option<DatasetInfo>,
 ) -> Result<EnsembleMetadata, ArtifactError> {
-    let probe = MujocoTask::new(task).map_err(|e| ArtifactError::Invalid(e.to_string()))?;
-    let (obs_dim, act_dim) = (probe.obs_dim(), probe.act_dim());
+    let shape = system
+        .shape()
+        .map_err(|e| ArtifactError::Invalid(e.to_string()))?;
+    let (obs_dim, act_dim) = (shape.obs_dim, shape.act_dim);
     if fit.scaler.mean.len() != obs_dim + act_dim {
         return Err(ArtifactError::Invalid(format!(
-            "the ensemble takes {} inputs, {task:?} has {obs_dim} observations and {act_dim} actions",
-            fit.scaler.mean.len()
+            "the ensemble takes {} inputs, {} has {obs_dim} observations and {act_dim} actions",
+            fit.scaler.mean.len(),
+            system.name()
         )));
     }
     let tensors = collect_tensors(&fit.model);
@@ -67,7 +75,8 @@ pub fn save_ensemble(
     let metadata = EnsembleMetadata {
         schema_version: ENSEMBLE_SCHEMA_VERSION,
         kind: "gaussian-ensemble".into(),
-        task,
+        task: system.simulator(),
+        system: system.file_text(),
         obs_dim,
         act_dim,
         config: config.clone(),

@@ -11,7 +11,7 @@ use super::ArtifactError;
 use super::dynamics::{DYNAMICS_METADATA, DynamicsMetadata, load_dynamics};
 use super::ensemble::{ENSEMBLE_METADATA, EnsembleMetadata, load_ensemble};
 use crate::ensemble::{EnsembleDynamics, EnsembleUncertainty};
-use crate::envs::{EnvError, TaskConfig, TaskRules};
+use crate::envs::{Rules, System};
 use crate::infer::Kernel;
 use crate::sde::{FusedSde, NeuralSde, ThresholdTable};
 use crate::shared::BatchDynamics;
@@ -56,23 +56,41 @@ impl ModelFolder {
         Err(ArtifactError::NotAModel(dir.to_path_buf()))
     }
 
-    /// The task the folder was fitted on: always an ensemble's; a neural SDE's
-    /// when its `model.json` records one.
-    pub fn task(&self) -> Option<TaskConfig> {
-        match self {
-            Self::NeuralSde { metadata, .. } => metadata.provenance.task,
-            Self::GaussianEnsemble { metadata, .. } => Some(metadata.task),
-        }
+    /// The system the folder was fitted on, where its metadata records one:
+    /// a system file's text (checked again here) or a built-in task.
+    pub fn system(&self) -> Result<Option<System>, ArtifactError> {
+        let (task, file, record) = match self {
+            Self::NeuralSde { metadata, .. } => (
+                metadata.provenance.task,
+                metadata.provenance.system.as_deref(),
+                DYNAMICS_METADATA,
+            ),
+            Self::GaussianEnsemble { metadata, .. } => {
+                (metadata.task, metadata.system.as_deref(), ENSEMBLE_METADATA)
+            }
+        };
+        System::recorded(task, file, Path::new(record))
+            .map_err(|e| ArtifactError::Invalid(e.to_string()))
     }
 
-    /// `task`'s reward and termination rules on this model's state.
-    pub fn rules(&self, task: TaskConfig) -> Result<TaskRules, EnvError> {
-        match self {
+    /// `system`'s reward and termination rules on this model's state; refused
+    /// where the system's reward is learned and the model does not learn it.
+    pub fn rules(&self, system: &System) -> Result<Rules, ArtifactError> {
+        let rules = match self {
             Self::NeuralSde { metadata, .. } => {
-                Ok(TaskRules::new(task, &metadata.spec.split, metadata.spec.dt))
+                system.rules_on(&metadata.spec.split, metadata.spec.dt)
             }
-            Self::GaussianEnsemble { .. } => TaskRules::of_task(task),
+            Self::GaussianEnsemble { .. } => system
+                .rules()
+                .map_err(|e| ArtifactError::Invalid(e.to_string()))?,
+        };
+        if rules.learned_reward() && !self.burn_dynamics().learns_reward() {
+            return Err(ArtifactError::Invalid(format!(
+                "{} learns its reward (reward.learned), but the model does not: refit it with --reward-model",
+                system.name()
+            )));
         }
+        Ok(rules)
     }
 
     /// ε(h, α) computed at the fit (a neural SDE's; an ensemble has none).

@@ -143,7 +143,7 @@ pub fn save_online_checkpoint(dir: &Path, run: &OnlineSac) -> Result<PathBuf, Ar
         &dir.join(POLICIES),
         &policy_stem(to),
         &run.sac.actor,
-        run.task,
+        &crate::envs::System::Task(run.task),
         PolicyProvenance {
             step: to,
             normalized_score: record.map(|r| r.eval.normalized_score),

@@ -16,7 +16,7 @@ use super::safetensors_file::{safetensors_bytes, write_bytes};
 use super::tensors::{collect_tensors, load_tensors};
 use super::{ArtifactError, sha256_hex};
 use crate::agent::{Actor, ActorConfig, OnlineSacConfig, PolicyLoopConfig};
-use crate::envs::TaskConfig;
+use crate::envs::{System, TaskConfig};
 use crate::nn::seeded_init;
 
 pub const POLICY_SCHEMA_VERSION: u32 = 1;
@@ -56,7 +56,12 @@ pub struct PolicyProvenance {
 pub struct PolicyMetadata {
     pub schema_version: u32,
     pub actor: ActorConfig,
-    pub task: TaskConfig,
+    /// The built-in task it acts in; none for a system described in a file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub task: Option<TaskConfig>,
+    /// The name of the file's system it acts in.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub system: Option<String>,
     #[serde(flatten)]
     pub provenance: PolicyProvenance,
     pub weights_sha256: String,
@@ -68,7 +73,7 @@ pub fn save_policy(
     dir: &Path,
     stem: &str,
     actor: &Actor,
-    task: TaskConfig,
+    system: &System,
     provenance: PolicyProvenance,
 ) -> Result<PolicyMetadata, ArtifactError> {
     let tensors = collect_tensors(actor);
@@ -76,7 +81,8 @@ pub fn save_policy(
     let metadata = PolicyMetadata {
         schema_version: POLICY_SCHEMA_VERSION,
         actor: actor.config.clone(),
-        task,
+        task: system.simulator(),
+        system: system.simulator().is_none().then(|| system.name()),
         provenance,
         weights_sha256: sha256_hex(&weights),
         tensors: tensors
@@ -87,6 +93,20 @@ pub fn save_policy(
     write_bytes(&dir.join(format!("{stem}.safetensors")), &weights)?;
     write_json(&dir.join(format!("{stem}.json")), &metadata)?;
     Ok(metadata)
+}
+
+impl PolicyMetadata {
+    /// The task the policy acts in; an error naming `file` for a policy of a
+    /// system described in a file, which has no simulator.
+    pub fn simulated_task(&self, file: &Path) -> Result<TaskConfig, ArtifactError> {
+        self.task.ok_or_else(|| {
+            ArtifactError::Invalid(format!(
+                "{}: a policy for `{}`, a system described in a file, with no simulator",
+                file.display(),
+                self.system.as_deref().unwrap_or("a system")
+            ))
+        })
+    }
 }
 
 /// Whether `dir` holds a policy under `stem`.

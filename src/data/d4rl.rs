@@ -151,7 +151,7 @@ pub fn read_d4rl(path: &Path) -> Result<Dataset, DataError> {
 
 /// Fills `next_observations` from the following row and drops the transitions
 /// that end a trajectory (their next state is unknown).
-fn next_states_from_successors(
+pub(super) fn next_states_from_successors(
     mut parts: DatasetParts,
     path: &Path,
 ) -> Result<DatasetParts, DataError> {

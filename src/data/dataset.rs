@@ -11,7 +11,7 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
 use super::DataError;
-use crate::envs::TaskConfig;
+use crate::envs::System;
 
 /// Free-form provenance stored under D4RL's `metadata/` group (task, recipe,
 /// seed, policy, generator version, ...).
@@ -184,13 +184,16 @@ impl Dataset {
         &self.trajectories
     }
 
-    /// Checks that states and actions have `task`'s widths; `file` names the source.
-    pub fn check_task(&self, task: &TaskConfig, file: &Path) -> Result<(), DataError> {
-        let probe = crate::envs::MujocoTask::new(*task)?;
-        let what = format!("{} ({:?} layout)", task.name, task.layout);
+    /// Checks that states and actions have `system`'s widths; `file` names the source.
+    pub fn check_system(&self, system: &System, file: &Path) -> Result<(), DataError> {
+        let shape = system.shape()?;
+        let what = match system {
+            System::Task(task) => format!("{} ({:?} layout)", task.name, task.layout),
+            System::File(spec) => format!("system `{}`", spec.name),
+        };
         for (key, got, expected) in [
-            ("observations", self.obs_dim(), probe.obs_dim()),
-            ("actions", self.act_dim(), probe.act_dim()),
+            ("observations", self.obs_dim(), shape.obs_dim),
+            ("actions", self.act_dim(), shape.act_dim),
         ] {
             if got != expected {
                 return Err(DataError::WrongDimension {

@@ -14,6 +14,7 @@ mod neorl;
 mod normalizer;
 mod recording;
 mod sampler;
+mod system_check;
 
 use std::path::PathBuf;
 
@@ -21,13 +22,14 @@ pub use behaviour::{BehaviourLevel, BehaviourPick, LEVEL_TOLERANCE, select_behav
 pub use csv_log::read_csv_log;
 pub use d4rl::{read_d4rl, write_d4rl};
 pub use dataset::{Dataset, DatasetMetadata, DatasetParts, Trajectory};
-pub use format::{DatasetFormat, read_dataset};
+pub use format::{DatasetFormat, read_dataset, read_system_dataset};
 pub use generate::{Budget, GenerateConfig, generate};
 pub use minari::read_minari;
 pub use neorl::{read_neorl, write_neorl};
 pub use normalizer::{Normalizer, NormalizerConfig, Stats};
 pub use recording::Recording;
 pub use sampler::{StartStateSampler, TransitionSampler, WindowBatch, WindowSampler};
+pub use system_check::{ColumnRange, PAIR_ERROR_LIMIT, PairCheck, SystemCheck, check_system};
 
 use crate::envs::EnvError;
 

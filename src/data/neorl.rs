@@ -1,7 +1,9 @@
-//! NeoRL's `.npz` datasets (e.g. `Hopper-v3-low-1000-train-noise.npz`): keys
+//! `.npz` datasets: NeoRL's (e.g. `Hopper-v3-low-1000-train-noise.npz`, keys
 //! `obs`, `next_obs`, `action`, `reward`, `done` and `index`, the first row of
-//! each trajectory. NeoRL observations include the root x position. The
-//! reader takes NeoRL's files; the writer produces files it reads back.
+//! each trajectory; NeoRL observations include the root x position), or any
+//! `.npz` with D4RL's keys (`observations`, `actions`, `rewards`,
+//! `terminals`, optional `timeouts` and `next_observations`), as `np.savez`
+//! of a D4RL dict writes. The writer produces NeoRL files it reads back.
 
 use std::fs::File;
 use std::path::Path;
@@ -9,6 +11,7 @@ use std::path::Path;
 use ndarray::{Array1, Array2, ArrayD, Ix2};
 use ndarray_npy::{NpzReader, NpzWriter};
 
+use super::d4rl::next_states_from_successors;
 use super::dataset::DatasetParts;
 use super::{DataError, Dataset, DatasetMetadata};
 use crate::shared::write_atomically;
@@ -26,6 +29,9 @@ pub fn read_neorl(path: &Path) -> Result<Dataset, DataError> {
     })?;
     let mut npz = NpzReader::new(file).map_err(|e| npz_error(e.to_string()))?;
     let names = npz.names().map_err(|e| npz_error(e.to_string()))?;
+    if names.iter().any(|n| n == "observations") {
+        return read_d4rl_keys(npz, &names, path);
+    }
     let mut array = |key: &str| -> Result<ArrayD<f32>, DataError> {
         if !names.iter().any(|n| n == key) {
             return Err(DataError::MissingKey {
@@ -79,6 +85,57 @@ pub fn read_neorl(path: &Path) -> Result<Dataset, DataError> {
         action_log_probs: None,
         metadata,
     };
+    Dataset::from_parts(parts, path)
+}
+
+/// Reads an `.npz` holding D4RL's keys, as [`super::read_d4rl`] reads them
+/// from HDF5 (next states from the following rows where `next_observations`
+/// is missing).
+fn read_d4rl_keys(
+    mut npz: NpzReader<File>,
+    names: &[String],
+    path: &Path,
+) -> Result<Dataset, DataError> {
+    let has = |key: &str| names.iter().any(|n| n == key);
+    let mut array = |key: &str| -> Result<ArrayD<f32>, DataError> {
+        if !has(key) {
+            return Err(DataError::MissingKey {
+                file: path.to_path_buf(),
+                key: key.into(),
+            });
+        }
+        read_as_f32(&mut npz, key).map_err(|e| DataError::Npz {
+            file: path.to_path_buf(),
+            message: format!("`{key}`: {e}"),
+        })
+    };
+    let flags = |values: Array1<f32>| values.iter().map(|&v| v != 0.0).collect::<Vec<bool>>();
+    let observations = matrix(array("observations")?, "observations", path)?;
+    let n = observations.nrows();
+    let mut metadata = DatasetMetadata::new();
+    metadata.insert("source".into(), path.display().to_string());
+    metadata.insert("format".into(), "npz with D4RL keys".into());
+    let mut parts = DatasetParts {
+        actions: matrix(array("actions")?, "actions", path)?,
+        rewards: column(array("rewards")?, "rewards", path)?,
+        terminals: flags(column(array("terminals")?, "terminals", path)?),
+        timeouts: if has("timeouts") {
+            flags(column(array("timeouts")?, "timeouts", path)?)
+        } else {
+            vec![false; n]
+        },
+        next_observations: Array2::zeros((0, observations.ncols())),
+        observations,
+        qpos: None,
+        qvel: None,
+        action_log_probs: None,
+        metadata,
+    };
+    if has("next_observations") {
+        parts.next_observations = matrix(array("next_observations")?, "next_observations", path)?;
+    } else {
+        parts = next_states_from_successors(parts, path)?;
+    }
     Dataset::from_parts(parts, path)
 }
 

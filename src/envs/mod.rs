@@ -5,6 +5,7 @@
 //! action box, eq. 8's pairs, a reward expression, termination bounds).
 
 mod evaluator;
+mod modelled_system;
 mod mujoco_task;
 mod rules;
 mod score;
@@ -12,8 +13,9 @@ mod system;
 mod task;
 
 pub use evaluator::{EvaluationConfig, EvaluationReport, evaluate, evaluate_or_cancel};
+pub use modelled_system::{System, SystemShape};
 pub use mujoco_task::{MujocoTask, TaskConfig, Transition};
-pub use rules::{ForwardVelocity, TaskRules};
+pub use rules::{ForwardVelocity, Rules, TaskRules};
 pub use score::ScoreReference;
 pub use system::{ObservationBound, RewardExpression, SystemReward, SystemSpec};
 pub use task::{HealthRule, ObservationLayout, ResetNoise, StateSplit, TaskName, TaskSpec};

@@ -7,8 +7,11 @@
 //! observations omit it, so there the observed root x velocity after the step
 //! stands in (see docs/paper-map.md, deviations).
 
+use std::sync::Arc;
+
 use super::EnvError;
 use super::mujoco_task::{MujocoTask, TaskConfig};
+use super::system::{SystemReward, SystemSpec};
 use super::task::{ObservationLayout, StateSplit, TaskSpec};
 
 /// Which observed root x velocity stands in for the forward velocity where the
@@ -102,5 +105,65 @@ impl TaskRules {
         let angle = f64::from(next_obs[self.root_z + 1]);
         let rest = next_obs[self.root_z + 1..].iter().map(|&x| f64::from(x));
         !self.spec.health.is_healthy(z, angle, rest)
+    }
+}
+
+/// Reward and termination on observations, of a built-in task or of a
+/// system described in a file: what model rollouts and the server apply to
+/// each sampled transition.
+#[derive(Debug, Clone)]
+pub enum Rules {
+    Task(TaskRules),
+    System(Arc<SystemSpec>),
+}
+
+impl From<TaskRules> for Rules {
+    fn from(rules: TaskRules) -> Self {
+        Self::Task(rules)
+    }
+}
+
+impl Rules {
+    /// Seconds between two observations the rules are applied to.
+    pub fn dt(&self) -> f64 {
+        match self {
+            Self::Task(rules) => rules.dt(),
+            Self::System(system) => system.dt,
+        }
+    }
+
+    /// A task's rules with the forward reward read from `velocity` (see
+    /// [`TaskRules::with_forward_velocity`]); a file's system has its own reward.
+    pub fn with_forward_velocity(&self, velocity: ForwardVelocity) -> Self {
+        match self {
+            Self::Task(rules) => Self::Task(rules.with_forward_velocity(velocity)),
+            Self::System(_) => self.clone(),
+        }
+    }
+
+    /// Whether the reward is the model's to learn (a system whose file says
+    /// `learned = true`): then [`Rules::reward`] is never asked, since a
+    /// model of such a system learns it (checked where the two meet).
+    pub fn learned_reward(&self) -> bool {
+        matches!(self, Self::System(system) if matches!(system.reward, SystemReward::Learned))
+    }
+
+    /// `r(s, a, s')` of one transition (NaN where the reward is learned).
+    pub fn reward(&self, obs: &[f32], action: &[f32], next_obs: &[f32]) -> f32 {
+        match self {
+            Self::Task(rules) => rules.reward(obs, action, next_obs),
+            Self::System(system) => match &system.reward {
+                SystemReward::Expression(expression) => expression.reward(obs, action, next_obs),
+                SystemReward::Learned => f32::NAN,
+            },
+        }
+    }
+
+    /// Whether `next_obs` is a terminal state.
+    pub fn terminal(&self, next_obs: &[f32]) -> bool {
+        match self {
+            Self::Task(rules) => rules.terminal(next_obs),
+            Self::System(system) => system.terminated(next_obs),
+        }
     }
 }

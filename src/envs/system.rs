@@ -83,6 +83,9 @@ struct TerminationFile {
 /// A checked system description.
 #[derive(Debug, Clone)]
 pub struct SystemSpec {
+    /// The file as written, kept so an artifact can carry the system it
+    /// models and be re-checked when it is loaded.
+    pub source: String,
     pub name: String,
     /// Seconds between consecutive observations.
     pub dt: f64,
@@ -160,18 +163,46 @@ impl RewardExpression {
         let mut values = vec![0.0; self.inputs.len()];
         (0..rows)
             .map(|r| {
-                for (value, input) in values.iter_mut().zip(&self.inputs) {
-                    *value = f64::from(match *input {
-                        Input::Observation(i) => observations[r * obs_dim + i],
-                        Input::NextObservation(i) => next_observations[r * obs_dim + i],
-                        Input::Action(i) => actions[r * act_dim + i],
-                    });
-                }
-                // Every variable was resolved when the expression was read,
-                // so evaluation cannot miss one; a NaN stays a NaN.
-                self.expression.eval(&values).unwrap_or(f64::NAN) as f32
+                self.reward_into(
+                    &mut values,
+                    &observations[r * obs_dim..(r + 1) * obs_dim],
+                    &actions[r * act_dim..(r + 1) * act_dim],
+                    &next_observations[r * obs_dim..(r + 1) * obs_dim],
+                )
             })
             .collect()
+    }
+
+    /// The reward of one transition (`observation`, `action`, `next`: one row each).
+    pub fn reward(&self, observation: &[f32], action: &[f32], next: &[f32]) -> f32 {
+        // Rewards read a handful of names: no allocation per row for those.
+        const ON_STACK: usize = 16;
+        let n = self.inputs.len();
+        if n <= ON_STACK {
+            self.reward_into(&mut [0.0; ON_STACK][..n], observation, action, next)
+        } else {
+            self.reward_into(&mut vec![0.0; n], observation, action, next)
+        }
+    }
+
+    /// The reward of one transition, with `values` (one per input) as scratch.
+    fn reward_into(
+        &self,
+        values: &mut [f64],
+        observation: &[f32],
+        action: &[f32],
+        next: &[f32],
+    ) -> f32 {
+        for (value, input) in values.iter_mut().zip(&self.inputs) {
+            *value = f64::from(match *input {
+                Input::Observation(i) => observation[i],
+                Input::NextObservation(i) => next[i],
+                Input::Action(i) => action[i],
+            });
+        }
+        // Every variable was resolved when the expression was read, so
+        // evaluation cannot miss one; a NaN stays a NaN.
+        self.expression.eval(values).unwrap_or(f64::NAN) as f32
     }
 }
 
@@ -192,7 +223,9 @@ impl SystemSpec {
             message,
         };
         let raw: SystemFile = toml::from_str(text).map_err(|e| error(e.to_string()))?;
-        raw.check().map_err(error)
+        let mut spec = raw.check().map_err(error)?;
+        spec.source = text.to_string();
+        Ok(spec)
     }
 
     pub fn obs_dim(&self) -> usize {
@@ -242,6 +275,7 @@ impl SystemFile {
             None => Vec::new(),
         };
         Ok(SystemSpec {
+            source: String::new(),
             name: self.name,
             dt: self.dt,
             observations: self.observations,

@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use super::ExperimentError;
 use crate::agent::{RolloutActions, RolloutConfig, rollout_model};
 use crate::data::{Dataset, WindowSampler};
-use crate::envs::{MujocoTask, TaskConfig, TaskRules};
+use crate::envs::{MujocoTask, Rules, TaskConfig};
 use crate::shared::{BatchDynamics, BatchPolicy, SeedStream, derive_seed};
 
 /// How the open-loop prediction error is measured.
@@ -47,7 +47,7 @@ pub struct PredictionError {
 /// scale for every dataset compared).
 pub fn prediction_error(
     dynamics: &dyn BatchDynamics,
-    rules: &TaskRules,
+    rules: &Rules,
     dataset: &Dataset,
     scale: &[f32],
     config: &PredictionConfig,
@@ -230,7 +230,7 @@ pub struct ExploitationConfig {
 /// `dynamics`, up to `horizon` steps or the end of each episode.
 pub fn exploitation(
     dynamics: &dyn BatchDynamics,
-    rules: &TaskRules,
+    rules: &Rules,
     task: TaskConfig,
     policy: &dyn BatchPolicy,
     config: &ExploitationConfig,

@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use super::model::NeuralSde;
 use super::rollout::OpenLoop;
 use crate::data::{Dataset, WindowSampler};
-use crate::envs::{EnvError, MujocoTask, TaskConfig, TaskRules};
+use crate::envs::{EnvError, MujocoTask, Rules, TaskConfig};
 use crate::shared::{BatchDynamics, Cancel, scaled_noise};
 
 /// RMSE after `horizon` open-loop steps, in normalised state units.
@@ -129,7 +129,7 @@ pub struct TaskComparisonConfig {
 pub fn compare_with_task(
     dynamics: &dyn BatchDynamics,
     task: TaskConfig,
-    rules: &TaskRules,
+    rules: &Rules,
     state_std: &[f32],
     actions: &[f32],
     config: &TaskComparisonConfig,

@@ -180,8 +180,15 @@ pub fn answer_format(headers: &HeaderMap) -> Format {
 /// A safetensors response body.
 /// `tensors` as a safetensors answer whose header metadata says the `noise_scale`
 /// the samples were drawn at.
-pub fn tensors_response(tensors: &NamedTensors, noise_scale: f32) -> Result<Response, ApiError> {
-    let metadata = HashMap::from([("noise_scale".to_string(), noise_scale.to_string())]);
+pub fn tensors_response(
+    tensors: &NamedTensors,
+    noise_scale: f32,
+    clipped_rows: usize,
+) -> Result<Response, ApiError> {
+    let metadata = HashMap::from([
+        ("noise_scale".to_string(), noise_scale.to_string()),
+        ("clipped_rows".to_string(), clipped_rows.to_string()),
+    ]);
     let bytes = safetensors_bytes(tensors, Some(metadata))
         .map_err(|e| ApiError::Internal(e.to_string()))?;
     Ok(([(header::CONTENT_TYPE, BINARY)], bytes).into_response())

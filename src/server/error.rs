@@ -15,6 +15,10 @@ pub enum ApiError {
     UnknownModel(String),
     #[error("model `{0}` has no policy (train one with `nuno-trainer fit-policy`)")]
     NoPolicy(String),
+    #[error(
+        "model `{model}` is of `{system}`, a system described in a file: there is no simulator to run it in"
+    )]
+    NoSimulator { model: String, system: String },
     #[error("no route {0} (the API is listed at /docs and /openapi.json)")]
     NoRoute(String),
     #[error("malformed request body: {0}")]
@@ -47,6 +51,7 @@ impl ApiError {
             ApiError::UnknownModel(_) => (StatusCode::NOT_FOUND, "model_not_found"),
             ApiError::NoRoute(_) => (StatusCode::NOT_FOUND, "route_not_found"),
             ApiError::NoPolicy(_) => (StatusCode::CONFLICT, "no_policy"),
+            ApiError::NoSimulator { .. } => (StatusCode::CONFLICT, "no_simulator"),
             ApiError::Malformed(_) => (StatusCode::BAD_REQUEST, "malformed_body"),
             ApiError::Invalid(_) => (StatusCode::UNPROCESSABLE_ENTITY, "invalid_request"),
             ApiError::OverLimit(_) => (StatusCode::UNPROCESSABLE_ENTITY, "over_limit"),
@@ -91,7 +96,7 @@ pub struct ErrorBody {
 
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 pub struct ErrorDetail {
-    /// Stable code: model_not_found, route_not_found, no_policy, malformed_body, invalid_request,
+    /// Stable code: model_not_found, route_not_found, no_policy, no_simulator, malformed_body, invalid_request,
     /// over_limit, body_too_large, unsupported_media_type, unauthorized, timeout, cancelled,
     /// internal.
     pub code: String,

@@ -20,7 +20,7 @@ use crate::agent::{ActionMode, Actor, ActorPolicy};
 use crate::artifact::{
     ArtifactError, BEST_POLICY, ModelFolder, PolicyMetadata, has_policy, load_policy,
 };
-use crate::envs::{TaskConfig, TaskRules};
+use crate::envs::{Rules, System};
 use crate::infer::Kernel;
 use crate::sde::ThresholdTable;
 use crate::shared::{BatchDynamics, BatchPolicy};
@@ -43,8 +43,11 @@ pub struct LoadedModel {
     pub folder: ModelFolder,
     /// The same weights on the fused CPU path, when the server uses it.
     fused: Option<Box<dyn BatchDynamics + Send>>,
-    pub task: TaskConfig,
-    pub rules: TaskRules,
+    /// The task or the file's system it models.
+    pub system: System,
+    pub rules: Rules,
+    /// The action box, `(low, high)` per action: requests' actions are clipped into it.
+    pub action_space: Vec<(f32, f32)>,
     pub policy: Option<(Actor, PolicyMetadata)>,
     /// Seconds of the task one model step covers.
     pub step_seconds: f64,
@@ -234,12 +237,17 @@ fn load_model(id: &str, dir: &Path, kernel: Kernel) -> Result<LoadedModel, LoadE
         Err(ArtifactError::NotAModel(_)) => return Err(LoadError::NotAModel),
         Err(e) => return Err(LoadError::Invalid(e.to_string())),
     };
-    let task = folder.task().ok_or_else(|| {
-        LoadError::Invalid("model.json names no task, so rewards and terminals are unknown".into())
+    let invalid = |e: ArtifactError| LoadError::Invalid(e.to_string());
+    let system = folder.system().map_err(invalid)?.ok_or_else(|| {
+        LoadError::Invalid(
+            "model.json names no task or system, so rewards and terminals are unknown".into(),
+        )
     })?;
-    let rules = folder
-        .rules(task)
-        .map_err(|e| LoadError::Invalid(e.to_string()))?;
+    let rules = folder.rules(&system).map_err(invalid)?;
+    let action_space = system
+        .shape()
+        .map_err(|e| LoadError::Invalid(e.to_string()))?
+        .action_space();
     let fused = kernel == Kernel::Fused;
     let dynamics = folder.burn_dynamics();
     let (obs_dim, act_dim, step_seconds) = (dynamics.obs_dim(), dynamics.act_dim(), rules.dt());
@@ -254,8 +262,9 @@ fn load_model(id: &str, dir: &Path, kernel: Kernel) -> Result<LoadedModel, LoadE
         id: id.to_string(),
         fused: fused.then(|| folder.fused_dynamics()),
         folder,
-        task,
+        system,
         rules,
+        action_space,
         policy,
         step_seconds,
         fused_actor,

@@ -32,6 +32,36 @@ fn finite(field: &str, values: &[f32], width: usize) -> Result<(), ApiError> {
     }
 }
 
+/// Clips `actions` (`[rows, space.len()]`) into the model's action box, as
+/// MuJoCo clips controls to their range; the number of rows changed. With
+/// `clip` false an action outside its box is refused, naming the first.
+pub fn clip_actions(
+    field: &str,
+    actions: &mut [f32],
+    space: &[(f32, f32)],
+    clip: bool,
+) -> Result<usize, ApiError> {
+    let mut clipped_rows = 0;
+    for (row, values) in actions.chunks_exact_mut(space.len()).enumerate() {
+        let mut clipped = false;
+        for (j, (value, &(low, high))) in values.iter_mut().zip(space).enumerate() {
+            if (low..=high).contains(value) {
+                continue;
+            }
+            if !clip {
+                return Err(ApiError::Invalid(format!(
+                    "`{field}[{row}][{j}]` = {value} is outside the action box [{low}, {high}] \
+                     (send `clip: true`, the default, to clip it)"
+                )));
+            }
+            *value = value.clamp(low, high);
+            clipped = true;
+        }
+        clipped_rows += usize::from(clipped);
+    }
+    Ok(clipped_rows)
+}
+
 /// `value` of `field` must lie in `1..=max`.
 pub fn within(field: &str, value: usize, max: usize) -> Result<(), ApiError> {
     if value == 0 {

@@ -9,8 +9,9 @@ Two things a JSON schema cannot state, and only these, are set aside:
   rows as states, `horizon` actions per start, KServe's `data` holding
   shape's product of numbers). Schema-valid cases get the model's widths and
   matching sizes before they are sent, so the server's other rules are what
-  they meet; a 422 naming a width, such a relation, or a CVaR level α the
-  model's threshold table lacks is not counted.
+  they meet; a 422 naming a width, such a relation, a CVaR level α the
+  model's threshold table lacks, or (asked with `clip: false`) an action
+  outside the model's action box is not counted.
 Every other failure of `--checks all` fails the run.
 """
 
@@ -34,6 +35,8 @@ SCHEMA_CANNOT_STATE = [
     re.compile(r"`states` and `actions` differ in rows"),
     # The CVaR thresholds ε(h, α) a model has are the model's (its `thresholds`).
     re.compile(r"the model has no ε\(h = \d+, α = [^)]*\); its table covers"),
+    # The action box is the model's (`GET /v1/models/{id}`); `clip: false` asks for the 422.
+    re.compile(r"is outside the action box \[[^\]]*\] \(send `clip: true`"),
 ]
 
 

@@ -15,15 +15,14 @@ use anyhow::Context;
 use burn::tensor::Device;
 use nuno::agent::{ActionMode, ActorPolicy};
 use nuno::artifact::{BEST_POLICY, ModelFolder, load_policy};
-use nuno::data::{Dataset, DatasetFormat, NormalizerConfig, Stats, read_dataset};
-use nuno::envs::{MujocoTask, TaskConfig, TaskRules};
+use nuno::data::{Dataset, DatasetFormat, NormalizerConfig, Stats, read_system_dataset};
+use nuno::envs::{Rules, System, TaskConfig};
 use nuno::experiment::{
     ExploitationConfig, PredictionConfig, exploitation, prediction_error, uncertainty_by_action,
 };
 use nuno::infer::Kernel;
 use nuno::shared::{BatchDynamics, BatchPolicy, Metric, MetricsTable};
 
-use crate::eta_report::action_space;
 use crate::output::write_text;
 use crate::plot::{Series, line_chart};
 
@@ -79,8 +78,8 @@ pub struct Args {
 struct Model {
     name: String,
     dynamics: Box<dyn BatchDynamics>,
-    task: TaskConfig,
-    rules: TaskRules,
+    system: System,
+    rules: Rules,
 }
 
 impl Args {
@@ -108,11 +107,9 @@ impl Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     args.check()?;
     let models = load_models(&args.models)?;
-    let task = models[0].task;
+    let system = &models[0].system;
     let read = |path: &Path| -> anyhow::Result<Dataset> {
-        let dataset = read_dataset(path, args.format)?;
-        dataset.check_task(&task, path)?;
-        Ok(dataset)
+        Ok(read_system_dataset(path, args.format, system)?)
     };
     let dataset = read(&args.dataset)?;
     let ood = args.ood_dataset.as_deref().map(read).transpose()?;
@@ -121,9 +118,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     write_prediction_error(&args, &models, &dataset, ood.as_ref())?;
-    write_uncertainty(&args, &models, task, &dataset, policy.as_deref())?;
-    if let Some(policy) = &policy {
-        write_exploitation(&args, &models, task, policy.as_ref())?;
+    write_uncertainty(&args, &models, system, &dataset, policy.as_deref())?;
+    match (&policy, system.simulator()) {
+        (Some(policy), Some(task)) => write_exploitation(&args, &models, task, policy.as_ref())?,
+        (Some(_), None) => println!(
+            "no Figure 4: {} is a system described in a file, with no simulator to run the policy in",
+            system.name()
+        ),
+        (None, _) => {}
     }
     println!("wrote {}", args.out.display());
     Ok(())
@@ -136,15 +138,15 @@ fn load_models(specs: &[String]) -> anyhow::Result<Vec<Model>> {
         .map(|spec| load_model(spec))
         .collect::<anyhow::Result<Vec<_>>>()?;
     let first = &models[0];
-    if let Some(other) = models.iter().find(|m| m.task != first.task) {
+    if let Some(other) = models.iter().find(|m| m.system != first.system) {
         anyhow::bail!(
-            "models of different tasks: {} is {} ({:?}), {} is {} ({:?})",
+            "models of different systems: {} is {} ({:?}), {} is {} ({:?})",
             first.name,
-            first.task.name,
-            first.task.layout,
+            first.system.name(),
+            first.system.simulator().map(|t| t.layout),
             other.name,
-            other.task.name,
-            other.task.layout
+            other.system.name(),
+            other.system.simulator().map(|t| t.layout)
         );
     }
     Ok(models)
@@ -215,11 +217,11 @@ type UncertaintyRow<'a> = (String, &'a str, [Metric; 5]);
 fn write_uncertainty(
     args: &Args,
     models: &[Model],
-    task: TaskConfig,
+    system: &System,
     dataset: &Dataset,
     policy: Option<&dyn BatchPolicy>,
 ) -> anyhow::Result<()> {
-    let bounds = action_space(&MujocoTask::new(task)?);
+    let bounds = system.shape()?.action_space();
     let mut rows: Vec<UncertaintyRow> = Vec::new();
     let mut curves = Vec::new();
     for model in models {
@@ -347,13 +349,13 @@ fn load_model(spec: &str) -> anyhow::Result<Model> {
     };
     let context = || format!("loading the model {name} from {}", dir.display());
     let folder = ModelFolder::load(&dir, &Device::flex()).with_context(context)?;
-    let task = folder
-        .task()
-        .with_context(|| format!("{}: model.json names no task", dir.display()))?;
+    let system = folder
+        .system()?
+        .with_context(|| format!("{}: its metadata names no task or system", dir.display()))?;
     Ok(Model {
-        rules: folder.rules(task)?,
+        rules: folder.rules(&system)?,
         dynamics: folder.fused_dynamics(),
-        task,
+        system,
         name,
     })
 }

@@ -1,24 +1,30 @@
 //! The dataset flags the fitting subcommands share (`--dataset`, `--format`,
-//! `--task`, `--neorl`), read and checked against the task in one place.
+//! `--task` or `--system`, `--neorl`), read and checked against the system in
+//! one place.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use nuno::artifact::{DatasetInfo, sha256_file};
-use nuno::data::{Dataset, DatasetFormat, read_dataset};
-use nuno::envs::{TaskConfig, TaskName};
+use nuno::data::{Dataset, DatasetFormat, read_system_dataset};
+use nuno::envs::{System, SystemSpec, TaskConfig, TaskName};
 
 #[derive(Debug, Clone, clap::Args, serde::Serialize)]
 pub struct DataSource {
-    /// Dataset file (D4RL .hdf5, NeoRL .npz) or Minari directory.
+    /// Dataset file (D4RL .hdf5, .npz with NeoRL or D4RL keys, a CSV log of a --system) or Minari directory.
     #[arg(long)]
     pub dataset: PathBuf,
     /// Reader to use (default: detected).
     #[arg(long)]
     pub format: Option<DatasetFormat>,
+    /// A built-in task: hopper, halfcheetah or walker2d.
+    #[arg(long, required_unless_present = "system", conflicts_with = "system")]
+    pub task: Option<TaskName>,
+    /// A system described in a TOML file (docs/your-own-system.md), in place of --task.
     #[arg(long)]
-    pub task: TaskName,
+    pub system: Option<PathBuf>,
     /// NeoRL's observation layout (root x included).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "system")]
     pub neorl: bool,
 }
 
@@ -31,16 +37,29 @@ pub fn task_config(task: TaskName, neorl: bool) -> TaskConfig {
     }
 }
 
+/// The system `--task` (with `--neorl`) or `--system FILE` names; the file
+/// read and checked.
+pub fn system_of(
+    task: Option<TaskName>,
+    file: Option<&std::path::Path>,
+    neorl: bool,
+) -> anyhow::Result<System> {
+    match (task, file) {
+        (_, Some(file)) => Ok(System::File(Arc::new(SystemSpec::read(file)?))),
+        (Some(task), None) => Ok(System::Task(task_config(task, neorl))),
+        (None, None) => anyhow::bail!("give --task or --system"),
+    }
+}
+
 impl DataSource {
-    pub fn task_config(&self) -> TaskConfig {
-        task_config(self.task, self.neorl)
+    /// The system the data is of.
+    pub fn system(&self) -> anyhow::Result<System> {
+        system_of(self.task, self.system.as_deref(), self.neorl)
     }
 
-    /// The dataset, checked against the task's widths.
-    pub fn read(&self) -> anyhow::Result<Dataset> {
-        let dataset = read_dataset(&self.dataset, self.format)?;
-        dataset.check_task(&self.task_config(), &self.dataset)?;
-        Ok(dataset)
+    /// The dataset, checked against the system's widths.
+    pub fn read(&self, system: &System) -> anyhow::Result<Dataset> {
+        Ok(read_system_dataset(&self.dataset, self.format, system)?)
     }
 
     /// What a model artifact records about the data it was fitted on.

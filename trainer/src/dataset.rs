@@ -15,7 +15,7 @@ use nuno::data::{
     BehaviourLevel, Budget, Dataset, DatasetFormat, DatasetMetadata, GenerateConfig, generate,
     read_dataset, write_d4rl, write_neorl,
 };
-use nuno::envs::{MujocoTask, TaskConfig, TaskName};
+use nuno::envs::{MujocoTask, System, TaskConfig, TaskName};
 use nuno::sde::ComputeDevice;
 use nuno::shared::BatchPolicy;
 
@@ -27,6 +27,9 @@ pub enum Command {
     Generate(GenerateArgs),
     /// Print a dataset's size, trajectories, returns and metadata.
     Info(InfoArgs),
+    /// Check a dataset against a system file: sizes, column ranges, the
+    /// action box, and that each declared pair's d position/dt = velocity holds.
+    Check(crate::dataset_check::CheckArgs),
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -112,6 +115,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Generate(args) => generate_cmd(args),
         Command::Info(args) => info(args),
+        Command::Check(args) => crate::dataset_check::check(args),
     }
 }
 
@@ -286,7 +290,7 @@ fn from_behaviour(
     if args.layout == Layout::Neorl {
         config.budget = Budget::Episodes(args.trajectories);
     }
-    config.policy_layout = behaviour.metadata.task.layout;
+    config.policy_layout = behaviour.metadata.simulated_task(&args.behaviour)?.layout;
     // Portable arithmetic: the same recipe gives the same bytes on any CPU.
     let policy = PortableActor::new(&ActorPolicy {
         actor: behaviour.actor.clone(),
@@ -378,7 +382,7 @@ fn medium_replay(run: &Path, medium: &Behaviour, accept_rerun: bool) -> anyhow::
             } == info.config
         });
     anyhow::ensure!(
-        same_run && info.task == medium.metadata.task,
+        same_run && Some(info.task) == medium.metadata.task,
         "{} is not the run the medium policy came from ({})",
         run.display(),
         medium.entry.run
@@ -474,7 +478,7 @@ fn record(
 fn info(args: InfoArgs) -> anyhow::Result<()> {
     let dataset = read_dataset(&args.file, args.format)?;
     if let Some(task) = args.task {
-        dataset.check_task(&task_config(task, args.neorl), &args.file)?;
+        dataset.check_system(&System::Task(task_config(task, args.neorl)), &args.file)?;
     }
     let returns: Vec<f64> = dataset
         .trajectories()

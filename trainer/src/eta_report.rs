@@ -6,9 +6,9 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use nuno::artifact::{load_dynamics, sha256_file};
-use nuno::data::{DatasetFormat, read_dataset};
-use nuno::envs::MujocoTask;
+use nuno::artifact::{DYNAMICS_METADATA, load_dynamics, sha256_file};
+use nuno::data::{DatasetFormat, read_dataset, read_system_dataset};
+use nuno::envs::System;
 use nuno::sde::{
     CalibrationConfig, CalibrationReport, ComputeDevice, EtaReport, EtaReportConfig, LossConfig,
     Z_STD_BAND, calibration_report, eta_report,
@@ -71,10 +71,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .context("check --rows, --radii and --windows")?;
     let (model, metadata) = load_dynamics(&args.model, &device)
         .with_context(|| format!("loading the model in {}", args.model.display()))?;
-    let dataset = read_dataset(&args.dataset, args.format)?;
-    if let Some(task) = &metadata.provenance.task {
-        dataset.check_task(task, &args.dataset)?;
-    }
+    let system = System::recorded(
+        metadata.provenance.task,
+        metadata.provenance.system.as_deref(),
+        &args.model.join(DYNAMICS_METADATA),
+    )?;
+    let dataset = match &system {
+        Some(system) => read_system_dataset(&args.dataset, args.format, system)?,
+        None => read_dataset(&args.dataset, args.format)?,
+    };
     let fit = metadata.provenance.fit.as_ref();
     // r as the model was fitted with (older artifacts: the paper's default).
     let radius = fit.map_or(LossConfig::new().radius, |fit| fit.loss.radius);
@@ -89,9 +94,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         _ => dataset,
     };
     let thresholds = metadata.provenance.thresholds.as_ref();
-    // Random actions span the task's action space (older artifacts: the data's range).
-    let actions = match &metadata.provenance.task {
-        Some(task) => action_space(&MujocoTask::new(*task)?),
+    // Random actions span the system's action space (older artifacts: the data's range).
+    let actions = match &system {
+        Some(system) => system.shape()?.action_space(),
         None => held_out.action_bounds(),
     };
     let calibration = calibration_report(
@@ -115,15 +120,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!();
     print_calibration(&calibration);
     Ok(())
-}
-
-/// The task's action box as `(low, high)` per dimension.
-pub fn action_space(task: &MujocoTask) -> Vec<(f32, f32)> {
-    let (low, high) = task.action_bounds();
-    low.iter()
-        .zip(&high)
-        .map(|(&l, &h)| (l as f32, h as f32))
-        .collect()
 }
 
 fn print_separation(report: &EtaReport) {

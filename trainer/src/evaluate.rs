@@ -69,7 +69,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     dir.display()
                 )
             })?;
-        let task = args.task.map_or(metadata.task, variant);
+        let task = match args.task {
+            Some(name) => variant(name),
+            None => metadata.simulated_task(&dir)?,
+        };
         let mode = if args.sampled {
             ActionMode::Sampled
         } else {

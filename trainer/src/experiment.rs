@@ -13,8 +13,8 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::{Subcommand, ValueEnum};
 use nuno::agent::Method;
-use nuno::data::read_dataset;
-use nuno::envs::{ObservationLayout, TaskConfig};
+use nuno::data::read_system_dataset;
+use nuno::envs::{ObservationLayout, System, TaskConfig};
 use nuno::experiment::{
     Budget, Cell, CellResult, CellSelection, CellStatus, Grid, MeanCurve, cell_dir, cell_status,
     markdown_table, mean_curves, policy_time_left, results_csv, summarize, summarize_run,
@@ -140,12 +140,10 @@ fn checked_cells(grid: &Path, select: &SelectArgs) -> anyhow::Result<(Grid, Vec<
                 cell.dataset,
                 cell.file.display()
             );
-            let task = task_config(cell);
-            read_dataset(&cell.file, None)
-                .and_then(|d| d.check_task(&task, &cell.file))
-                .with_context(|| {
-                    format!("dataset `{}` does not fit {}", cell.dataset, cell.task)
-                })?;
+            let system = System::Task(task_config(cell));
+            read_system_dataset(&cell.file, None, &system).with_context(|| {
+                format!("dataset `{}` does not fit {}", cell.dataset, cell.task)
+            })?;
         }
     }
     Ok((parsed, cells))
@@ -358,7 +356,8 @@ fn fit_cell_model(cell: &Cell, budget: &Budget, model: &Path) -> anyhow::Result<
     let data = DataSource {
         dataset: cell.file.clone(),
         format: None,
-        task: cell.task,
+        task: Some(cell.task),
+        system: None,
         neorl: cell.layout == ObservationLayout::Neorl,
     };
     // Each fit writes its JSON last: without it the fit did not finish.
@@ -578,7 +577,8 @@ mod tests {
         let data = DataSource {
             dataset: cell.file.clone(),
             format: None,
-            task: cell.task,
+            task: Some(cell.task),
+            system: None,
             neorl: false,
         };
         let runner = model_args(&cell, &grid.budget, data, "m".into());

@@ -11,7 +11,7 @@ use nuno::artifact::{
     EnsembleFitShape, load_ensemble_checkpoint, save_ensemble, save_ensemble_checkpoint,
 };
 use nuno::ensemble::{EnsembleConfig, EnsembleEpoch, EnsembleError, fit_ensemble};
-use nuno::envs::TaskConfig;
+use nuno::envs::System;
 use nuno::infer::Kernel;
 use nuno::sde::ComputeDevice;
 use nuno::shared::MetricsTable;
@@ -62,7 +62,7 @@ pub struct Args {
 #[derive(Debug, Serialize)]
 pub struct Plan {
     pub data: DataSource,
-    pub task: TaskConfig,
+    pub system: System,
     pub config: EnsembleConfig,
     pub kernel: Kernel,
     pub out: PathBuf,
@@ -101,7 +101,7 @@ impl Args {
         }
         config.validate()?;
         Ok(Plan {
-            task: self.data.task_config(),
+            system: self.data.system()?,
             data: self.data,
             config,
             kernel: self.kernel,
@@ -118,7 +118,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// Fits the ensemble (from the last checkpoint under --resume) and writes it
 /// with its metrics and holdout plot.
 pub fn fit(plan: &Plan) -> anyhow::Result<()> {
-    let dataset = plan.data.read()?;
+    let dataset = plan.data.read(&plan.system)?;
     let device = ComputeDevice::Cpu.device().map_err(anyhow::Error::msg)?;
     let checkpoints = plan.out.join("ensemble-checkpoints");
     let shape = EnsembleFitShape {
@@ -155,7 +155,7 @@ pub fn fit(plan: &Plan) -> anyhow::Result<()> {
         },
     )?;
     let info = plan.data.info(&dataset);
-    save_ensemble(&plan.out, &fit, &plan.config, plan.task, Some(info))?;
+    save_ensemble(&plan.out, &fit, &plan.config, &plan.system, Some(info))?;
     write_metrics(&plan.out, &fit.history, plan.config.members)?;
     println!(
         "{} epochs; elites {:?} (holdout MSE {:?}); written to {}",

@@ -12,7 +12,7 @@ use burn::tensor::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::artifact::{DynamicsProvenance, load_sde_checkpoint, save_dynamics, save_sde_checkpoint};
 use nuno::data::Dataset;
-use nuno::envs::{MujocoTask, TaskConfig};
+use nuno::envs::System;
 use nuno::infer::Kernel;
 use nuno::sde::{
     ComputeDevice, DriftInputs, DynamicsSpec, EtaLossForm, FitConfig, FitRecord, FitReport,
@@ -24,7 +24,7 @@ use nuno::shared::{Metric, MetricsTable};
 use serde::Serialize;
 
 use crate::data_source::DataSource;
-use crate::eta_report::{action_space, calibration_charts, print_calibration};
+use crate::eta_report::{calibration_charts, print_calibration};
 use crate::flag_defaults::with_defaults;
 use crate::plot::{Series, line_chart};
 use crate::resume::checkpoint_to_resume;
@@ -127,7 +127,9 @@ pub struct Args {
 #[derive(Debug, Serialize)]
 pub struct Plan {
     pub data: DataSource,
-    pub task: TaskConfig,
+    pub system: System,
+    /// The system's action box, where the fit's report probes η.
+    pub action_space: Vec<(f32, f32)>,
     pub spec: DynamicsSpec,
     pub fit: FitConfig,
     pub report: FitReportConfig,
@@ -161,19 +163,26 @@ impl Args {
             !self.drift_hidden.is_empty() && self.drift_hidden.iter().all(|&h| h > 0),
             "--drift-hidden needs positive layer sizes"
         );
-        let task = self.data.task_config();
-        let probe = MujocoTask::new(task)?;
+        let system = self.data.system()?;
+        let shape = system.shape()?;
         let spec = DynamicsSpec {
-            obs_dim: probe.obs_dim(),
-            act_dim: probe.act_dim(),
-            split: probe.state_split(),
-            dt: probe.dt(),
+            obs_dim: shape.obs_dim,
+            act_dim: shape.act_dim,
+            split: shape.split.clone(),
+            dt: shape.dt,
         };
+        let learned_reward = system.rules()?.learned_reward();
+        anyhow::ensure!(
+            self.reward_model || !learned_reward,
+            "{} learns its reward (reward.learned in its file): add --reward-model",
+            system.name()
+        );
         let fit = self.fit_config(&spec)?;
         let report = self.report_config()?;
         Ok(Plan {
             data: self.data,
-            task,
+            action_space: shape.action_space(),
+            system,
             spec,
             fit,
             report,
@@ -251,7 +260,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// Fits the SDE (from the last checkpoint under --resume), measures it and
 /// writes the artifact, its metrics and plots.
 pub fn fit(plan: &Plan) -> anyhow::Result<()> {
-    let dataset = plan.data.read()?;
+    let dataset = plan.data.read(&plan.system)?;
     let (train, valid) = dataset.split_by_trajectory(plan.fit.valid_fraction, plan.fit.seed);
     let device = plan.device.device().map_err(anyhow::Error::msg)?;
     let resume = resume_state(plan, &device)?;
@@ -266,13 +275,14 @@ pub fn fit(plan: &Plan) -> anyhow::Result<()> {
         &dataset,
         &valid,
         plan.fit.loss.radius,
-        &action_space(&MujocoTask::new(plan.task)?),
+        &plan.action_space,
         &plan.report,
         &device,
     )?;
     print_calibration(&report.calibration);
     let provenance = DynamicsProvenance {
-        task: Some(plan.task),
+        task: plan.system.simulator(),
+        system: plan.system.file_text(),
         fit: Some(plan.fit.clone()),
         thresholds: Some(report.thresholds.clone()),
         calibration: Some(report.calibration.clone()),

@@ -16,9 +16,9 @@ use nuno::artifact::{
     BEST_POLICY, LAST_POLICY, ModelFolder, PolicyProvenance, latest_checkpoint, load_checkpoint,
     save_checkpoint, save_policy,
 };
-use nuno::data::{DatasetFormat, read_dataset};
+use nuno::data::{DatasetFormat, read_system_dataset};
 use nuno::ensemble::EnsembleUncertainty;
-use nuno::envs::{ForwardVelocity, TaskConfig};
+use nuno::envs::{ForwardVelocity, System, TaskConfig};
 use nuno::infer::Kernel;
 use nuno::sde::{ComputeDevice, Recipe};
 use nuno::shared::{BatchDynamics, Metric, MetricsTable};
@@ -48,8 +48,9 @@ pub struct Args {
     pub format: Option<DatasetFormat>,
     /// Table 3 row giving h, α and λ_pen, e.g. hopper-random or neorl-hopper-low
     /// (with --algo mopo or tatu-mopo: the same dataset's row of MOPO's h and λ).
+    /// Without one (a system of your own), give --horizon, --cvar-alpha and --penalty.
     #[arg(long)]
-    pub preset: String,
+    pub preset: Option<String>,
     /// The method: nuno, nuno-r and nuno-al train in the neural SDE of fit-model,
     /// mopo and tatu-mopo in the Gaussian ensemble of fit-ensemble.
     #[arg(long, default_value_t = Method::Nuno)]
@@ -145,7 +146,7 @@ pub struct Plan {
     pub dataset: PathBuf,
     pub format: Option<DatasetFormat>,
     #[serde(skip)]
-    pub preset: &'static Preset,
+    pub preset: Option<&'static Preset>,
     pub method: Method,
     pub config: PolicyLoopConfig,
     /// TATU's pessimism coefficient (tatu-mopo only).
@@ -174,7 +175,7 @@ impl Args {
             "-",
         ]);
         (args.model, args.dataset, args.out) = (model, dataset, out);
-        args.preset = preset.to_string();
+        args.preset = Some(preset.to_string());
         args
     }
 
@@ -182,16 +183,26 @@ impl Args {
     /// are refused here, before anything is read.
     pub fn plan(self) -> anyhow::Result<Plan> {
         self.check()?;
-        let preset = preset(&self.preset)?;
+        let preset = self.preset.as_deref().map(preset).transpose()?;
         let sac = SacConfig::new()
             .with_batch_size(self.batch_size)
             .with_actor_hidden(self.hidden.clone())
             .with_critic_hidden(self.hidden.clone());
-        let mut config = PolicyLoopConfig::from_preset(preset, sac);
+        let mut config = match preset {
+            Some(preset) => PolicyLoopConfig::from_preset(preset, sac),
+            None => match (self.horizon, self.cvar_alpha, self.penalty) {
+                (Some(h), Some(alpha), Some(penalty)) => {
+                    PolicyLoopConfig::new(sac, h, alpha, penalty)
+                }
+                _ => anyhow::bail!("without --preset, give --horizon, --cvar-alpha and --penalty"),
+            },
+        };
         if self.algo.uses_ensemble() {
             // MOPO's own h and λ with the ensemble's max ‖σ‖ as the penalty; TATU
             // adds its truncation to MOPO's, MOPO alone has none.
-            (config.horizon, config.penalty) = mopo_preset(&self.preset)?;
+            if let Some(name) = &self.preset {
+                (config.horizon, config.penalty) = mopo_preset(name)?;
+            }
             config.truncate = self.algo.truncation() != Truncation::Never;
             config.apply_mopo_settings(self.mopo_settings.unwrap_or_default());
         }
@@ -214,7 +225,7 @@ impl Args {
         config.seed = self.seed;
         let pessimism = (self.algo == Method::TatuMopo).then(|| {
             self.pessimism
-                .unwrap_or_else(|| tatu_pessimism(&self.preset))
+                .unwrap_or_else(|| tatu_pessimism(self.preset.as_deref().unwrap_or_default()))
         });
         let kernel = self.kernel.unwrap_or(match self.device {
             ComputeDevice::Cpu => Kernel::Fused,
@@ -292,9 +303,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// or from the last checkpoint, saving the best and last policies.
 pub fn train(plan: &Plan) -> anyhow::Result<()> {
     let device = plan.device.device().map_err(anyhow::Error::msg)?;
-    let (model, task) = load_model(plan, &device)?;
-    let dataset = read_dataset(&plan.dataset, plan.format)?;
-    dataset.check_task(&task, &plan.dataset)?;
+    let (model, system) = load_model(plan, &device)?;
+    let dataset = read_system_dataset(&plan.dataset, plan.format, &system)?;
     let base = model.dynamics(plan.kernel);
     let aleatoric;
     let dynamics: &dyn BatchDynamics = if plan.method == Method::NunoAl {
@@ -306,8 +316,8 @@ pub fn train(plan: &Plan) -> anyhow::Result<()> {
     let ctx = LoopContext {
         dataset: &dataset,
         dynamics,
-        task,
-        rules: model.rules(task)?,
+        rules: model.rules(&system)?,
+        system,
         kernel: plan.kernel,
     };
     let mut training = start(plan, &model, &ctx, &device)?;
@@ -323,24 +333,26 @@ pub fn train(plan: &Plan) -> anyhow::Result<()> {
         let record = training.run_epoch(&ctx)?;
         bar.set_position(training.step as u64);
         bar.set_message(format!(
-            "SPS {:.1} | score {:.1} | η policy {:.3} data {:.3} | rollout len {:.1}",
+            "SPS {:.1} | {} {:.1} | η policy {:.3} data {:.3} | rollout len {:.1}",
             record.sps,
-            record.eval.normalized_score,
+            record.eval.score_name(),
+            record.eval.score(),
             record.eta.policy,
             record.eta.dataset,
             record.rollout.mean_length
         ));
-        save_policies(plan, &model, task, &record, &training)?;
+        save_policies(plan, &model, &ctx.system, &record, &training)?;
         save_checkpoint(&plan.out.join("checkpoints"), &training)?;
         write_metrics(&plan.out, &training.history)?;
     }
     bar.finish();
     if let Some(last) = training.history.last() {
         println!(
-            "{} epochs, {} steps: last normalised score {:.1}; policies in {}",
+            "{} epochs, {} steps: last {} {:.1}; policies in {}",
             last.epoch,
             last.step,
-            last.eval.normalized_score,
+            last.eval.score_name(),
+            last.eval.score(),
             plan.policies.display()
         );
     }
@@ -373,7 +385,11 @@ fn start(
         let c = &training.config;
         println!(
             "{} ({}): h = {}, α = {}, λ_pen = {}, truncation threshold {threshold:.4}",
-            plan.preset.name, plan.method, c.horizon, c.cvar_alpha, c.penalty
+            plan.preset.map_or("no preset", |p| p.name),
+            plan.method,
+            c.horizon,
+            c.cvar_alpha,
+            c.penalty
         );
     }
     Ok(training)
@@ -384,12 +400,12 @@ fn start(
 fn save_policies(
     plan: &Plan,
     model: &ModelFolder,
-    task: TaskConfig,
+    system: &System,
     record: &EpochRecord,
     training: &PolicyTraining,
 ) -> anyhow::Result<()> {
     let provenance = || PolicyProvenance {
-        preset: Some(plan.preset.name.to_string()),
+        preset: plan.preset.map(|p| p.name.to_string()),
         dynamics_sha256: Some(model.weights_sha256().to_string()),
         dataset_sha256: model.dataset_sha256().map(String::from),
         training: Some(training.config.clone()),
@@ -402,14 +418,14 @@ fn save_policies(
         truncation_threshold: training.threshold,
     };
     let actor = training.policy(ActionMode::Deterministic).actor;
-    save_policy(&plan.policies, LAST_POLICY, &actor, task, provenance())?;
+    save_policy(&plan.policies, LAST_POLICY, &actor, system, provenance())?;
     let best = training
         .history
         .iter()
-        .map(|r| r.eval.normalized_score)
+        .map(|r| r.eval.score())
         .fold(f64::NEG_INFINITY, f64::max);
-    if record.eval.normalized_score >= best {
-        save_policy(&plan.policies, BEST_POLICY, &actor, task, provenance())?;
+    if record.eval.score() >= best {
+        save_policy(&plan.policies, BEST_POLICY, &actor, system, provenance())?;
     }
     Ok(())
 }
@@ -432,14 +448,16 @@ fn write_metrics(out: &Path, history: &[EpochRecord]) -> anyhow::Result<()> {
         name,
         points: history.iter().map(|r| (r.step as f64, f(r))).collect(),
     };
+    // A system without a simulator charts the model's own estimate instead.
+    let score = history
+        .last()
+        .map_or("normalised score", |r| r.eval.score_name());
     line_chart(
         &out.join("normalized_score.svg"),
-        "NUNO: D4RL normalised score",
+        &format!("NUNO: {score}"),
         "gradient step",
-        "normalised score",
-        &[series("evaluation (mean of episodes)", |r| {
-            r.eval.normalized_score
-        })],
+        score,
+        &[series("evaluation (mean of episodes)", |r| r.eval.score())],
     )?;
     line_chart(
         &out.join("eta.svg"),
@@ -459,7 +477,7 @@ fn write_metrics(out: &Path, history: &[EpochRecord]) -> anyhow::Result<()> {
 /// neural SDE for NUNO's methods, a Gaussian ensemble for MOPO's), with its
 /// task (a model.json from before tasks were recorded: the preset's), checked
 /// against the preset's.
-fn load_model(plan: &Plan, device: &Device) -> anyhow::Result<(ModelFolder, TaskConfig)> {
+fn load_model(plan: &Plan, device: &Device) -> anyhow::Result<(ModelFolder, System)> {
     let dir = &plan.model;
     let folder = ModelFolder::load(dir, device)
         .with_context(|| format!("loading the model in {}", dir.display()))?;
@@ -490,22 +508,33 @@ fn load_model(plan: &Plan, device: &Device) -> anyhow::Result<(ModelFolder, Task
         }
         folder => folder,
     };
-    let preset = plan.preset;
-    let task = folder.task().unwrap_or(TaskConfig {
-        name: preset.task,
-        layout: preset.layout,
-        ..TaskConfig::d4rl(preset.task)
-    });
-    anyhow::ensure!(
-        task.name == preset.task && task.layout == preset.layout,
-        "preset {} is for {} ({:?}), the model is for {} ({:?})",
-        preset.name,
-        preset.task,
-        preset.layout,
-        task.name,
-        task.layout
-    );
-    Ok((folder, task))
+    let system = match (folder.system()?, plan.preset) {
+        (Some(system), _) => system,
+        // A model.json from before tasks were recorded: the preset's.
+        (None, Some(preset)) => System::Task(TaskConfig {
+            layout: preset.layout,
+            ..TaskConfig::d4rl(preset.task)
+        }),
+        (None, None) => anyhow::bail!(
+            "{}: the model records no task or system, and no --preset names one",
+            dir.display()
+        ),
+    };
+    if let Some(preset) = plan.preset {
+        let matches = system
+            .simulator()
+            .is_some_and(|task| task.name == preset.task && task.layout == preset.layout);
+        anyhow::ensure!(
+            matches,
+            "preset {} is for {} ({:?}), the model is of {} ({:?})",
+            preset.name,
+            preset.task,
+            preset.layout,
+            system.name(),
+            system.simulator().map(|t| t.layout)
+        );
+    }
+    Ok((folder, system))
 }
 
 /// What the run's rollouts truncate at (`agent::run_threshold`). A threshold

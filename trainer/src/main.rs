@@ -9,6 +9,7 @@ mod analyze;
 mod collect;
 mod data_source;
 mod dataset;
+mod dataset_check;
 mod eta_report;
 mod evaluate;
 mod experiment;

@@ -10,10 +10,11 @@ use utoipa::ToSchema;
 use super::fields::{DEFAULT_EPISODES, integer, one, optional_integer};
 use crate::agent::ActionMode;
 use crate::envs::{
-    EnvError, EvaluationConfig, EvaluationReport, evaluate_or_cancel as run_episodes,
+    EnvError, EvaluationConfig, EvaluationReport, TaskConfig, evaluate_or_cancel as run_episodes,
 };
 use crate::sde::{TaskComparisonConfig, compare_with_task};
 use crate::server::body::RawBody;
+use crate::server::registry::LoadedModel;
 use crate::server::rows::{Rows, split_rows};
 use crate::server::validate::within;
 use crate::server::{ApiError, AppState};
@@ -51,7 +52,7 @@ pub struct EvaluateResponse {
     responses(
         (status = 200, description = "Success", body = EvaluateResponse),
         (status = 404, description = "Unknown model", body = crate::server::ErrorBody),
-        (status = 409, body = crate::server::ErrorBody, description = "The model has no policy"),
+        (status = 409, body = crate::server::ErrorBody, description = "The model has no policy, or its system no simulator"),
         (status = 422, description = "Wrong dimensions, non-finite values, an empty batch, or over a limit", body = crate::server::ErrorBody),
     ))]
 pub async fn evaluate(
@@ -60,6 +61,7 @@ pub async fn evaluate(
 ) -> Result<Json<EvaluateResponse>, ApiError> {
     let r: EvaluateRequest = body.json().await?;
     let model = state.model(&r.model)?;
+    let task = simulator(&model)?;
     if model.policy.is_none() {
         return Err(ApiError::NoPolicy(r.model));
     }
@@ -67,7 +69,7 @@ pub async fn evaluate(
     let episodes = r.episodes.unwrap_or(DEFAULT_EPISODES.min(max_episodes));
     within("episodes", episodes, max_episodes)?;
     state.metrics.batch("evaluate", &r.model, episodes);
-    let config = EvaluationConfig::new(model.task, episodes, r.seed);
+    let config = EvaluationConfig::new(task, episodes, r.seed);
     let worker = model.clone();
     let report = state
         .compute(move |cancel| {
@@ -82,7 +84,7 @@ pub async fn evaluate(
         .await?;
     Ok(Json(EvaluateResponse {
         model: r.model,
-        task: model.task.name.to_string(),
+        task: task.name.to_string(),
         report,
     }))
 }
@@ -130,6 +132,7 @@ pub struct ValidateResponse {
     responses(
         (status = 200, description = "Success", body = ValidateResponse),
         (status = 404, description = "Unknown model", body = crate::server::ErrorBody),
+        (status = 409, body = crate::server::ErrorBody, description = "The model's system has no simulator"),
         (status = 422, description = "Wrong dimensions, non-finite values, an empty batch, or over a limit", body = crate::server::ErrorBody),
     ))]
 pub async fn validate(
@@ -139,6 +142,7 @@ pub async fn validate(
 ) -> Result<Json<ValidateResponse>, ApiError> {
     let r: ValidateRequest = body.json().await?;
     let model = state.model(&id)?;
+    let task = simulator(&model)?;
     let (obs_dim, act_dim) = (model.obs_dim(), model.act_dim());
     let limits = &state.config.limits;
     let horizon = r.actions.len();
@@ -162,7 +166,7 @@ pub async fn validate(
             let std = worker.observation_std();
             compare_with_task(
                 worker.batch_dynamics(),
-                worker.task,
+                task,
                 &worker.rules,
                 std,
                 &actions,
@@ -184,4 +188,15 @@ pub async fn validate(
         rmse: comparison.rmse,
         normalized_rmse: comparison.normalized_rmse,
     }))
+}
+
+/// The MuJoCo task `model` is of; a 409 for a system described in a file.
+fn simulator(model: &LoadedModel) -> Result<TaskConfig, ApiError> {
+    model
+        .system
+        .simulator()
+        .ok_or_else(|| ApiError::NoSimulator {
+            model: model.id.clone(),
+            system: model.system.name(),
+        })
 }

@@ -14,6 +14,10 @@ pub(super) fn unit() -> f64 {
     1.0
 }
 
+pub(super) fn yes() -> bool {
+    true
+}
+
 /// A non-negative integer field. JSON Schema, and so the spec, counts `9.0` as
 /// the integer 9, and clients that hold numbers as floats (numpy, JavaScript)
 /// send it that way: integral floats are taken, fractions and negatives are not.

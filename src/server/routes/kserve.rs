@@ -17,7 +17,7 @@ use super::fields::integers;
 use super::kserve_binary::{OutputData, binary_response, binary_size, decode_fp32};
 use crate::agent::{ParticleConfig, ParticleStep, step_particles};
 use crate::server::body::{Format, INFERENCE_HEADER_LENGTH, RawBody, TensorBytes, json_response};
-use crate::server::validate::{flat, within};
+use crate::server::validate::{clip_actions, flat, within};
 use crate::server::{ApiError, AppState};
 
 /// v2's error shape.
@@ -230,6 +230,9 @@ pub struct InferResponse {
     pub model_name: String,
     pub model_version: String,
     pub id: Option<String>,
+    /// `clipped_rows`: rows whose action was clipped into the model's action box.
+    #[schema(value_type = Object)]
+    pub parameters: serde_json::Map<String, serde_json::Value>,
     pub outputs: Vec<InferTensor>,
 }
 
@@ -266,11 +269,14 @@ pub async fn infer(
     let mut inputs = split_binary_tail(&mut r.inputs, &body.bytes[header_length..])?;
     let max_batch = state.config.limits.max_batch;
     let states = input_values(&mut inputs, "states", obs_dim, max_batch)?;
-    let actions = input_values(&mut inputs, "actions", act_dim, max_batch)?;
+    let mut actions = input_values(&mut inputs, "actions", act_dim, max_batch)?;
     let batch = states.len() / obs_dim;
     if actions.len() / act_dim != batch {
         return Err(ApiError::Invalid("`states` and `actions` differ in rows".into()).into());
     }
+    // `clip: false` asks for a 422 where an action leaves the box.
+    let clip = flag_parameter(Some(&r.parameters), "clip")?.unwrap_or(true);
+    let clipped_rows = clip_actions("actions", &mut actions, &model.action_space, clip)?;
     let wanted = wanted_outputs(&r)?;
     let number = |key: &str, default: f64| number_parameter(&r.parameters, key, default);
     let seed = number("seed", 0.0)? as u64;
@@ -297,7 +303,7 @@ pub async fn infer(
                 config,
                 &mut rng,
             );
-            infer_response(&id, request_id, &s, &wanted)
+            infer_response(&id, request_id, &s, &wanted, clipped_rows)
         })
         .await?;
     Ok(response)
@@ -469,6 +475,7 @@ fn infer_response(
     request_id: Option<String>,
     s: &ParticleStep,
     wanted: &[(String, bool)],
+    clipped_rows: usize,
 ) -> Result<Response, ApiError> {
     let (b, d) = (s.batch, s.obs_dim);
     let output = |name: &str| -> (Vec<usize>, OutputData<'_>) {
@@ -512,6 +519,10 @@ fn infer_response(
         model_name: id.to_string(),
         model_version: "1".into(),
         id: request_id,
+        parameters: serde_json::Map::from_iter([(
+            "clipped_rows".to_string(),
+            serde_json::json!(clipped_rows),
+        )]),
         outputs,
     };
     if tails.is_empty() {

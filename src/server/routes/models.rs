@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use crate::artifact::ModelFolder;
+use crate::envs::{System, SystemReward, SystemSpec};
 use crate::server::{ApiError, AppState, LoadedModel, ModelKind};
 
 /// One loaded model in brief.
@@ -14,9 +15,9 @@ pub struct ModelSummary {
     pub id: String,
     /// neural-sde (NUNO's, `fit-model`) or gaussian-ensemble (MOPO's, `fit-ensemble`).
     pub kind: ModelKind,
-    /// hopper, halfcheetah or walker2d.
+    /// hopper, halfcheetah or walker2d; or the name a system file gives.
     pub task: String,
-    /// d4rl or neorl observations.
+    /// d4rl or neorl observations; `system` for a system described in a file.
     pub layout: String,
     pub obs_dim: usize,
     pub act_dim: usize,
@@ -60,17 +61,70 @@ pub struct ModelDetail {
     /// The policy's provenance (preset, epoch, score), if one is loaded.
     #[schema(value_type = Object)]
     pub policy: serde_json::Value,
+    /// A system described in a file: its names, dt, pairs, reward and
+    /// bounds (absent for a built-in task).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub system: Option<SystemDescription>,
+}
+
+/// What a system file declares, by name.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct SystemDescription {
+    pub name: String,
+    /// Seconds between consecutive observations.
+    pub dt: f64,
+    pub observations: Vec<String>,
+    pub actions: Vec<String>,
+    pub action_low: Vec<f64>,
+    pub action_high: Vec<f64>,
+    /// `[position, velocity]`: d position/dt = velocity (eq. 8's prior).
+    pub pairs: Vec<[String; 2]>,
+    /// Positions the drift sees through cos and sin.
+    pub angles: Vec<String>,
+    /// `learned` or the reward expression.
+    pub reward: String,
+    /// Observation → `[low, high]`: an episode ends outside.
+    pub bounds: std::collections::BTreeMap<String, [f64; 2]>,
+}
+
+impl SystemDescription {
+    fn of(spec: &SystemSpec) -> Self {
+        let name = |i: usize| spec.observations[i].clone();
+        let split = &spec.split;
+        Self {
+            name: spec.name.clone(),
+            dt: spec.dt,
+            observations: spec.observations.clone(),
+            actions: spec.actions.clone(),
+            action_low: spec.action_low.clone(),
+            action_high: spec.action_high.clone(),
+            pairs: (split.positions.iter().zip(&split.position_velocity))
+                .map(|(&p, &v)| [name(p), name(v)])
+                .collect(),
+            angles: split.angles.iter().map(|&a| name(a)).collect(),
+            reward: match &spec.reward {
+                SystemReward::Learned => "learned".into(),
+                SystemReward::Expression(e) => e.text().into(),
+            },
+            bounds: (spec.bounds.iter())
+                .map(|b| (name(b.index), [b.low, b.high]))
+                .collect(),
+        }
+    }
 }
 
 pub(crate) fn summary(model: &LoadedModel) -> ModelSummary {
     ModelSummary {
         id: model.id.clone(),
         kind: model.kind(),
-        task: model.task.name.to_string(),
-        layout: serde_json::to_value(model.task.layout)
-            .ok()
-            .and_then(|v| v.as_str().map(String::from))
-            .unwrap_or_default(),
+        task: model.system.name(),
+        layout: match &model.system {
+            System::Task(task) => serde_json::to_value(task.layout)
+                .ok()
+                .and_then(|v| v.as_str().map(String::from))
+                .unwrap_or_default(),
+            System::File(_) => "system".into(),
+        },
         obs_dim: model.obs_dim(),
         act_dim: model.act_dim(),
         dt: model.step_seconds,
@@ -138,5 +192,9 @@ pub async fn get_model(
             .as_ref()
             .map(|(_, p)| value(serde_json::to_value(&p.provenance)))
             .unwrap_or_default(),
+        system: match &model.system {
+            System::File(spec) => Some(SystemDescription::of(spec)),
+            System::Task(_) => None,
+        },
     }))
 }

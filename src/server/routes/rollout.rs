@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use super::fields::{integer, one, unit};
+use super::fields::{integer, one, unit, yes};
 use crate::agent::{
     ActionMode, RolloutActions, RolloutConfig, RolloutTrace, StepOutcome, penalized_reward,
     rollout_model_or_cancel,
@@ -21,7 +21,7 @@ use crate::server::body::{
     Format, RawBody, TensorBytes, answer_format, json_response, tensors_response,
 };
 use crate::server::rows::{Rows, split_rows};
-use crate::server::validate::{answer_within, non_negative, within};
+use crate::server::validate::{answer_within, clip_actions, non_negative, within};
 use crate::server::{ApiError, AppState, Limits, LoadedModel};
 
 #[derive(Debug, Clone, Deserialize, ToSchema)]
@@ -36,6 +36,10 @@ pub struct RolloutRequest {
     #[serde(default)]
     #[schema(value_type = Option<Vec<Vec<Vec<f32>>>>)]
     pub actions: Option<Vec<Rows>>,
+    /// Clip open-loop actions outside the model's action box into it
+    /// (default), as MuJoCo clips controls; false answers 422 instead.
+    #[serde(default = "yes")]
+    pub clip: bool,
     /// How the policy acts when it does (default deterministic).
     #[serde(default)]
     pub policy_mode: ActionMode,
@@ -112,6 +116,8 @@ pub struct RolloutResponse {
     /// The scale of ε the samples were drawn at: the request's `noise_scale`,
     /// else the model's own.
     pub noise_scale: f32,
+    /// Open-loop action rows (start × step) clipped into the action box.
+    pub clipped_rows: usize,
     /// Start `b`'s particle `p` is entry `b·particles + p`.
     pub trajectories: Vec<Trajectory>,
 }
@@ -122,7 +128,7 @@ pub struct RolloutResponse {
 /// `eta`, `accumulated_eta`, `rewards`, `penalized_rewards` `[rows, horizon]`
 /// (NaN past each trajectory's steps taken), `length` `[rows]` (steps kept) and
 /// `outcome` `[rows]` (0 ran to h, 1 terminal, 2 truncated, 3 diverged); row
-/// `b·particles + p` is start `b`'s particle `p`; `noise_scale` used in its metadata.
+/// `b·particles + p` is start `b`'s particle `p`; `noise_scale` used and `clipped_rows` in its metadata.
 #[utoipa::path(post, path = "/v1/models/{id}/rollout", tag = "models",
     params(("id" = String, Path, description = "Model id")),
     request_body = RolloutRequest,
@@ -152,10 +158,15 @@ pub async fn rollout(
         .noise_scale
         .unwrap_or_else(|| model.batch_dynamics().sample_noise_scale());
     non_negative("noise_scale", f64::from(noise_scale))?;
-    let sequence = match r.actions.take() {
+    let mut sequence = match r.actions.take() {
         None if model.policy.is_none() => return Err(ApiError::NoPolicy(id)),
         None => None,
         Some(actions) => Some(flatten_sequences(actions, batch, r.horizon, act_dim)?),
+    };
+    // A policy's actions are in the box by construction (tanh, scaled).
+    let clipped_rows = match sequence.as_mut() {
+        Some(actions) => clip_actions("actions", actions, &model.action_space, r.clip)?,
+        None => 0,
     };
     let threshold = resolve_threshold(r.threshold, r.alpha, r.horizon, &model)?;
     state
@@ -195,6 +206,7 @@ pub async fn rollout(
                 return tensors_response(
                     &binary_rollout(&out.trace, r.penalty, (obs_dim, act_dim)),
                     noise_scale,
+                    clipped_rows,
                 );
             }
             let trajectories = trajectories(&out.trace, r.penalty, r.particles, (obs_dim, act_dim));
@@ -204,6 +216,7 @@ pub async fn rollout(
                 particles: r.particles,
                 threshold,
                 noise_scale,
+                clipped_rows,
                 trajectories,
             })
         })

@@ -11,12 +11,12 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use super::fields::{integer, one, unit};
+use super::fields::{integer, one, unit, yes};
 use crate::agent::{ParticleConfig, ParticleStep, step_particles};
 use crate::artifact::NamedTensors;
 use crate::server::body::{Format, RawBody, TensorBytes, json_response, tensors_response};
 use crate::server::rows::{Rows, split_rows as rows};
-use crate::server::validate::{answer_within, flat, non_negative, within};
+use crate::server::validate::{answer_within, clip_actions, flat, non_negative, within};
 use crate::server::{ApiError, AppState};
 
 /// A batch of observations and actions to step.
@@ -49,6 +49,10 @@ pub struct StepRequest {
     #[serde(default)]
     #[schema(minimum = 0)]
     pub noise_scale: Option<f32>,
+    /// Clip actions outside the model's action box into it (default), as
+    /// MuJoCo clips controls; false answers 422 for such an action instead.
+    #[serde(default = "yes")]
+    pub clip: bool,
 }
 
 /// Per item: the SDE's terms; per item and particle: the sampled step.
@@ -60,6 +64,8 @@ pub struct StepResponse {
     /// The scale of ε the samples were drawn at: the request's `noise_scale`,
     /// else the model's own.
     pub noise_scale: f32,
+    /// Rows whose action was clipped into the action box.
+    pub clipped_rows: usize,
     /// s + f(s, a)·dt, the drift mean: `[batch][obs_dim]`.
     pub mean: Vec<Vec<f32>>,
     /// Aleatoric diffusion σ(s, a): `[batch][obs_dim]`.
@@ -80,8 +86,8 @@ pub struct StepResponse {
 
 /// Samples one EM step. Binary bodies: a safetensors file with `states`
 /// `[batch, obs_dim]` and `actions` `[batch, act_dim]` (f32), the options as
-/// string metadata (`particles`, `seed`, `penalty`, `noise_scale`); the answer
-/// is a safetensors file (`noise_scale` used in its metadata) with `mean`, `sigma`, `h_eta` `[batch, obs_dim]`,
+/// string metadata (`particles`, `seed`, `penalty`, `noise_scale`, `clip`); the answer
+/// is a safetensors file (`noise_scale` used and `clipped_rows` in its metadata) with `mean`, `sigma`, `h_eta` `[batch, obs_dim]`,
 /// `eta` `[batch]`, `next_states` `[batch, particles, obs_dim]`, `rewards`,
 /// `penalized_rewards`, `terminals` (0/1) `[batch, particles]`.
 #[utoipa::path(post, path = "/v1/models/{id}/step", tag = "models",
@@ -104,7 +110,7 @@ pub async fn step(
 ) -> Result<Response, ApiError> {
     let model = state.model(&id)?;
     let (obs_dim, act_dim) = (model.obs_dim(), model.act_dim());
-    let (observations, actions, request) = match body.format {
+    let (observations, mut actions, request) = match body.format {
         Format::Json => {
             let mut r: StepRequest = body.json().await?;
             let states = std::mem::take(&mut r.states).into_matrix("states", obs_dim)?;
@@ -120,6 +126,7 @@ pub async fn step(
             actions.len() / act_dim
         )));
     }
+    let clipped_rows = clip_actions("actions", &mut actions, &model.action_space, request.clip)?;
     let limits = &state.config.limits;
     within("batch (rows of states)", batch, limits.max_batch)?;
     within("particles", request.particles, limits.max_particles)?;
@@ -158,8 +165,12 @@ pub async fn step(
                 &mut rng,
             );
             match format {
-                Format::Json => json_response(&step_response(&id, &result, noise_scale)),
-                Format::Binary => tensors_response(&binary_response(result), noise_scale),
+                Format::Json => {
+                    json_response(&step_response(&id, &result, noise_scale, clipped_rows))
+                }
+                Format::Binary => {
+                    tensors_response(&binary_response(result), noise_scale, clipped_rows)
+                }
             }
         })
         .await
@@ -195,6 +206,7 @@ fn binary_request(
             .contains_key("noise_scale")
             .then(|| option(&metadata, "noise_scale", 1.0))
             .transpose()?,
+        clip: option(&metadata, "clip", true)?,
     };
     Ok((states, actions, request))
 }
@@ -213,13 +225,19 @@ fn option<T: std::str::FromStr>(
     }
 }
 
-fn step_response(id: &str, s: &ParticleStep, noise_scale: f32) -> StepResponse {
+fn step_response(
+    id: &str,
+    s: &ParticleStep,
+    noise_scale: f32,
+    clipped_rows: usize,
+) -> StepResponse {
     let (p, d) = (s.particles, s.obs_dim);
     StepResponse {
         model: id.to_string(),
         batch: s.batch,
         particles: p,
         noise_scale,
+        clipped_rows,
         mean: rows(&s.mean, d),
         sigma: rows(&s.sigma, d),
         h_eta: rows(&s.h_eta, d),
