@@ -28,6 +28,14 @@
 //! preset = "hopper-random"           # Table 3 row: h, α, λ_pen
 //! methods = ["nuno", "nuno-r", "nuno-al", "mopo", "tatu-mopo"]
 //! seeds = [0, 1, 2]
+//!
+//! [[datasets]]                       # a system described as data
+//! name = "pendulum"
+//! file = "pendulum/log.csv"
+//! system = "pendulum/system.toml"    # relative to the grid file, in place of task
+//! policy = { horizon = 10, cvar_alpha = 0.95, penalty = 1.0 }   # in place of preset
+//! methods = ["nuno", "mopo"]
+//! seeds = [0, 1, 2]
 //! ```
 
 use std::fmt;
@@ -205,16 +213,94 @@ fn default_hidden() -> Vec<usize> {
     vec![256, 256]
 }
 
-/// One dataset row of the grid, as written.
+/// One dataset row of the grid, as written: a built-in task's data with its
+/// preset, or a system file's with the policy step's h, α and λ_pen.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GridDataset {
     pub name: String,
     pub file: PathBuf,
-    pub task: TaskName,
-    pub preset: String,
+    #[serde(default)]
+    pub task: Option<TaskName>,
+    /// A system file, relative to the grid file.
+    #[serde(default)]
+    pub system: Option<PathBuf>,
+    #[serde(default)]
+    pub preset: Option<String>,
+    /// What a preset gives, for a system (there are no presets for one).
+    #[serde(default)]
+    pub policy: Option<PolicySettings>,
     pub methods: Vec<String>,
     pub seeds: Vec<u64>,
+}
+
+/// fit-policy's `--horizon`, `--cvar-alpha` and `--penalty`: h, α and λ_pen
+/// (for MOPO's methods, MOPO's h and λ; α is TATU's CVaR level).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PolicySettings {
+    pub horizon: usize,
+    pub cvar_alpha: f64,
+    pub penalty: f64,
+}
+
+/// What a dataset row's data is of.
+enum RowSystem {
+    Task {
+        task: TaskName,
+        preset: String,
+        layout: ObservationLayout,
+    },
+    File {
+        file: PathBuf,
+        policy: PolicySettings,
+    },
+}
+
+impl GridDataset {
+    /// A task with its preset, or a system file (resolved against `base`)
+    /// with its policy settings: exactly one of the two, checked.
+    fn row_system(&self, base: &Path) -> Result<RowSystem, String> {
+        let name = &self.name;
+        match (self.task, &self.system, &self.preset, &self.policy) {
+            (Some(task), None, Some(preset_name), None) => {
+                let row = preset(preset_name).map_err(|e| format!("dataset `{name}`: {e}"))?;
+                if row.task != task {
+                    return Err(format!(
+                        "dataset `{name}` is {task} data, its preset `{preset_name}` is for {}",
+                        row.task
+                    ));
+                }
+                Ok(RowSystem::Task {
+                    task,
+                    preset: preset_name.clone(),
+                    layout: row.layout,
+                })
+            }
+            (None, Some(file), None, Some(policy)) => {
+                let PolicySettings {
+                    horizon,
+                    cvar_alpha,
+                    penalty,
+                } = *policy;
+                if horizon == 0
+                    || !(cvar_alpha > 0.0 && cvar_alpha <= 1.0)
+                    || !(penalty.is_finite() && penalty >= 0.0)
+                {
+                    return Err(format!(
+                        "dataset `{name}`: policy needs horizon ≥ 1, cvar_alpha in (0, 1] and penalty ≥ 0"
+                    ));
+                }
+                Ok(RowSystem::File {
+                    file: base.join(file),
+                    policy: *policy,
+                })
+            }
+            _ => Err(format!(
+                "dataset `{name}` needs either task and preset (a built-in task) or system and policy (a system file)"
+            )),
+        }
+    }
 }
 
 /// The grid file.
@@ -239,9 +325,20 @@ pub struct Cell {
     /// The same file resolved against the grid's folder, what the cell reads.
     #[serde(skip)]
     pub file: PathBuf,
-    pub task: TaskName,
+    /// The built-in task, or none for a system file's data.
+    pub task: Option<TaskName>,
     pub layout: ObservationLayout,
-    pub preset: String,
+    /// The Table 3 row of a built-in task's data.
+    pub preset: Option<String>,
+    /// The system file as the grid names it (relative to the grid file's folder).
+    #[serde(default, skip_serializing_if = "Option::is_none", rename = "system")]
+    pub system_in_grid: Option<PathBuf>,
+    /// The same file resolved against the grid's folder, what the cell reads.
+    #[serde(skip)]
+    pub system: Option<PathBuf>,
+    /// h, α and λ_pen for a system file's data.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub policy: Option<PolicySettings>,
     pub method: Method,
     pub seed: u64,
 }
@@ -263,6 +360,9 @@ impl Cell {
             && self.task == other.task
             && self.layout == other.layout
             && self.preset == other.preset
+            && self.system_in_grid.as_ref().map(|f| f.file_name())
+                == other.system_in_grid.as_ref().map(|f| f.file_name())
+            && self.policy == other.policy
             && self.method == other.method
             && self.seed == other.seed
     }
@@ -378,13 +478,7 @@ impl Grid {
             // Whether the file exists is the runner's check, on the cells it
             // runs: a report or status needs only the cells' folders.
             let file = base.join(&d.file);
-            let preset = preset(&d.preset).map_err(|e| format!("dataset `{}`: {e}", d.name))?;
-            if preset.task != d.task {
-                return Err(format!(
-                    "dataset `{}` is {} data, its preset `{}` is for {}",
-                    d.name, d.task, d.preset, preset.task
-                ));
-            }
+            let system = d.row_system(base)?;
             if d.methods.is_empty() || d.seeds.is_empty() {
                 return Err(format!(
                     "dataset `{}` needs at least one method and one seed",
@@ -399,15 +493,16 @@ impl Grid {
                         .map_err(|e| format!("dataset `{}`: {e}", d.name))
                 })
                 .collect::<Result<Vec<_>, _>>()?;
-            if let Some(m) = methods.iter().find(|m| m.uses_ensemble())
-                && crate::agent::mopo_preset(&d.preset).is_err()
+            if let (Some(m), RowSystem::Task { preset, .. }) =
+                (methods.iter().find(|m| m.uses_ensemble()), &system)
+                && crate::agent::mopo_preset(preset).is_err()
             {
                 return Err(format!(
-                    "dataset `{}`: {m} needs MOPO's hyperparameters, which `{}` has none of (its rows are D4RL's)",
-                    d.name, d.preset
+                    "dataset `{}`: {m} needs MOPO's hyperparameters, which `{preset}` has none of (its rows are D4RL's)",
+                    d.name
                 ));
             }
-            checked.push((d, file, preset.layout, methods));
+            checked.push((d, file, system, methods));
         }
         // Seeds outermost (each dataset's first seed, then each one's second,
         // ...), then datasets in file order, then methods: a sweep cut short
@@ -419,22 +514,40 @@ impl Grid {
             .max()
             .unwrap_or(0);
         for round in 0..rounds {
-            for (d, file, layout, methods) in &checked {
+            for (d, file, system, methods) in &checked {
                 let Some(&seed) = d.seeds.get(round) else {
                     continue;
                 };
                 for &method in methods {
-                    cells.push(Cell {
+                    let mut cell = Cell {
                         index: cells.len(),
                         dataset: d.name.clone(),
                         file_in_grid: d.file.clone(),
                         file: file.clone(),
-                        task: d.task,
-                        layout: *layout,
-                        preset: d.preset.clone(),
+                        task: None,
+                        layout: ObservationLayout::default(),
+                        preset: None,
+                        system_in_grid: None,
+                        system: None,
+                        policy: None,
                         method,
                         seed,
-                    });
+                    };
+                    match system {
+                        RowSystem::Task {
+                            task,
+                            preset,
+                            layout,
+                        } => {
+                            (cell.task, cell.layout) = (Some(*task), *layout);
+                            cell.preset = Some(preset.clone());
+                        }
+                        RowSystem::File { file, policy } => {
+                            cell.system_in_grid = d.system.clone();
+                            (cell.system, cell.policy) = (Some(file.clone()), Some(*policy));
+                        }
+                    }
+                    cells.push(cell);
                 }
             }
         }

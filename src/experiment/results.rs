@@ -25,7 +25,8 @@ const RESULT: &str = "result.json";
 pub struct CellResult {
     pub schema_version: u32,
     pub cell: Cell,
-    /// The best evaluation's normalised score (the paper's "best score") and its step.
+    /// The best evaluation's normalised score (the paper's "best score"; for a system file's
+    /// data, the return in the model) and its step.
     pub best_score: f64,
     pub best_step: usize,
     /// The last evaluation's normalised score.
@@ -84,21 +85,19 @@ pub fn summarize_run(
     let last = records.last().ok_or_else(|| {
         ExperimentError::Invalid(format!("{}: no finished epoch", metrics.display()))
     })?;
+    // A system file's cells score the return in the model (it has no simulator).
     let best = records
         .iter()
-        .max_by(|a, b| a.eval.normalized_score.total_cmp(&b.eval.normalized_score))
+        .max_by(|a, b| a.eval.score().total_cmp(&b.eval.score()))
         .unwrap_or(last);
     Ok(CellResult {
         schema_version: RESULT_SCHEMA_VERSION,
         cell: cell.clone(),
-        best_score: best.eval.normalized_score,
+        best_score: best.eval.score(),
         best_step: best.step,
-        final_score: last.eval.normalized_score,
+        final_score: last.eval.score(),
         steps: last.step,
-        curve: records
-            .iter()
-            .map(|r| (r.step, r.eval.normalized_score))
-            .collect(),
+        curve: records.iter().map(|r| (r.step, r.eval.score())).collect(),
         policy_seconds: Some(records.iter().map(|r| r.seconds.total()).sum()),
         budget: Some(budget.clone()),
         dataset_sha256: Some(sha256_file(&cell.file)?),
@@ -141,7 +140,7 @@ pub fn cell_status(
             return Err(ExperimentError::Invalid(format!(
                 "{}: written for another cell (preset {}, dataset file {}); move the old experiment away",
                 dir.display(),
-                old.preset,
+                old.preset.as_deref().unwrap_or("none: a system file's"),
                 old.file_in_grid.display()
             )));
         }
@@ -397,9 +396,12 @@ mod tests {
                 dataset: dataset.into(),
                 file_in_grid: PathBuf::from(format!("{dataset}.hdf5")),
                 file: PathBuf::from(format!("{dataset}.hdf5")),
-                task: TaskName::Hopper,
+                task: Some(TaskName::Hopper),
                 layout: ObservationLayout::D4rl,
-                preset: "hopper-random".into(),
+                preset: Some("hopper-random".into()),
+                system_in_grid: None,
+                system: None,
+                policy: None,
                 method,
                 seed,
             },

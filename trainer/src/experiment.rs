@@ -14,14 +14,14 @@ use anyhow::Context;
 use clap::{Subcommand, ValueEnum};
 use nuno::agent::Method;
 use nuno::data::read_system_dataset;
-use nuno::envs::{ObservationLayout, System, TaskConfig};
+use nuno::envs::{ObservationLayout, System};
 use nuno::experiment::{
     Budget, Cell, CellResult, CellSelection, CellStatus, Grid, MeanCurve, cell_dir, cell_status,
     markdown_table, mean_curves, policy_time_left, results_csv, summarize, summarize_run,
     write_result,
 };
 
-use crate::data_source::DataSource;
+use crate::data_source::{DataSource, system_of};
 use crate::output::write_text;
 use crate::plot::{Series, line_chart};
 use crate::{fit_ensemble, fit_model, fit_policy};
@@ -140,20 +140,23 @@ fn checked_cells(grid: &Path, select: &SelectArgs) -> anyhow::Result<(Grid, Vec<
                 cell.dataset,
                 cell.file.display()
             );
-            let system = System::Task(task_config(cell));
+            let system = cell_system(cell)?;
             read_system_dataset(&cell.file, None, &system).with_context(|| {
-                format!("dataset `{}` does not fit {}", cell.dataset, cell.task)
+                format!("dataset `{}` does not fit {}", cell.dataset, system.name())
             })?;
         }
     }
     Ok((parsed, cells))
 }
 
-fn task_config(cell: &Cell) -> TaskConfig {
-    match cell.layout {
-        ObservationLayout::D4rl => TaskConfig::d4rl(cell.task),
-        ObservationLayout::Neorl => TaskConfig::neorl(cell.task),
-    }
+/// The built-in task or the system file (read and checked) the cell's data is of.
+fn cell_system(cell: &Cell) -> anyhow::Result<System> {
+    system_of(
+        cell.task,
+        cell.system.as_deref(),
+        cell.layout == ObservationLayout::Neorl,
+    )
+    .with_context(|| format!("dataset `{}`", cell.dataset))
 }
 
 fn run_grid(args: RunArgs) -> anyhow::Result<()> {
@@ -356,8 +359,8 @@ fn fit_cell_model(cell: &Cell, budget: &Budget, model: &Path) -> anyhow::Result<
     let data = DataSource {
         dataset: cell.file.clone(),
         format: None,
-        task: Some(cell.task),
-        system: None,
+        task: cell.task,
+        system: cell.system.clone(),
         neorl: cell.layout == ObservationLayout::Neorl,
     };
     // Each fit writes its JSON last: without it the fit did not finish.
@@ -398,8 +401,13 @@ fn model_args(cell: &Cell, b: &Budget, data: DataSource, out: PathBuf) -> fit_mo
 /// MOPO settings MOPO's.
 fn policy_args(cell: &Cell, b: &Budget, model: PathBuf, dir: PathBuf) -> fit_policy::Args {
     let out = dir.join("policy");
-    let mut args = fit_policy::Args::defaults(model, cell.file.clone(), &cell.preset, out);
+    let mut args = fit_policy::Args::defaults(model, cell.file.clone(), cell.preset.clone(), out);
     (args.seed, args.resume, args.algo) = (cell.seed, true, cell.method);
+    if let Some(policy) = cell.policy {
+        args.horizon = Some(policy.horizon);
+        args.cvar_alpha = Some(policy.cvar_alpha);
+        args.penalty = Some(policy.penalty);
+    }
     args.policies = Some(dir);
     args.steps = b.policy_steps;
     args.steps_per_epoch = b.steps_per_epoch;
@@ -577,7 +585,7 @@ mod tests {
         let data = DataSource {
             dataset: cell.file.clone(),
             format: None,
-            task: Some(cell.task),
+            task: cell.task,
             system: None,
             neorl: false,
         };

@@ -160,9 +160,14 @@ pub struct Plan {
 
 impl Args {
     /// The flags' defaults for training in `model` on `dataset` under the
-    /// Table 3 row `preset` into `out`: what fit-policy with only those flags
+    /// Table 3 row `preset` (none for a system file's data) into `out`: what fit-policy with only those flags
     /// runs (the experiment runner sets its budget's fields over them).
-    pub fn defaults(model: PathBuf, dataset: PathBuf, preset: &str, out: PathBuf) -> Self {
+    pub fn defaults(
+        model: PathBuf,
+        dataset: PathBuf,
+        preset: Option<String>,
+        out: PathBuf,
+    ) -> Self {
         let mut args: Args = with_defaults(&[
             "fit-policy",
             "--model",
@@ -175,7 +180,7 @@ impl Args {
             "-",
         ]);
         (args.model, args.dataset, args.out) = (model, dataset, out);
-        args.preset = Some(preset.to_string());
+        args.preset = preset;
         args
     }
 

@@ -710,3 +710,45 @@ fn logs(dir: &Path) -> String {
         })
         .unwrap_or_default()
 }
+
+#[test]
+fn a_grid_runs_a_system_file_and_scores_it_in_the_model() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/pendulum");
+    common::copy_dir(&example, &dir.join("pendulum"));
+    let row = "\n[[datasets]]\nname = \"pendulum\"\nfile = \"pendulum/log.csv\"\n\
+               system = \"pendulum/system.toml\"\n\
+               policy = { horizon = 5, cvar_alpha = 0.95, penalty = 1.0 }\n\
+               methods = [\"nuno\", \"mopo\"]\nseeds = [0]\n";
+    let grid = s(&write_grid(dir, "grid.toml", &[row.to_string()]));
+    let out = dir.join("out");
+    let first = ok(&["experiment", "run", "--grid", &grid, "--out", &s(&out)]);
+    assert!(first.contains("2 to run"), "{first}");
+    for method in ["nuno", "mopo"] {
+        let result: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(out.join(format!("pendulum/{method}/seed-0/result.json"))).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(result["cell"]["system"], "pendulum/system.toml", "{result}");
+        assert_eq!(result["cell"]["policy"]["horizon"], 5, "{result}");
+        // Without a simulator the score is the return in the model: the
+        // pendulum's rewards are ≤ 0 at every step, so the return is too.
+        let best = result["best_score"].as_f64().unwrap();
+        assert!(best <= 0.0 && best.is_finite(), "{result}");
+        let metrics = out.join(format!("pendulum/{method}/seed-0/policy/metrics.jsonl"));
+        let metrics = std::fs::read_to_string(metrics).unwrap();
+        assert!(
+            metrics.lines().all(|l| l.contains("\"in_model\":true")),
+            "{metrics}"
+        );
+    }
+    // A row is a task with a preset or a system with policy settings, not a mix.
+    let mixed = row.replace("system = ", "task = \"hopper\"\nsystem = ");
+    let bad = s(&write_grid(dir, "mixed.toml", &[mixed]));
+    let error = fails(&["experiment", "run", "--grid", &bad, "--out", &s(&out)]);
+    assert!(
+        error.contains("needs either task and preset") && error.contains("pendulum"),
+        "{error}"
+    );
+}
