@@ -5,6 +5,7 @@
 
 pub mod analysis;
 pub mod grid;
+mod linear_model;
 pub mod results;
 
 use std::path::PathBuf;
@@ -14,6 +15,7 @@ pub use analysis::{
     exploitation, prediction_error, uncertainty_by_action,
 };
 pub use grid::{Budget, Cell, CellSelection, Grid, GridDataset};
+pub use linear_model::LinearModel;
 pub use results::{
     CellResult, CellStatus, MeanCurve, Summary, cell_dir, cell_status, markdown_table, mean_curves,
     policy_time_left, results_csv, summarize, summarize_run, write_result,

@@ -18,7 +18,8 @@ use nuno::artifact::{BEST_POLICY, ModelFolder, load_policy};
 use nuno::data::{Dataset, DatasetFormat, NormalizerConfig, Stats, read_system_dataset};
 use nuno::envs::{Rules, System, TaskConfig};
 use nuno::experiment::{
-    ExploitationConfig, PredictionConfig, exploitation, prediction_error, uncertainty_by_action,
+    ExploitationConfig, LinearModel, PredictionConfig, exploitation, prediction_error,
+    uncertainty_by_action,
 };
 use nuno::infer::Kernel;
 use nuno::shared::{BatchDynamics, BatchPolicy, Metric, MetricsTable};
@@ -69,6 +70,10 @@ pub struct Args {
     penalty: f64,
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Also predict with a linear model, s' = W·[s, a, 1] fitted by least squares
+    /// on --dataset (the baseline a learned model should beat; Figure 5 only).
+    #[arg(long)]
+    linear_baseline: bool,
     /// Output folder for the CSV files and plots.
     #[arg(long)]
     out: PathBuf,
@@ -117,7 +122,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let policy = policy.map(|p| Kernel::Fused.policy(p));
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    write_prediction_error(&args, &models, &dataset, ood.as_ref())?;
+    let linear = args
+        .linear_baseline
+        .then(|| linear_baseline(&models[0], &dataset))
+        .transpose()?;
+    let predictors: Vec<&Model> = models.iter().chain(&linear).collect();
+    write_prediction_error(&args, &predictors, &dataset, ood.as_ref())?;
     write_uncertainty(&args, &models, system, &dataset, policy.as_deref())?;
     match (&policy, system.simulator()) {
         (Some(policy), Some(task)) => write_exploitation(&args, &models, task, policy.as_ref())?,
@@ -129,6 +139,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     println!("wrote {}", args.out.display());
     Ok(())
+}
+
+/// The least-squares linear model of `dataset`, under the first model's
+/// system and rules.
+fn linear_baseline(first: &Model, dataset: &Dataset) -> anyhow::Result<Model> {
+    let dt = first.system.shape()?.dt;
+    Ok(Model {
+        name: "linear least squares".into(),
+        dynamics: Box::new(LinearModel::fit(dataset, dt)?),
+        system: first.system.clone(),
+        rules: first.rules.clone(),
+    })
 }
 
 /// The models of `specs`, checked to be of one task.
@@ -159,7 +181,7 @@ type PredictionRow<'a> = (String, &'a str, usize, f64, usize);
 /// in-distribution data's units.
 fn write_prediction_error(
     args: &Args,
-    models: &[Model],
+    models: &[&Model],
     dataset: &Dataset,
     ood: Option<&Dataset>,
 ) -> anyhow::Result<()> {

@@ -89,6 +89,20 @@ fn analyze_writes_every_figure_for_both_model_kinds() {
     ] {
         assert!(out.join(figure).is_file(), "{figure}");
     }
+    // The least-squares linear model joins Figure 5 only; the shipped SDE,
+    // fitted on the same kind of data, predicts a step far better than it.
+    ok(&analyze(&["--linear-baseline"]));
+    let prediction = csv("prediction_error.csv");
+    assert_eq!(prediction.lines().count(), 1 + 3 * 8, "{prediction}");
+    let step_one = |model: &str| -> f64 {
+        let line = prediction
+            .lines()
+            .find(|l| l.starts_with(&format!("{model},in-distribution,1,")))
+            .unwrap_or_else(|| panic!("no step 1 of {model}: {prediction}"));
+        line.split(',').nth(3).unwrap().parse().unwrap()
+    };
+    let (sde, linear) = (step_one("nuno"), step_one("linear least squares"));
+    assert!(sde < linear, "SDE {sde} against linear {linear}");
     // Bad input, named.
     let error = fails(&analyze(&["--horizon", "0"]));
     assert!(error.contains("--horizon"), "{error}");
