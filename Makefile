@@ -9,7 +9,8 @@ CARGO             ?= cargo
 MUJOCO_DIR        := .mujoco
 MUJOCO_LIB        := $(MUJOCO_DIR)/lib/libmujoco.so
 MJCF_DIR          := $(MUJOCO_DIR)/assets
-MJCF_FILES        := $(MJCF_DIR)/hopper.xml $(MJCF_DIR)/half_cheetah.xml $(MJCF_DIR)/walker2d.xml
+MJCF_FILES        := $(addprefix $(MJCF_DIR)/,hopper.xml half_cheetah.xml walker2d.xml swimmer.xml \
+                       inverted_pendulum.xml ant.xml)
 VENV              := .venv
 VENV_STAMP        := $(VENV)/.installed
 # Any wheel of the pinned release carries the same libmujoco; take the one for this Python.

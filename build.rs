@@ -11,13 +11,23 @@ fn main() {
     let lib_dir = std::env::var("MUJOCO_DYNAMIC_LINK_DIR").unwrap_or_default();
     let mjcf_dir = std::env::var("NUNO_MJCF_DIR").unwrap_or_default();
     let lib = Path::new(&lib_dir).join("libmujoco.so");
-    let hopper = Path::new(&mjcf_dir).join("hopper.xml");
-    if !lib.is_file() || !hopper.is_file() {
+    // Every task's MJCF model, embedded by `src/envs/task.rs`.
+    let models = [
+        "hopper.xml",
+        "half_cheetah.xml",
+        "walker2d.xml",
+        "swimmer.xml",
+        "inverted_pendulum.xml",
+        "ant.xml",
+    ];
+    let missing = std::iter::once(lib.clone())
+        .chain(models.iter().map(|m| Path::new(&mjcf_dir).join(m)))
+        .find(|path| !path.is_file());
+    if let Some(path) = missing {
         panic!(
-            "the MuJoCo runtime is missing ({} or {}): run `make mujoco`, which fetches \
+            "the MuJoCo runtime is missing ({}): run `make mujoco`, which fetches \
              libmujoco from the `mujoco` wheel and the MJCF models from the `gymnasium` wheel",
-            lib.display(),
-            hopper.display()
+            path.display()
         );
     }
     println!("cargo::rerun-if-changed={}", lib.display());

@@ -221,7 +221,6 @@ fn main() {
     let policies: [&dyn BatchPolicy; 2] = [&burn_policy, &fused_policy];
     let rules = Rules::from(TaskRules::new(
         TaskConfig::d4rl(TaskName::Hopper),
-        &hopper.spec.split,
         hopper.spec.dt,
     ));
     let batch = 50_000;
@@ -282,7 +281,6 @@ fn system_rules(
     let spec = SystemSpec::parse(HOPPER_AS_DATA, std::path::Path::new("bench")).unwrap();
     let compiled = Rules::from(TaskRules::new(
         TaskConfig::d4rl(TaskName::Hopper),
-        &hopper.spec.split,
         hopper.spec.dt,
     ));
     let as_data = Rules::System(std::sync::Arc::new(spec.clone()));

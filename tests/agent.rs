@@ -256,7 +256,7 @@ impl BatchDynamics for DivergesWhereMarked {
 #[test]
 fn a_diverging_model_ends_its_rollouts_and_keeps_nothing_that_is_not_finite() {
     let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(task, &spec.split, spec.dt));
+    let rules = Rules::from(TaskRules::new(task, spec.dt));
     let dynamics = DivergesWhereMarked {
         inner: ConstantEta { spec: spec.clone() },
         calls: Default::default(),
@@ -339,7 +339,7 @@ fn hopper() -> (TaskConfig, DynamicsSpec) {
 #[test]
 fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
     let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(task, &spec.split, spec.dt));
+    let rules = Rules::from(TaskRules::new(task, spec.dt));
     let dynamics = ConstantEta { spec: spec.clone() };
     let policy = Constant(vec![0.5, -0.5, 0.25], spec.obs_dim);
     // An upright hopper: z = 1.25, everything else 0.
@@ -419,7 +419,7 @@ fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
 /// on every step; returns the mean |known reward − simulator reward|.
 fn known_rules_against_the_simulator(task: TaskConfig) -> f64 {
     let mut sim = MujocoTask::new(task).unwrap();
-    let rules = Rules::from(TaskRules::new(task, &sim.state_split(), sim.dt()));
+    let rules = Rules::from(TaskRules::new(task, sim.dt()));
     let mut obs = sim.reset(Some(1));
     let mut rng = ChaCha8Rng::seed_from_u64(2);
     let (mut steps, mut reward_error) = (0, 0.0f64);
@@ -514,7 +514,7 @@ fn hopper_context<'a>(model: &'a nuno::sde::NeuralSde, dataset: &'a Dataset) -> 
     LoopContext {
         dataset,
         dynamics: model,
-        rules: system.rules_on(&model.constants.spec.split, model.constants.spec.dt),
+        rules: system.rules_on(model.constants.spec.dt),
         system,
         // burn throughout, like the dynamics (the fused path: tests/infer.rs, the CLI test).
         kernel: Kernel::Burn,
@@ -802,7 +802,7 @@ fn sde_rollouts_with_truncation_keep_nothing_past_epsilon() {
     let (model, metadata) = shipped_model();
     let dataset = small_dataset();
     let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(task, &spec.split, spec.dt));
+    let rules = Rules::from(TaskRules::new(task, spec.dt));
     let device = Device::flex();
     let actor = seeded_init(&device, 1, || {
         Sac::new(
@@ -861,7 +861,6 @@ fn particles_equal_the_model_step_on_repeated_rows() {
     let (model, metadata) = shipped_model();
     let rules = Rules::from(TaskRules::new(
         TaskConfig::d4rl(TaskName::Hopper),
-        &metadata.spec.split,
         metadata.spec.dt,
     ));
     let (batch, particles, obs_dim, act_dim) = (5, 7, 11, 3);
@@ -975,7 +974,6 @@ fn cancelled_rollouts_and_evaluations_stop_at_the_next_step() {
     let (model, metadata) = shipped_model();
     let rules = Rules::from(TaskRules::new(
         TaskConfig::d4rl(TaskName::Hopper),
-        &metadata.spec.split,
         metadata.spec.dt,
     ));
     let policy = CancelAt {
@@ -1041,7 +1039,7 @@ impl BatchDynamics for TwoSignals {
 #[test]
 fn rollouts_penalise_eta_but_truncate_on_the_models_own_signal() {
     let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(task, &spec.split, spec.dt));
+    let rules = Rules::from(TaskRules::new(task, spec.dt));
     let dynamics = TwoSignals {
         inner: ConstantEta { spec: spec.clone() },
     };
@@ -1139,7 +1137,7 @@ fn a_threshold_computed_through_rollouts_agrees_with_the_models_own_table() {
     let (model, _) = shipped_model();
     let dataset = small_dataset();
     let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(task, &spec.split, spec.dt));
+    let rules = Rules::from(TaskRules::new(task, spec.dt));
     let config = nuno::sde::ThresholdConfig::new()
         .with_horizons(vec![5])
         .with_alphas(vec![0.5, 0.9])

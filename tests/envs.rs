@@ -3,7 +3,7 @@
 
 use nuno::agent::RandomPolicy;
 use nuno::envs::{
-    EnvError, EvaluationConfig, MujocoTask, ObservationLayout, StateSplit, TaskConfig, TaskName,
+    EnvError, EvaluationConfig, Joint, JointKind, MujocoTask, StateSplit, TaskConfig, TaskName,
     evaluate,
 };
 use nuno::shared::BatchPolicy;
@@ -16,16 +16,27 @@ fn random_policy(task: &MujocoTask) -> RandomPolicy {
 
 #[test]
 fn dimensions_and_timesteps_are_d4rl_and_neorl() {
-    // (task, D4RL obs dim, NeoRL obs dim, act dim, dt)
-    for (name, d4rl, neorl, act, dt) in [
-        (TaskName::Hopper, 11, 12, 3, 0.008),
-        (TaskName::HalfCheetah, 17, 18, 6, 0.05),
-        (TaskName::Walker2d, 17, 18, 6, 0.008),
+    // (task, D4RL obs dim, NeoRL obs dim, act dim, control limit, dt), from
+    // Gymnasium's documentation of each `*-v4` task and its XML's ctrlrange.
+    for (name, d4rl, neorl, act, limit, dt) in [
+        (TaskName::Hopper, 11, 12, 3, 1.0, 0.008),
+        (TaskName::HalfCheetah, 17, 18, 6, 1.0, 0.05),
+        (TaskName::Walker2d, 17, 18, 6, 1.0, 0.008),
+        (TaskName::Swimmer, 8, 10, 2, 1.0, 0.04),
+        (TaskName::InvertedPendulum, 4, 4, 1, 3.0, 0.04),
+        (TaskName::Ant, 27, 29, 8, 1.0, 0.05),
     ] {
         let task = MujocoTask::new(TaskConfig::d4rl(name)).unwrap();
         assert_eq!((task.obs_dim(), task.act_dim()), (d4rl, act), "{name}");
         assert!((task.dt() - dt).abs() < 1e-12, "{name} dt {}", task.dt());
-        assert_eq!(task.action_bounds(), (vec![-1.0; act], vec![1.0; act]));
+        assert_eq!(task.action_bounds(), (vec![-limit; act], vec![limit; act]));
+        let (qpos, qvel) = task.initial_state();
+        let spec = name.spec();
+        assert_eq!(
+            (qpos.len(), qvel.len()),
+            (spec.nq, spec.nv),
+            "{name} widths"
+        );
         let mut task = MujocoTask::new(TaskConfig::neorl(name)).unwrap();
         assert_eq!(task.obs_dim(), neorl, "{name} NeoRL");
         assert_eq!(task.reset(Some(0)).len(), neorl);
@@ -34,22 +45,60 @@ fn dimensions_and_timesteps_are_d4rl_and_neorl() {
 
 #[test]
 fn state_split_pairs_each_position_with_its_velocity() {
-    let hopper = StateSplit::planar(6, ObservationLayout::D4rl);
-    assert_eq!(hopper.positions, vec![0, 1, 2, 3, 4]);
-    assert_eq!(hopper.velocities, vec![5, 6, 7, 8, 9, 10]);
-    assert_eq!(hopper.position_velocity, vec![6, 7, 8, 9, 10]);
-    let neorl = StateSplit::planar(6, ObservationLayout::Neorl);
+    // Hopper: root x and z slide, the root's pitch and three joints hinge.
+    let joint = |kind, i| Joint {
+        kind,
+        qpos: i,
+        dof: i,
+    };
+    let kinds = [JointKind::Slide, JointKind::Slide].into_iter();
+    let hopper: Vec<Joint> = (kinds.chain([JointKind::Hinge; 4]).enumerate())
+        .map(|(i, kind)| joint(kind, i))
+        .collect();
+    let d4rl = StateSplit::of_joints(&hopper, 6, 6, 1);
+    assert_eq!(d4rl.positions, vec![0, 1, 2, 3, 4]);
+    assert_eq!(d4rl.velocities, vec![5, 6, 7, 8, 9, 10]);
+    assert_eq!(d4rl.position_velocity, vec![6, 7, 8, 9, 10]);
+    assert_eq!(d4rl.angles, vec![1, 2, 3, 4]);
+    let neorl = StateSplit::of_joints(&hopper, 6, 6, 0);
     assert_eq!(neorl.position_velocity, vec![6, 7, 8, 9, 10, 11]);
+    // Ant: a free root (x y z, quaternion; 6 velocities) then 8 hinges. Its
+    // height pairs with the root's z velocity; the quaternion has no velocity
+    // of its own, so pairing stops there and the hinges are left to the drift.
+    let ant: Vec<Joint> = std::iter::once(joint(JointKind::Free, 0))
+        .chain((0..8).map(|i| Joint {
+            kind: JointKind::Hinge,
+            qpos: 7 + i,
+            dof: 6 + i,
+        }))
+        .collect();
+    let ant = StateSplit::of_joints(&ant, 15, 14, 2);
+    assert_eq!(ant.positions, vec![0]);
+    assert_eq!(ant.position_velocity, vec![13 + 2]);
+    assert_eq!(ant.velocities, (1..27).collect::<Vec<_>>());
+    assert!(ant.angles.is_empty());
 
-    // The angles are the positions MuJoCo's model moves by hinge joints (the
-    // root's pitch and every joint; root x and z slide), in both layouts.
-    for name in TaskName::ALL {
+    // The angles are the paired positions MuJoCo's model moves by hinge joints,
+    // in both layouts: hopper 4, halfcheetah and walker2d 7, swimmer 3 (its
+    // root rotation and two joints), the pendulum's 1, the ant's none.
+    for (name, angles) in [
+        (TaskName::Hopper, 4),
+        (TaskName::HalfCheetah, 7),
+        (TaskName::Walker2d, 7),
+        (TaskName::Swimmer, 3),
+        (TaskName::InvertedPendulum, 1),
+        (TaskName::Ant, 0),
+    ] {
         for config in [TaskConfig::d4rl(name), TaskConfig::neorl(name)] {
-            let skipped = usize::from(config.layout == ObservationLayout::D4rl);
+            let from = config.layout.qpos_from(name);
             let task = MujocoTask::new(config).unwrap();
-            let hinges: Vec<usize> = task.hinge_qpos().iter().map(|q| q - skipped).collect();
-            assert_eq!(task.state_split().angles, hinges, "{name}");
-            assert!(hinges.len() >= 4, "{name}: {hinges:?}");
+            let split = task.state_split();
+            let hinges: Vec<usize> = (task.hinge_qpos().iter())
+                .filter(|&&q| q >= from && q - from < split.positions.len())
+                .map(|q| q - from)
+                .collect();
+            assert_eq!(split.angles, hinges, "{name}");
+            assert_eq!(hinges.len(), angles, "{name}: {hinges:?}");
         }
     }
 
@@ -185,8 +234,8 @@ fn bad_actions_and_states_are_refused_with_what_was_wrong() {
             got: 5
         }
     ));
-    let err = "ant".parse::<TaskName>().unwrap_err();
-    assert!(err.to_string().contains("unknown task `ant`"));
+    let err = "humanoid".parse::<TaskName>().unwrap_err();
+    assert!(err.to_string().contains("unknown task `humanoid`"));
     assert_eq!(
         "HalfCheetah".parse::<TaskName>().unwrap(),
         TaskName::HalfCheetah

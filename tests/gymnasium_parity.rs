@@ -1,4 +1,5 @@
-//! The Rust tasks against Python Gymnasium `*-v4` on `mujoco==3.17.0`: the same
+//! The Rust tasks (hopper, halfcheetah, walker2d, swimmer, inverted pendulum,
+//! ant) against Python Gymnasium `*-v4` on `mujoco==3.17.0`: the same
 //! start states and actions must give the same observations, rewards,
 //! terminated and truncated flags (to 1e-9), across falls, resets, the time
 //! limit and NeoRL's observation layout.
@@ -11,9 +12,9 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 const TOLERANCE: f64 = 1e-9;
-/// Actions go beyond the [-1, 1] control range so MuJoCo's clamping and the
-/// control cost on the unclamped action are both exercised.
-const ACTION_RANGE: f64 = 1.3;
+/// Actions go 30 % beyond each task's control range so MuJoCo's clamping and
+/// the control cost on the unclamped action are both exercised.
+const ACTION_OVERSHOOT: f64 = 1.3;
 
 #[derive(Serialize)]
 struct Episode {
@@ -61,9 +62,10 @@ fn run_episode(config: TaskConfig, seed: u64) -> (Episode, Outcome) {
         qvel: task.qvel().to_vec(),
         actions: Vec::new(),
     };
+    let (_, high) = task.action_bounds();
     loop {
-        let action: Vec<f64> = (0..task.act_dim())
-            .map(|_| rng.random_range(-ACTION_RANGE..ACTION_RANGE))
+        let action: Vec<f64> = (high.iter())
+            .map(|h| ACTION_OVERSHOOT * h * rng.random_range(-1.0..1.0))
             .collect();
         let step = task.step(&action).unwrap();
         episode.actions.push(action);

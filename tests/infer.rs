@@ -290,7 +290,6 @@ fn fused_ten_step_rollouts_match_burn_with_fixed_noise() {
     let fused_model = FusedSde::new(&model);
     let rules = Rules::from(TaskRules::new(
         TaskConfig::d4rl(TaskName::Hopper),
-        &model.spec().split,
         model.spec().dt,
     ));
     let data = hopper_data();

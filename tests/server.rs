@@ -323,7 +323,6 @@ async fn step_matches_the_library_in_json_and_binary() {
         assert!((r.eta[b] - direct.eta[b]).abs() < 1e-6);
         let rules = Rules::from(TaskRules::new(
             metadata.provenance.task.unwrap(),
-            &metadata.spec.split,
             metadata.spec.dt,
         ));
         for p in 0..3 {

@@ -77,9 +77,7 @@ impl ModelFolder {
     /// where the system's reward is learned and the model does not learn it.
     pub fn rules(&self, system: &System) -> Result<Rules, ArtifactError> {
         let rules = match self {
-            Self::NeuralSde { metadata, .. } => {
-                system.rules_on(&metadata.spec.split, metadata.spec.dt)
-            }
+            Self::NeuralSde { metadata, .. } => system.rules_on(metadata.spec.dt),
             Self::GaussianEnsemble { .. } => system
                 .rules()
                 .map_err(|e| ArtifactError::Invalid(e.to_string()))?,

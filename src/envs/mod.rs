@@ -1,6 +1,7 @@
 //! The MuJoCo tasks NUNO is benchmarked on (hopper, halfcheetah, walker2d with
-//! D4RL-v2 semantics, and NeoRL's variant that observes root x), their D4RL
-//! normalised scores, and a parallel evaluator that runs a policy in them;
+//! D4RL-v2 semantics, and NeoRL's variant that observes root x) and Gymnasium's
+//! swimmer, inverted pendulum and ant, their normalised scores, and a parallel
+//! evaluator that runs a policy in them;
 //! and any other system described as data (`system.rs`: names, dt, the
 //! action box, eq. 8's pairs, a reward expression, termination bounds).
 
@@ -18,7 +19,9 @@ pub use mujoco_task::{MujocoTask, TaskConfig, Transition};
 pub use rules::{ForwardVelocity, Rules, TaskRules};
 pub use score::ScoreReference;
 pub use system::{ObservationBound, RewardExpression, SystemReward, SystemSpec};
-pub use task::{HealthRule, ObservationLayout, ResetNoise, StateSplit, TaskName, TaskSpec};
+pub use task::{
+    HealthRule, Joint, JointKind, ObservationLayout, ResetNoise, StateSplit, TaskName, TaskSpec,
+};
 
 /// Everything that can go wrong in a task or an evaluation.
 #[derive(Debug, thiserror::Error)]
@@ -29,7 +32,9 @@ pub enum EnvError {
         file: std::path::PathBuf,
         message: String,
     },
-    #[error("unknown task `{0}` (expected one of: hopper, halfcheetah, walker2d)")]
+    #[error(
+        "unknown task `{0}` (expected one of: hopper, halfcheetah, walker2d, swimmer, invertedpendulum, ant)"
+    )]
     UnknownTask(String),
     #[error("MuJoCo could not build the {task} model: {message}")]
     Model { task: TaskName, message: String },

@@ -88,11 +88,11 @@ impl System {
         }
     }
 
-    /// The rules on a model whose state splits as `split`, `dt` apart (a
-    /// neural SDE's own; a file's system has one split and dt).
-    pub fn rules_on(&self, split: &StateSplit, dt: f64) -> Rules {
+    /// The rules on a model whose states are `dt` apart (a neural SDE's own;
+    /// a file's system has one dt).
+    pub fn rules_on(&self, dt: f64) -> Rules {
         match self {
-            Self::Task(task) => TaskRules::new(*task, split, dt).into(),
+            Self::Task(task) => TaskRules::new(*task, dt).into(),
             Self::File(spec) => Rules::System(spec.clone()),
         }
     }

@@ -8,7 +8,7 @@
 use std::sync::{Arc, Once, OnceLock};
 
 use mujoco_rs::prelude::{MjData, MjModel};
-use mujoco_rs::wrappers::mj_model::MjtJoint;
+use mujoco_rs::wrappers::mj_model::{MjtJoint, MjtObjBase};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -16,7 +16,9 @@ use serde::{Deserialize, Serialize};
 
 use super::EnvError;
 use super::score::ScoreReference;
-use super::task::{ObservationLayout, ResetNoise, StateSplit, TaskName, TaskSpec};
+use super::task::{
+    Joint, JointKind, ObservationLayout, ResetNoise, StateSplit, TaskName, TaskSpec,
+};
 
 /// Which task to run, in which variant.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -64,7 +66,7 @@ pub struct Transition {
     pub terminated: bool,
     /// The time limit was reached: the episode ends, bootstrapping is still valid.
     pub truncated: bool,
-    /// Root x after the step.
+    /// Root x (ant: its torso's x) after the step.
     pub x_position: f64,
     /// `(x_after − x_before) / dt`, the forward-velocity reward term.
     pub x_velocity: f64,
@@ -78,8 +80,8 @@ fn compiled_model(name: TaskName) -> Result<Arc<MjModel>, EnvError> {
     // SAFETY: every MuJoCo object is built from a model made below, so no thread
     // uses MuJoCo before this first call completes (Once blocks the others).
     LOGGING.call_once(|| unsafe { mujoco_rs::prelude::install_logging_hook() });
-    static MODELS: [OnceLock<Arc<MjModel>>; 3] =
-        [OnceLock::new(), OnceLock::new(), OnceLock::new()];
+    static MODELS: [OnceLock<Arc<MjModel>>; TaskName::ALL.len()] =
+        [const { OnceLock::new() }; TaskName::ALL.len()];
     let cell = &MODELS[name as usize];
     if let Some(model) = cell.get() {
         return Ok(model.clone());
@@ -98,6 +100,8 @@ pub struct MujocoTask {
     data: MjData<Arc<MjModel>>,
     init_qpos: Vec<f64>,
     init_qvel: Vec<f64>,
+    /// The body whose frame's x is the forward position (`TaskSpec::forward_body`).
+    forward_body: Option<usize>,
     dt: f64,
     elapsed_steps: usize,
     rng: ChaCha8Rng,
@@ -118,6 +122,15 @@ impl MujocoTask {
         let model = compiled_model(config.name)?;
         let spec = config.name.spec();
         let dt = model.opt().timestep * spec.frame_skip as f64;
+        let forward_body = match spec.forward_body {
+            Some(body) => Some(model.name_to_id(MjtObjBase::mjOBJ_BODY, body).ok_or_else(
+                || EnvError::Model {
+                    task: config.name,
+                    message: format!("the model has no body named `{body}`"),
+                },
+            )?),
+            None => None,
+        };
         let data = MjData::try_new(model).map_err(|e| EnvError::Model {
             task: config.name,
             message: e.to_string(),
@@ -127,6 +140,7 @@ impl MujocoTask {
             config,
             init_qpos: data.qpos().to_vec(),
             init_qvel: data.qvel().to_vec(),
+            forward_body,
             data,
             dt,
             elapsed_steps: 0,
@@ -167,7 +181,28 @@ impl MujocoTask {
 
     /// Which observation entries are positions and velocities.
     pub fn state_split(&self) -> StateSplit {
-        StateSplit::planar(self.init_qpos.len(), self.config.layout)
+        let model = self.data.model();
+        let joints: Vec<Joint> = (model.jnt_type().iter())
+            .zip(model.jnt_qposadr())
+            .zip(model.jnt_dofadr())
+            .map(|((kind, &qpos), &dof)| Joint {
+                kind: match *kind {
+                    MjtJoint::mjJNT_FREE => JointKind::Free,
+                    MjtJoint::mjJNT_BALL => JointKind::Ball,
+                    MjtJoint::mjJNT_SLIDE => JointKind::Slide,
+                    _ => JointKind::Hinge,
+                },
+                qpos: qpos as usize,
+                dof: dof as usize,
+            })
+            .collect();
+        let (nq, nv) = (self.init_qpos.len(), self.init_qvel.len());
+        StateSplit::of_joints(&joints, nq, nv, self.qpos_from())
+    }
+
+    /// The first qpos entry the observation holds.
+    fn qpos_from(&self) -> usize {
+        self.config.layout.qpos_from(self.config.name)
     }
 
     /// The qpos indices of the model's hinge joints (angles, in radians).
@@ -250,18 +285,21 @@ impl MujocoTask {
     /// Applies `action` for `frame_skip` physics steps.
     pub fn step(&mut self, action: &[f64]) -> Result<Transition, EnvError> {
         check_vector("action", action, self.act_dim())?;
-        let x_before = self.data.qpos()[0];
+        let x_before = self.forward_position();
         self.data.ctrl_mut().copy_from_slice(action);
         for _ in 0..self.spec.frame_skip {
             self.data.step();
         }
         self.elapsed_steps += 1;
-        let x_after = self.data.qpos()[0];
+        let x_after = self.forward_position();
         let x_velocity = (x_after - x_before) / self.dt;
 
-        // Same operation order as Gymnasium, so rewards agree to the last bit.
-        let ctrl_cost = self.spec.ctrl_cost_weight * action.iter().map(|a| a * a).sum::<f64>();
-        let forward_reward = self.spec.forward_reward_weight * x_velocity;
+        // Same operation order as Gymnasium, so rewards agree to the last bit; a
+        // term whose weight is 0 is left out, as Gymnasium's inverted pendulum has none.
+        let weighted = |weight: f64, value: f64| if weight == 0.0 { 0.0 } else { weight * value };
+        let control = action.iter().map(|a| a * a).sum::<f64>();
+        let ctrl_cost = weighted(self.spec.ctrl_cost_weight, control);
+        let forward_reward = weighted(self.spec.forward_reward_weight, x_velocity);
         let reward = (forward_reward + self.spec.healthy_reward) - ctrl_cost;
         Ok(Transition {
             observation: self.observation(),
@@ -273,27 +311,33 @@ impl MujocoTask {
         })
     }
 
+    /// Where the forward velocity is measured: the forward body's frame x
+    /// (MuJoCo's `xpos`, as of the last kinematics pass, as Gymnasium reads it), or qpos[0].
+    fn forward_position(&self) -> f64 {
+        match self.forward_body {
+            Some(body) => self.data.xpos()[body][0],
+            None => self.data.qpos()[0],
+        }
+    }
+
     /// The current observation in the configured layout.
     pub fn observation(&self) -> Vec<f64> {
-        let skipped = match self.config.layout {
-            ObservationLayout::D4rl => 1,
-            ObservationLayout::Neorl => 0,
-        };
         let clip = self.spec.velocity_clip.unwrap_or(f64::INFINITY);
-        let qpos = &self.data.qpos()[skipped..];
+        let qpos = &self.data.qpos()[self.qpos_from()..];
         let qvel = self.data.qvel().iter().map(|v| v.clamp(-clip, clip));
         qpos.iter().copied().chain(qvel).collect()
     }
 
     /// Gymnasium's `is_healthy` on the simulator state.
     pub fn is_healthy(&self) -> bool {
-        let qpos = self.data.qpos();
-        let rest = qpos
-            .get(2..)
-            .unwrap_or_default()
+        let state: Vec<f64> = self
+            .data
+            .qpos()
             .iter()
-            .chain(self.data.qvel());
-        self.spec.health.is_healthy(qpos[1], qpos[2], rest.copied())
+            .chain(self.data.qvel())
+            .copied()
+            .collect();
+        self.spec.health.is_healthy(&state, 0)
     }
 }
 

@@ -12,7 +12,7 @@ use std::sync::Arc;
 use super::EnvError;
 use super::mujoco_task::{MujocoTask, TaskConfig};
 use super::system::{SystemReward, SystemSpec};
-use super::task::{ObservationLayout, StateSplit, TaskSpec};
+use super::task::TaskSpec;
 
 /// Which observed root x velocity stands in for the forward velocity where the
 /// observations omit root x (D4RL's layout).
@@ -33,8 +33,8 @@ crate::shared::named_enum!(ForwardVelocity, "forward velocity", ForwardVelocity:
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TaskRules {
     spec: &'static TaskSpec,
-    /// Observation index of qpos[1] (root height for hopper/walker2d).
-    root_z: usize,
+    /// The first qpos entry the observations hold (observation 0).
+    qpos_from: usize,
     /// Observation index of qvel[0], the root x velocity.
     x_velocity: usize,
     /// Observation index of qpos[0], the root x, where it is observed.
@@ -55,21 +55,18 @@ impl TaskRules {
     /// model that steps once per task step, like an ensemble, follows).
     pub fn of_task(task: TaskConfig) -> Result<Self, EnvError> {
         let probe = MujocoTask::new(task)?;
-        Ok(Self::new(task, &probe.state_split(), probe.dt()))
+        Ok(Self::new(task, probe.dt()))
     }
 
-    /// The rules of `task`, whose observations split as `split`, `dt` apart.
-    pub fn new(task: TaskConfig, split: &StateSplit, dt: f64) -> Self {
+    /// The rules of `task`, whose observations are `dt` apart.
+    pub fn new(task: TaskConfig, dt: f64) -> Self {
         let spec = task.name.spec();
-        let (root_z, root_x) = match task.layout {
-            ObservationLayout::D4rl => (0, None),
-            ObservationLayout::Neorl => (1, Some(0)),
-        };
+        let qpos_from = task.layout.qpos_from(task.name);
         Self {
             spec,
-            root_z,
-            x_velocity: split.velocities[0],
-            root_x,
+            qpos_from,
+            x_velocity: spec.nq - qpos_from,
+            root_x: (qpos_from == 0).then_some(0),
             dt,
             forward_velocity: ForwardVelocity::Next,
         }
@@ -101,10 +98,7 @@ impl TaskRules {
 
     /// Whether `next_obs` is a terminal state (the robot fell).
     pub fn terminal(&self, next_obs: &[f32]) -> bool {
-        let z = f64::from(next_obs[self.root_z]);
-        let angle = f64::from(next_obs[self.root_z + 1]);
-        let rest = next_obs[self.root_z + 1..].iter().map(|&x| f64::from(x));
-        !self.spec.health.is_healthy(z, angle, rest)
+        !self.spec.health.is_healthy(next_obs, self.qpos_from)
     }
 }
 

@@ -11,7 +11,8 @@ use serde::{Deserialize, Serialize};
 use super::EnvError;
 use super::score::ScoreReference;
 
-/// The three MuJoCo locomotion tasks of D4RL and NeoRL.
+/// The MuJoCo tasks nuno simulates: D4RL's and NeoRL's three locomotion
+/// robots, and Gymnasium's Swimmer, InvertedPendulum and Ant.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum TaskName {
@@ -19,17 +20,32 @@ pub enum TaskName {
     #[serde(rename = "halfcheetah")]
     HalfCheetah,
     Walker2d,
+    Swimmer,
+    #[serde(rename = "invertedpendulum")]
+    InvertedPendulum,
+    Ant,
 }
 
 impl TaskName {
-    pub const ALL: [TaskName; 3] = [TaskName::Hopper, TaskName::HalfCheetah, TaskName::Walker2d];
+    pub const ALL: [TaskName; 6] = [
+        TaskName::Hopper,
+        TaskName::HalfCheetah,
+        TaskName::Walker2d,
+        TaskName::Swimmer,
+        TaskName::InvertedPendulum,
+        TaskName::Ant,
+    ];
 
-    /// The name used in dataset and preset names (`hopper`, `halfcheetah`, `walker2d`).
+    /// The name used in dataset and preset names (`hopper`, `halfcheetah`, ...,
+    /// `invertedpendulum`: no hyphen, as Minari spells it, so `NAME-KIND` parses).
     pub fn as_str(self) -> &'static str {
         match self {
             TaskName::Hopper => "hopper",
             TaskName::HalfCheetah => "halfcheetah",
             TaskName::Walker2d => "walker2d",
+            TaskName::Swimmer => "swimmer",
+            TaskName::InvertedPendulum => "invertedpendulum",
+            TaskName::Ant => "ant",
         }
     }
 
@@ -39,6 +55,9 @@ impl TaskName {
             TaskName::Hopper => &HOPPER,
             TaskName::HalfCheetah => &HALF_CHEETAH,
             TaskName::Walker2d => &WALKER2D,
+            TaskName::Swimmer => &SWIMMER,
+            TaskName::InvertedPendulum => &INVERTED_PENDULUM,
+            TaskName::Ant => &ANT,
         }
     }
 }
@@ -61,23 +80,31 @@ impl FromStr for TaskName {
 }
 
 /// When an episode ends early because the robot fell (Gymnasium's `is_healthy`).
+///
+/// Each rule reads the state vector `concat(qpos, qvel)`; an observation that
+/// omits the first `from` qpos entries is that vector from index `from` on,
+/// which every rule below can still read (its qpos indices are ≥ `from`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum HealthRule {
-    /// Never terminates (halfcheetah).
+    /// Never terminates (halfcheetah, swimmer).
     AlwaysHealthy,
     /// Healthy while `z_range.0 < qpos[1] < z_range.1`, `angle_range.0 < qpos[2] < angle_range.1`
-    /// and, if set, every entry of `concat(qpos, qvel)[2..]` lies strictly inside `state_range`.
+    /// and, if set, every entry of `concat(qpos, qvel)[2..]` lies strictly inside `state_range`
+    /// (hopper, walker2d).
     Upright {
         z_range: (f64, f64),
         angle_range: (f64, f64),
         state_range: Option<(f64, f64)>,
     },
+    /// Healthy while every entry of the state is finite and
+    /// `range.0 <= qpos[qpos] <= range.1` (ant's height, the inverted pendulum's angle).
+    FiniteWithin { qpos: usize, range: (f64, f64) },
 }
 
 impl HealthRule {
-    /// Whether a robot with root height `z`, root angle `angle` and the rest of
-    /// `concat(qpos, qvel)[2..]` in `rest` is healthy.
-    pub fn is_healthy(&self, z: f64, angle: f64, mut rest: impl Iterator<Item = f64>) -> bool {
+    /// Whether the state whose entries from index `from` on are `state` is healthy.
+    pub fn is_healthy<T: Copy + Into<f64>>(&self, state: &[T], from: usize) -> bool {
+        let at = |i: usize| state[i - from].into();
         match *self {
             HealthRule::AlwaysHealthy => true,
             HealthRule::Upright {
@@ -86,8 +113,14 @@ impl HealthRule {
                 state_range,
             } => {
                 let inside = |x: f64, (lo, hi): (f64, f64)| lo < x && x < hi;
-                let state_ok = state_range.is_none_or(|range| rest.all(|x| inside(x, range)));
-                inside(z, z_range) && inside(angle, angle_range) && state_ok
+                let rest = &state[2 - from..];
+                let state_ok =
+                    state_range.is_none_or(|range| rest.iter().all(|&x| inside(x.into(), range)));
+                inside(at(1), z_range) && inside(at(2), angle_range) && state_ok
+            }
+            HealthRule::FiniteWithin { qpos, range } => {
+                let x = at(qpos);
+                state.iter().all(|&v| v.into().is_finite()) && range.0 <= x && x <= range.1
             }
         }
     }
@@ -108,8 +141,17 @@ pub struct TaskSpec {
     pub name: TaskName,
     /// The MJCF model from the `gymnasium` wheel, embedded at build time.
     pub xml: &'static str,
+    /// The model's qpos and qvel widths (checked against the compiled model in `tests/envs.rs`).
+    pub nq: usize,
+    pub nv: usize,
+    /// Gymnasium's default observation is `qpos[observed_qpos_from..] ++ qvel`: the
+    /// root's horizontal coordinates are left out (D4RL's layout); NeoRL's keeps them all.
+    pub observed_qpos_from: usize,
     /// MuJoCo steps per environment step; dt = timestep · frame_skip.
     pub frame_skip: usize,
+    /// The body whose frame's x gives the forward velocity (Gymnasium's ant reads its
+    /// torso, `get_body_com`); `None`: the root's qpos[0] (the planar robots, swimmer).
+    pub forward_body: Option<&'static str>,
     pub forward_reward_weight: f64,
     pub ctrl_cost_weight: f64,
     /// Reward added at every step (Gymnasium v4 pays it on the terminal step too).
@@ -122,14 +164,19 @@ pub struct TaskSpec {
     pub max_episode_steps: usize,
     /// D4RL's reference returns for the normalised score.
     pub d4rl_score: ScoreReference,
-    /// The reference returns NUNO uses for NeoRL tasks (NeoRL ships none).
+    /// The reference returns NUNO uses for NeoRL tasks (NeoRL ships none). Tasks
+    /// outside NeoRL score the full-qpos layout against `d4rl_score`.
     pub neorl_score: ScoreReference,
 }
 
 const HOPPER: TaskSpec = TaskSpec {
     name: TaskName::Hopper,
     xml: include_str!(concat!(env!("NUNO_MJCF_DIR"), "/hopper.xml")),
+    nq: 6,
+    nv: 6,
+    observed_qpos_from: 1,
     frame_skip: 4,
+    forward_body: None,
     forward_reward_weight: 1.0,
     ctrl_cost_weight: 1e-3,
     healthy_reward: 1.0,
@@ -154,7 +201,11 @@ const HOPPER: TaskSpec = TaskSpec {
 const HALF_CHEETAH: TaskSpec = TaskSpec {
     name: TaskName::HalfCheetah,
     xml: include_str!(concat!(env!("NUNO_MJCF_DIR"), "/half_cheetah.xml")),
+    nq: 9,
+    nv: 9,
+    observed_qpos_from: 1,
     frame_skip: 5,
+    forward_body: None,
     forward_reward_weight: 1.0,
     ctrl_cost_weight: 0.1,
     healthy_reward: 0.0,
@@ -175,7 +226,11 @@ const HALF_CHEETAH: TaskSpec = TaskSpec {
 const WALKER2D: TaskSpec = TaskSpec {
     name: TaskName::Walker2d,
     xml: include_str!(concat!(env!("NUNO_MJCF_DIR"), "/walker2d.xml")),
+    nq: 9,
+    nv: 9,
+    observed_qpos_from: 1,
     frame_skip: 4,
+    forward_body: None,
     forward_reward_weight: 1.0,
     ctrl_cost_weight: 1e-3,
     healthy_reward: 1.0,
@@ -197,15 +252,134 @@ const WALKER2D: TaskSpec = TaskSpec {
     },
 };
 
+// Swimmer, InvertedPendulum and Ant are not in D4RL or NeoRL. Their score
+// references: `random` is the mean return of uniformly random actions over
+// 1000 Gymnasium episodes (seeds 0–999; `experiments/gymnasium_random_returns.py`),
+// as D4RL defines its own; `expert` is Gymnasium's `reward_threshold` for the
+// task (docs/paper-map.md).
+
+const SWIMMER: TaskSpec = TaskSpec {
+    name: TaskName::Swimmer,
+    xml: include_str!(concat!(env!("NUNO_MJCF_DIR"), "/swimmer.xml")),
+    nq: 5,
+    nv: 5,
+    observed_qpos_from: 2,
+    frame_skip: 4,
+    forward_body: None,
+    forward_reward_weight: 1.0,
+    ctrl_cost_weight: 1e-4,
+    healthy_reward: 0.0,
+    health: HealthRule::AlwaysHealthy,
+    velocity_clip: None,
+    reset_noise: ResetNoise::Uniform { scale: 0.1 },
+    max_episode_steps: 1000,
+    d4rl_score: SWIMMER_SCORE,
+    neorl_score: SWIMMER_SCORE,
+};
+
+const SWIMMER_SCORE: ScoreReference = ScoreReference {
+    random: SWIMMER_RANDOM,
+    expert: 360.0,
+};
+
+const INVERTED_PENDULUM: TaskSpec = TaskSpec {
+    name: TaskName::InvertedPendulum,
+    xml: include_str!(concat!(env!("NUNO_MJCF_DIR"), "/inverted_pendulum.xml")),
+    nq: 2,
+    nv: 2,
+    observed_qpos_from: 0,
+    frame_skip: 2,
+    forward_body: None,
+    forward_reward_weight: 0.0,
+    ctrl_cost_weight: 0.0,
+    healthy_reward: 1.0,
+    health: HealthRule::FiniteWithin {
+        qpos: 1,
+        range: (-0.2, 0.2),
+    },
+    velocity_clip: None,
+    reset_noise: ResetNoise::Uniform { scale: 0.01 },
+    max_episode_steps: 1000,
+    d4rl_score: INVERTED_PENDULUM_SCORE,
+    neorl_score: INVERTED_PENDULUM_SCORE,
+};
+
+const INVERTED_PENDULUM_SCORE: ScoreReference = ScoreReference {
+    random: INVERTED_PENDULUM_RANDOM,
+    expert: 950.0,
+};
+
+const ANT: TaskSpec = TaskSpec {
+    name: TaskName::Ant,
+    xml: include_str!(concat!(env!("NUNO_MJCF_DIR"), "/ant.xml")),
+    nq: 15,
+    nv: 14,
+    observed_qpos_from: 2,
+    frame_skip: 5,
+    forward_body: Some("torso"),
+    forward_reward_weight: 1.0,
+    ctrl_cost_weight: 0.5,
+    healthy_reward: 1.0,
+    health: HealthRule::FiniteWithin {
+        qpos: 2,
+        range: (0.2, 1.0),
+    },
+    velocity_clip: None,
+    reset_noise: ResetNoise::UniformPositionNormalVelocity { scale: 0.1 },
+    max_episode_steps: 1000,
+    d4rl_score: ANT_SCORE,
+    neorl_score: ANT_SCORE,
+};
+
+const ANT_SCORE: ScoreReference = ScoreReference {
+    random: ANT_RANDOM,
+    expert: 6000.0,
+};
+
+const SWIMMER_RANDOM: f64 = 0.485732;
+const INVERTED_PENDULUM_RANDOM: f64 = 6.02;
+const ANT_RANDOM: f64 = -61.327469;
+
 /// Which observation variant a task reports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ObservationLayout {
-    /// `qpos[1..] ++ qvel`: D4RL (Gymnasium's default, root x excluded).
+    /// `qpos[k..] ++ qvel` with the task's `observed_qpos_from` k: D4RL
+    /// (Gymnasium's default, the root's horizontal coordinates excluded).
     #[default]
     D4rl,
     /// `qpos ++ qvel`: NeoRL, whose observations include the root x position.
     Neorl,
+}
+
+impl ObservationLayout {
+    /// The first qpos entry this layout observes for `task`.
+    pub fn qpos_from(self, task: TaskName) -> usize {
+        match self {
+            ObservationLayout::D4rl => task.spec().observed_qpos_from,
+            ObservationLayout::Neorl => 0,
+        }
+    }
+}
+
+/// What one MuJoCo joint adds to qpos and qvel, and where.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Joint {
+    pub kind: JointKind,
+    /// Its first entry in qpos (`jnt_qposadr`) and in qvel (`jnt_dofadr`).
+    pub qpos: usize,
+    pub dof: usize,
+}
+
+/// MuJoCo's joint types, by what their coordinates are.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JointKind {
+    /// Position (3) and orientation quaternion (4); linear (3) and angular (3) velocity.
+    Free,
+    /// An orientation quaternion (4); angular velocity (3).
+    Ball,
+    Slide,
+    Hinge,
 }
 
 /// How an observation splits into positions and velocities for the neural SDE's
@@ -226,26 +400,43 @@ pub struct StateSplit {
 }
 
 impl StateSplit {
-    /// The split for a planar robot with `nq == nv` joints, root x first.
+    /// The split of the observation `qpos[from..] ++ qvel` of a model with
+    /// these joints: a slide or hinge coordinate, or a free joint's position,
+    /// pairs with its velocity (a free joint's linear velocity is its
+    /// position's derivative in the world frame); hinges are angles.
     ///
-    /// D4RL observations drop root x, so observed position `i` (qpos `i + 1`) pairs
-    /// with velocity `i + 1`; NeoRL keeps root x and pairs position `i` with velocity `i`.
-    /// Every qpos after root x and root z (the root's pitch and the hinges) is an angle.
-    pub fn planar(nq: usize, layout: ObservationLayout) -> Self {
-        let skipped = match layout {
-            ObservationLayout::D4rl => 1,
-            ObservationLayout::Neorl => 0,
-        };
-        let n_pos = nq - skipped;
-        let positions: Vec<usize> = (0..n_pos).collect();
-        let velocities: Vec<usize> = (n_pos..n_pos + nq).collect();
-        let position_velocity = (0..n_pos).map(|i| n_pos + i + skipped).collect();
-        let root_z = 1 - skipped;
+    /// The SDE needs its positions first (`DynamicsSpec::validate`), so pairing
+    /// stops at the first observed qpos entry without a velocity of its own (a
+    /// quaternion): the entries from there on are learned by the drift's
+    /// networks alone, as unpaired observations of a system file are.
+    pub fn of_joints(joints: &[Joint], nq: usize, nv: usize, from: usize) -> Self {
+        let mut paired = vec![None; nq];
+        let mut angles = Vec::new();
+        for joint in joints {
+            let translations = match joint.kind {
+                JointKind::Free => 3,
+                JointKind::Ball => 0,
+                JointKind::Slide | JointKind::Hinge => 1,
+            };
+            for k in 0..translations {
+                paired[joint.qpos + k] = Some(joint.dof + k);
+            }
+            if joint.kind == JointKind::Hinge {
+                angles.push(joint.qpos);
+            }
+        }
+        let observed_qpos = nq - from;
+        let dofs: Vec<usize> = paired[from..].iter().map_while(|v| *v).collect();
+        let n_pos = dofs.len();
         Self {
-            positions,
-            velocities,
-            position_velocity,
-            angles: (root_z + 1..n_pos).collect(),
+            positions: (0..n_pos).collect(),
+            velocities: (n_pos..observed_qpos + nv).collect(),
+            position_velocity: dofs.iter().map(|d| observed_qpos + d).collect(),
+            angles: angles
+                .into_iter()
+                .filter(|&q| q >= from && q < from + n_pos)
+                .map(|q| q - from)
+                .collect(),
         }
     }
 

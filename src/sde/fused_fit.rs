@@ -1147,7 +1147,7 @@ mod tests {
 
     use super::*;
     use crate::data::{Dataset, DatasetParts, NormalizerConfig, WindowSampler};
-    use crate::envs::{ObservationLayout, StateSplit};
+    use crate::envs::{Joint, JointKind, StateSplit};
     use crate::nn::{seeded_init, standard_normal};
     use crate::sde::eta::FarField;
     use crate::sde::fit_step::{BurnSdeTrainer, Gradients};
@@ -1160,7 +1160,19 @@ mod tests {
     /// A planar system of NQ joints (D4RL layout: root x dropped) whose
     /// positions follow their velocities and whose velocities wander.
     fn dataset(rows: usize, seed: u64) -> (DynamicsSpec, Dataset) {
-        let split = StateSplit::planar(NQ, ObservationLayout::D4rl);
+        // Root x and z slide, the rest hinge; root x is not observed.
+        let joints: Vec<Joint> = (0..NQ)
+            .map(|i| Joint {
+                kind: if i < 2 {
+                    JointKind::Slide
+                } else {
+                    JointKind::Hinge
+                },
+                qpos: i,
+                dof: i,
+            })
+            .collect();
+        let split = StateSplit::of_joints(&joints, NQ, NQ, 1);
         let obs_dim = split.obs_dim();
         let spec = DynamicsSpec {
             obs_dim,

@@ -15,14 +15,24 @@ import sys
 import gymnasium as gym
 import numpy as np
 
-IDS = {"hopper": "Hopper-v4", "halfcheetah": "HalfCheetah-v4", "walker2d": "Walker2d-v4"}
+IDS = {
+    "hopper": "Hopper-v4",
+    "halfcheetah": "HalfCheetah-v4",
+    "walker2d": "Walker2d-v4",
+    "swimmer": "Swimmer-v4",
+    "invertedpendulum": "InvertedPendulum-v4",
+    "ant": "Ant-v4",
+}
+# InvertedPendulum observes its whole qpos and takes no such keyword.
+FULL_QPOS_ONLY = {"invertedpendulum"}
 
 
 def replay(episode):
+    layout = {}
+    if episode["task"] not in FULL_QPOS_ONLY:
+        layout["exclude_current_positions_from_observation"] = episode["layout"] == "d4rl"
     env = gym.make(
-        IDS[episode["task"]],
-        max_episode_steps=episode["max_episode_steps"],
-        exclude_current_positions_from_observation=episode["layout"] == "d4rl",
+        IDS[episode["task"]], max_episode_steps=episode["max_episode_steps"], **layout
     )
     env.reset(seed=0)
     sim = env.unwrapped

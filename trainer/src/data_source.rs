@@ -17,7 +17,7 @@ pub struct DataSource {
     /// Reader to use (default: detected).
     #[arg(long)]
     pub format: Option<DatasetFormat>,
-    /// A built-in task: hopper, halfcheetah or walker2d.
+    /// A built-in task: hopper, halfcheetah, walker2d, swimmer, invertedpendulum or ant.
     #[arg(long, required_unless_present = "system", conflicts_with = "system")]
     pub task: Option<TaskName>,
     /// A system described in a TOML file (docs/your-own-system.md), in place of --task.

@@ -21,7 +21,7 @@ pub struct Args {
     /// Sample actions from π instead of taking its mean.
     #[arg(long)]
     sampled: bool,
-    /// Task: hopper, halfcheetah or walker2d (default: the policy's own task).
+    /// Task: hopper, halfcheetah, walker2d, swimmer, invertedpendulum or ant (default: the policy's own task).
     #[arg(long)]
     task: Option<TaskName>,
     /// Number of episodes.

@@ -15,7 +15,8 @@ pub struct ModelSummary {
     pub id: String,
     /// neural-sde (NUNO's, `fit-model`) or gaussian-ensemble (MOPO's, `fit-ensemble`).
     pub kind: ModelKind,
-    /// hopper, halfcheetah or walker2d; or the name a system file gives.
+    /// A built-in task (hopper, halfcheetah, walker2d, swimmer, invertedpendulum, ant);
+    /// or the name a system file gives.
     pub task: String,
     /// d4rl or neorl observations; `system` for a system described in a file.
     pub layout: String,
