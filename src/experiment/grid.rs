@@ -198,6 +198,32 @@ mod tests {
             mopo(&budget("mopo_settings = \"nuno\"\nrollout_batch = 5000"))
         );
     }
+
+    #[test]
+    fn a_task_without_a_table_3_row_takes_policy_settings() {
+        let row = "[budget]\nmodel_steps = 100\npolicy_steps = 100\n\
+                   [[datasets]]\nname = \"pendulum-random\"\nfile = \"p.hdf5\"\n\
+                   task = \"invertedpendulum\"\n\
+                   policy = { horizon = 5, cvar_alpha = 1.0, penalty = 0.5 }\n\
+                   methods = [\"nuno\", \"mopo\"]\nseeds = [0]\n";
+        let grid: Grid = toml::from_str(row).unwrap();
+        let cells = grid.cells(Path::new("/grids")).unwrap();
+        assert_eq!(cells.len(), 2);
+        for cell in &cells {
+            assert_eq!(cell.task, Some(TaskName::InvertedPendulum));
+            assert_eq!(cell.preset, None);
+            assert_eq!(cell.policy.map(|p| (p.horizon, p.penalty)), Some((5, 0.5)));
+            assert_eq!(cell.file, Path::new("/grids/p.hdf5"));
+        }
+        // A preset and policy settings together are one too many.
+        let both = row.replace("policy = ", "preset = \"hopper-random\"\npolicy = ");
+        let grid: Grid = toml::from_str(&both).unwrap();
+        let error = grid.cells(Path::new("/grids")).unwrap_err();
+        assert!(
+            error.contains("`pendulum-random` needs task and preset"),
+            "{error}"
+        );
+    }
 }
 
 fn default_likelihood() -> LikelihoodPath {
@@ -214,7 +240,8 @@ fn default_hidden() -> Vec<usize> {
 }
 
 /// One dataset row of the grid, as written: a built-in task's data with its
-/// preset, or a system file's with the policy step's h, α and λ_pen.
+/// Table 3 preset or with the policy step's h, α and λ_pen, or a system file's
+/// data with them.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GridDataset {
@@ -227,7 +254,7 @@ pub struct GridDataset {
     pub system: Option<PathBuf>,
     #[serde(default)]
     pub preset: Option<String>,
-    /// What a preset gives, for a system (there are no presets for one).
+    /// What a preset gives, for a system or a task without a Table 3 row.
     #[serde(default)]
     pub policy: Option<PolicySettings>,
     pub methods: Vec<String>,
@@ -244,12 +271,16 @@ pub struct PolicySettings {
     pub penalty: f64,
 }
 
-/// What a dataset row's data is of.
+/// What a dataset row's data is of, and where the policy step's h, α and
+/// λ_pen come from.
 enum RowSystem {
+    /// A built-in task's data, with a Table 3 preset or with explicit settings
+    /// (the tasks Table 3 has no row for).
     Task {
         task: TaskName,
-        preset: String,
+        preset: Option<String>,
         layout: ObservationLayout,
+        policy: Option<PolicySettings>,
     },
     File {
         file: PathBuf,
@@ -257,9 +288,57 @@ enum RowSystem {
     },
 }
 
+/// A dataset row, checked: what its data is of and the methods it names.
+struct CheckedRow {
+    file: PathBuf,
+    system: RowSystem,
+    methods: Vec<Method>,
+}
+
 impl GridDataset {
-    /// A task with its preset, or a system file (resolved against `base`)
-    /// with its policy settings: exactly one of the two, checked.
+    /// The row with its names checked and paths resolved against `base`.
+    fn checked(&self, base: &Path) -> Result<CheckedRow, String> {
+        let name = &self.name;
+        if name.is_empty() || name.contains(['/', '\\']) || name.starts_with('.') {
+            return Err(format!("dataset name `{name}` cannot name a folder"));
+        }
+        // Whether the file exists is the runner's check, on the cells it
+        // runs: a report or status needs only the cells' folders.
+        let file = base.join(&self.file);
+        let system = self.row_system(base)?;
+        if self.methods.is_empty() || self.seeds.is_empty() {
+            return Err(format!(
+                "dataset `{name}` needs at least one method and one seed"
+            ));
+        }
+        let methods = (self.methods.iter())
+            .map(|m| {
+                m.parse::<Method>()
+                    .map_err(|e| format!("dataset `{name}`: {e}"))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        if let (
+            Some(m),
+            RowSystem::Task {
+                preset: Some(preset),
+                ..
+            },
+        ) = (methods.iter().find(|m| m.uses_ensemble()), &system)
+            && crate::agent::mopo_preset(preset).is_err()
+        {
+            return Err(format!(
+                "dataset `{name}`: {m} needs MOPO's hyperparameters, which `{preset}` has none of (its rows are D4RL's)"
+            ));
+        }
+        Ok(CheckedRow {
+            file,
+            system,
+            methods,
+        })
+    }
+
+    /// A task with its preset or its policy settings, or a system file
+    /// (resolved against `base`) with its policy settings: one of the three, checked.
     fn row_system(&self, base: &Path) -> Result<RowSystem, String> {
         let name = &self.name;
         match (self.task, &self.system, &self.preset, &self.policy) {
@@ -273,33 +352,77 @@ impl GridDataset {
                 }
                 Ok(RowSystem::Task {
                     task,
-                    preset: preset_name.clone(),
+                    preset: Some(preset_name.clone()),
                     layout: row.layout,
+                    policy: None,
                 })
             }
-            (None, Some(file), None, Some(policy)) => {
-                let PolicySettings {
-                    horizon,
-                    cvar_alpha,
-                    penalty,
-                } = *policy;
-                if horizon == 0
-                    || !(cvar_alpha > 0.0 && cvar_alpha <= 1.0)
-                    || !(penalty.is_finite() && penalty >= 0.0)
-                {
-                    return Err(format!(
-                        "dataset `{name}`: policy needs horizon ≥ 1, cvar_alpha in (0, 1] and penalty ≥ 0"
-                    ));
-                }
-                Ok(RowSystem::File {
-                    file: base.join(file),
-                    policy: *policy,
-                })
-            }
+            (Some(task), None, None, Some(policy)) => Ok(RowSystem::Task {
+                task,
+                preset: None,
+                layout: ObservationLayout::D4rl,
+                policy: Some(self.checked_policy(policy)?),
+            }),
+            (None, Some(file), None, Some(policy)) => Ok(RowSystem::File {
+                file: base.join(file),
+                policy: self.checked_policy(policy)?,
+            }),
             _ => Err(format!(
-                "dataset `{name}` needs either task and preset (a built-in task) or system and policy (a system file)"
+                "dataset `{name}` needs task and preset (a Table 3 dataset), task and policy (a built-in task's other data), or system and policy (a system file)"
             )),
         }
+    }
+
+    fn checked_policy(&self, policy: &PolicySettings) -> Result<PolicySettings, String> {
+        let PolicySettings {
+            horizon,
+            cvar_alpha,
+            penalty,
+        } = *policy;
+        if horizon == 0
+            || !(cvar_alpha > 0.0 && cvar_alpha <= 1.0)
+            || !(penalty.is_finite() && penalty >= 0.0)
+        {
+            return Err(format!(
+                "dataset `{}`: policy needs horizon ≥ 1, cvar_alpha in (0, 1] and penalty ≥ 0",
+                self.name
+            ));
+        }
+        Ok(*policy)
+    }
+
+    /// The row's cell for `method` and `seed`, `index`-th in the grid.
+    fn cell(&self, index: usize, row: &CheckedRow, method: Method, seed: u64) -> Cell {
+        let mut cell = Cell {
+            index,
+            dataset: self.name.clone(),
+            file_in_grid: self.file.clone(),
+            file: row.file.clone(),
+            task: None,
+            layout: ObservationLayout::default(),
+            preset: None,
+            system_in_grid: None,
+            system: None,
+            policy: None,
+            method,
+            seed,
+        };
+        match &row.system {
+            RowSystem::Task {
+                task,
+                preset,
+                layout,
+                policy,
+            } => {
+                (cell.task, cell.layout) = (Some(*task), *layout);
+                (cell.preset, cell.policy) = (preset.clone(), *policy);
+            }
+            RowSystem::File { file, policy } => {
+                cell.system_in_grid = self.system.clone();
+                (cell.system, cell.policy) = (Some(file.clone()), Some(*policy));
+            }
+        }
+        cell
     }
 }
 
@@ -336,7 +459,7 @@ pub struct Cell {
     /// The same file resolved against the grid's folder, what the cell reads.
     #[serde(skip)]
     pub system: Option<PathBuf>,
-    /// h, α and λ_pen for a system file's data.
+    /// h, α and λ_pen where there is no preset.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub policy: Option<PolicySettings>,
     pub method: Method,
@@ -465,89 +588,26 @@ impl Grid {
         if self.datasets.is_empty() {
             return Err("the grid names no dataset".into());
         }
-        let mut cells = Vec::new();
-        let mut checked = Vec::new();
         let mut names = std::collections::BTreeSet::new();
+        let mut checked = Vec::new();
         for d in &self.datasets {
             if !names.insert(d.name.as_str()) {
                 return Err(format!("dataset `{}` is named twice", d.name));
             }
-            if d.name.is_empty() || d.name.contains(['/', '\\']) || d.name.starts_with('.') {
-                return Err(format!("dataset name `{}` cannot name a folder", d.name));
-            }
-            // Whether the file exists is the runner's check, on the cells it
-            // runs: a report or status needs only the cells' folders.
-            let file = base.join(&d.file);
-            let system = d.row_system(base)?;
-            if d.methods.is_empty() || d.seeds.is_empty() {
-                return Err(format!(
-                    "dataset `{}` needs at least one method and one seed",
-                    d.name
-                ));
-            }
-            let methods = d
-                .methods
-                .iter()
-                .map(|m| {
-                    m.parse::<Method>()
-                        .map_err(|e| format!("dataset `{}`: {e}", d.name))
-                })
-                .collect::<Result<Vec<_>, _>>()?;
-            if let (Some(m), RowSystem::Task { preset, .. }) =
-                (methods.iter().find(|m| m.uses_ensemble()), &system)
-                && crate::agent::mopo_preset(preset).is_err()
-            {
-                return Err(format!(
-                    "dataset `{}`: {m} needs MOPO's hyperparameters, which `{preset}` has none of (its rows are D4RL's)",
-                    d.name
-                ));
-            }
-            checked.push((d, file, system, methods));
+            checked.push((d, d.checked(base)?));
         }
         // Seeds outermost (each dataset's first seed, then each one's second,
         // ...), then datasets in file order, then methods: a sweep cut short
         // has every dataset × method at its first seeds.
-        let rounds = self
-            .datasets
-            .iter()
-            .map(|d| d.seeds.len())
-            .max()
-            .unwrap_or(0);
-        for round in 0..rounds {
-            for (d, file, system, methods) in &checked {
+        let rounds = self.datasets.iter().map(|d| d.seeds.len()).max();
+        let mut cells = Vec::new();
+        for round in 0..rounds.unwrap_or(0) {
+            for (d, row) in &checked {
                 let Some(&seed) = d.seeds.get(round) else {
                     continue;
                 };
-                for &method in methods {
-                    let mut cell = Cell {
-                        index: cells.len(),
-                        dataset: d.name.clone(),
-                        file_in_grid: d.file.clone(),
-                        file: file.clone(),
-                        task: None,
-                        layout: ObservationLayout::default(),
-                        preset: None,
-                        system_in_grid: None,
-                        system: None,
-                        policy: None,
-                        method,
-                        seed,
-                    };
-                    match system {
-                        RowSystem::Task {
-                            task,
-                            preset,
-                            layout,
-                        } => {
-                            (cell.task, cell.layout) = (Some(*task), *layout);
-                            cell.preset = Some(preset.clone());
-                        }
-                        RowSystem::File { file, policy } => {
-                            cell.system_in_grid = d.system.clone();
-                            (cell.system, cell.policy) = (Some(file.clone()), Some(*policy));
-                        }
-                    }
-                    cells.push(cell);
+                for &method in &row.methods {
+                    cells.push(d.cell(cells.len(), row, method, seed));
                 }
             }
         }

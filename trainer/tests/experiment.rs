@@ -743,12 +743,13 @@ fn a_grid_runs_a_system_file_and_scores_it_in_the_model() {
             "{metrics}"
         );
     }
-    // A row is a task with a preset or a system with policy settings, not a mix.
+    // A row is a task with a preset or policy settings, or a system with
+    // policy settings, not a mix.
     let mixed = row.replace("system = ", "task = \"hopper\"\nsystem = ");
     let bad = s(&write_grid(dir, "mixed.toml", &[mixed]));
     let error = fails(&["experiment", "run", "--grid", &bad, "--out", &s(&out)]);
     assert!(
-        error.contains("needs either task and preset") && error.contains("pendulum"),
+        error.contains("needs task and preset") && error.contains("pendulum"),
         "{error}"
     );
 }
