@@ -329,6 +329,16 @@ fn bad_csv_logs_are_refused_naming_the_line_and_the_column() {
     // One row per episode makes no transition.
     let error = nuno::data::read_csv_log(&csv_log(dir.path(), HEADER, &[good]), &spec).unwrap_err();
     assert!(error.to_string().contains("no transitions"), "{error}");
+    // A missing log is named as missing, by the same reader every command uses.
+    let missing = dir.path().join("missing.csv");
+    let system = nuno::envs::System::File(std::sync::Arc::new(spec));
+    let error = nuno::data::read_system_dataset(&missing, None, &system).unwrap_err();
+    assert!(
+        matches!(&error, nuno::data::DataError::Io { source, .. }
+            if source.kind() == std::io::ErrorKind::NotFound),
+        "{error}"
+    );
+    assert!(error.to_string().contains("missing.csv"), "{error}");
 }
 
 #[test]

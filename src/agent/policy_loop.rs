@@ -28,7 +28,9 @@ use crate::data::{Dataset, StartStateSampler, TransitionSampler};
 use crate::envs::{EvaluationConfig, EvaluationReport, ForwardVelocity, Rules, System, evaluate};
 use crate::infer::Kernel;
 use crate::sde::{CODE_MODEL_BUFFER_FACTOR, Recipe, ThresholdTable};
-use crate::shared::{BatchDynamics, BatchPolicy, SeedStream, TransitionBatch, derive_seed};
+use crate::shared::{
+    BatchDynamics, BatchPolicy, SeedStream, TransitionBatch, derive_seed, mean_std_population,
+};
 
 /// How the actor's learning rate moves over a run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -532,12 +534,10 @@ impl PolicyTraining {
         let returns: Vec<f64> = (rollout.trace.rewards.iter())
             .map(|r| r.iter().map(|&x| f64::from(x)).sum())
             .collect();
-        let n = returns.len().max(1) as f64;
-        let mean = returns.iter().sum::<f64>() / n;
-        let var = returns.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n;
+        let (mean_return, std_return) = mean_std_population(&returns);
         EvalSummary {
-            mean_return: mean,
-            std_return: var.sqrt(),
+            mean_return,
+            std_return,
             in_model: true,
             ..EvalSummary::default()
         }

@@ -47,10 +47,13 @@ pub fn read_csv_log(path: &Path, system: &SystemSpec) -> Result<Dataset, DataErr
         file: path.to_path_buf(),
         message,
     };
+    let file = std::fs::File::open(path).map_err(|source| DataError::Io {
+        file: path.to_path_buf(),
+        source,
+    })?;
     let mut reader = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
-        .from_path(path)
-        .map_err(|e| invalid(format!("cannot read it as CSV: {e}")))?;
+        .from_reader(file);
     let header = reader
         .headers()
         .map_err(|e| invalid(format!("line 1: {e}")))?

@@ -88,7 +88,7 @@ pub fn read_system_dataset(
 ) -> Result<Dataset, DataError> {
     let format = format.unwrap_or_else(|| DatasetFormat::detect(path));
     let dataset = match (format, system) {
-        (DatasetFormat::Csv, System::File(spec)) if path.exists() => read_csv_log(path, spec)?,
+        (DatasetFormat::Csv, System::File(spec)) => read_csv_log(path, spec)?,
         _ => read_dataset(path, Some(format))?,
     };
     dataset.check_system(system, path)?;

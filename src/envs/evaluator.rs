@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{EnvError, MujocoTask, TaskConfig};
 use crate::shared::cancel::Cancel;
-use crate::shared::{BatchPolicy, SeedStream, derive_seed};
+use crate::shared::{BatchPolicy, SeedStream, derive_seed, mean_std_population};
 
 /// What to evaluate and how.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -96,8 +96,8 @@ pub fn evaluate_or_cancel(
 
     let reference = config.task.score_reference();
     let normalized_scores: Vec<f64> = returns.iter().map(|&r| reference.normalize(r)).collect();
-    let (mean_return, std_return) = mean_std(&returns);
-    let (mean_normalized_score, std_normalized_score) = mean_std(&normalized_scores);
+    let (mean_return, std_return) = mean_std_population(&returns);
+    let (mean_normalized_score, std_normalized_score) = mean_std_population(&normalized_scores);
     Ok(EvaluationReport {
         returns,
         lengths,
@@ -166,12 +166,4 @@ fn run_group(
         running = still_running;
     }
     Ok(results)
-}
-
-/// Mean and population standard deviation (numpy's default), as D4RL reports them.
-fn mean_std(values: &[f64]) -> (f64, f64) {
-    let n = values.len() as f64;
-    let mean = values.iter().sum::<f64>() / n;
-    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
-    (mean, var.sqrt())
 }

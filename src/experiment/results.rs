@@ -15,7 +15,7 @@ use crate::agent::EpochRecord;
 use crate::agent::Method;
 use crate::agent::MopoSettings;
 use crate::artifact::{latest_checkpoint, read_versioned_json_filled, sha256_file, write_json};
-use crate::shared::{Metric, MetricsTable};
+use crate::shared::{Metric, MetricsTable, mean_std_sample};
 
 pub const RESULT_SCHEMA_VERSION: u32 = 1;
 const RESULT: &str = "result.json";
@@ -247,8 +247,8 @@ pub fn summarize(results: &[CellResult], dataset_order: &[&str]) -> Vec<Summary>
     groups
         .into_values()
         .map(|runs| {
-            let (best_mean, best_std) = mean_std(runs.iter().map(|r| r.best_score));
-            let (final_mean, final_std) = mean_std(runs.iter().map(|r| r.final_score));
+            let (best_mean, best_std) = mean_std_sample(runs.iter().map(|r| r.best_score));
+            let (final_mean, final_std) = mean_std_sample(runs.iter().map(|r| r.final_score));
             Summary {
                 dataset: runs[0].cell.dataset.clone(),
                 method: runs[0].cell.method,
@@ -304,16 +304,6 @@ pub fn mean_curves(results: &[CellResult]) -> Vec<MeanCurve> {
 }
 
 /// Mean and sample standard deviation (0 for one run).
-fn mean_std(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
-    let n = values.clone().count();
-    let mean = values.clone().sum::<f64>() / n.max(1) as f64;
-    if n < 2 {
-        return (mean, 0.0);
-    }
-    let var = values.map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
-    (mean, var.sqrt())
-}
-
 /// One line per finished cell.
 pub fn results_csv(results: &[CellResult]) -> String {
     MetricsTable::new()

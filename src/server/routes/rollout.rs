@@ -158,16 +158,7 @@ pub async fn rollout(
         .noise_scale
         .unwrap_or_else(|| model.batch_dynamics().sample_noise_scale());
     non_negative("noise_scale", f64::from(noise_scale))?;
-    let mut sequence = match r.actions.take() {
-        None if model.policy.is_none() => return Err(ApiError::NoPolicy(id)),
-        None => None,
-        Some(actions) => Some(flatten_sequences(actions, batch, r.horizon, act_dim)?),
-    };
-    // A policy's actions are in the box by construction (tanh, scaled).
-    let clipped_rows = match sequence.as_mut() {
-        Some(actions) => clip_actions("actions", actions, &model.action_space, r.clip)?,
-        None => 0,
-    };
+    let (sequence, clipped_rows) = open_loop_actions(&mut r, &model, batch)?;
     let threshold = resolve_threshold(r.threshold, r.alpha, r.horizon, &model)?;
     state
         .metrics
@@ -246,6 +237,25 @@ fn check_size(
         answer,
         limits.max_answer_bytes,
     )
+}
+
+/// The request's open-loop actions, flat and clipped into the model's action
+/// box, with how many rows were clipped; none where the model's policy acts
+/// (a policy's actions are in the box by construction: tanh, scaled).
+fn open_loop_actions(
+    r: &mut RolloutRequest,
+    model: &LoadedModel,
+    batch: usize,
+) -> Result<(Option<Vec<f32>>, usize), ApiError> {
+    let Some(actions) = r.actions.take() else {
+        return match model.policy {
+            None => Err(ApiError::NoPolicy(model.id.clone())),
+            Some(_) => Ok((None, 0)),
+        };
+    };
+    let mut flat = flatten_sequences(actions, batch, r.horizon, model.act_dim())?;
+    let clipped = clip_actions("actions", &mut flat, &model.action_space, r.clip)?;
+    Ok((Some(flat), clipped))
 }
 
 /// One open-loop sequence per start, `horizon` rows of `act_dim` each, as one
