@@ -7,6 +7,7 @@
 
 mod evaluator;
 mod modelled_system;
+mod mujoco_table;
 mod mujoco_task;
 mod rules;
 mod score;

@@ -5,10 +5,10 @@
 //! `ctrl`, `mj_step` `frame_skip` times, then reward, termination and
 //! observation from the new state.
 
-use std::sync::{Arc, Once, OnceLock};
+use std::sync::Arc;
 
 use mujoco_rs::prelude::{MjData, MjModel};
-use mujoco_rs::wrappers::mj_model::{MjtJoint, MjtObjBase};
+use mujoco_rs::wrappers::mj_model::MjtJoint;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -72,27 +72,6 @@ pub struct Transition {
     pub x_velocity: f64,
 }
 
-/// The compiled MJCF model of a task, parsed once per process and shared.
-fn compiled_model(name: TaskName) -> Result<Arc<MjModel>, EnvError> {
-    // MuJoCo would otherwise print warnings and append them to MUJOCO_LOG.TXT in
-    // the working directory; route them to the `log` crate instead.
-    static LOGGING: Once = Once::new();
-    // SAFETY: every MuJoCo object is built from a model made below, so no thread
-    // uses MuJoCo before this first call completes (Once blocks the others).
-    LOGGING.call_once(|| unsafe { mujoco_rs::prelude::install_logging_hook() });
-    static MODELS: [OnceLock<Arc<MjModel>>; TaskName::ALL.len()] =
-        [const { OnceLock::new() }; TaskName::ALL.len()];
-    let cell = &MODELS[name as usize];
-    if let Some(model) = cell.get() {
-        return Ok(model.clone());
-    }
-    let model = MjModel::from_xml_string(name.spec().xml).map_err(|e| EnvError::Model {
-        task: name,
-        message: e.to_string(),
-    })?;
-    Ok(cell.get_or_init(|| Arc::new(model)).clone())
-}
-
 /// A task instance: one MuJoCo `MjData` over the task's shared model.
 pub struct MujocoTask {
     spec: &'static TaskSpec,
@@ -100,8 +79,6 @@ pub struct MujocoTask {
     data: MjData<Arc<MjModel>>,
     init_qpos: Vec<f64>,
     init_qvel: Vec<f64>,
-    /// The body whose frame's x is the forward position (`TaskSpec::forward_body`).
-    forward_body: Option<usize>,
     dt: f64,
     elapsed_steps: usize,
     rng: ChaCha8Rng,
@@ -119,18 +96,9 @@ impl std::fmt::Debug for MujocoTask {
 impl MujocoTask {
     /// A new instance in the model's initial state (call [`reset`](Self::reset) before stepping).
     pub fn new(config: TaskConfig) -> Result<Self, EnvError> {
-        let model = compiled_model(config.name)?;
         let spec = config.name.spec();
+        let model = spec.model.0.clone();
         let dt = model.opt().timestep * spec.frame_skip as f64;
-        let forward_body = match spec.forward_body {
-            Some(body) => Some(model.name_to_id(MjtObjBase::mjOBJ_BODY, body).ok_or_else(
-                || EnvError::Model {
-                    task: config.name,
-                    message: format!("the model has no body named `{body}`"),
-                },
-            )?),
-            None => None,
-        };
         let data = MjData::try_new(model).map_err(|e| EnvError::Model {
             task: config.name,
             message: e.to_string(),
@@ -140,7 +108,6 @@ impl MujocoTask {
             config,
             init_qpos: data.qpos().to_vec(),
             init_qvel: data.qvel().to_vec(),
-            forward_body,
             data,
             dt,
             elapsed_steps: 0,
@@ -314,7 +281,7 @@ impl MujocoTask {
     /// Where the forward velocity is measured: the forward body's frame x
     /// (MuJoCo's `xpos`, as of the last kinematics pass, as Gymnasium reads it), or qpos[0].
     fn forward_position(&self) -> f64 {
-        match self.forward_body {
+        match self.spec.forward_body {
             Some(body) => self.data.xpos()[body][0],
             None => self.data.qpos()[0],
         }

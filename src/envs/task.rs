@@ -1,14 +1,18 @@
 //! What defines each task: the MJCF model, frame skip, reward weights, health
-//! rules, reset noise, observation layout and the state split the neural SDE
-//! needs. Values are Gymnasium's `*-v4` (D4RL-v2 semantics on the modern
-//! bindings); see docs/paper-map.md for the sources.
+//! rules, reset noise, observation layout (each task's `[mujoco]` table in
+//! `tasks/`) and the state split the neural SDE needs. Values are Gymnasium's
+//! `*-v4` (D4RL-v2 semantics on the modern bindings); see docs/paper-map.md
+//! for the sources.
 
 use std::fmt;
 use std::str::FromStr;
+use std::sync::{Arc, Once, OnceLock};
 
+use mujoco_rs::prelude::MjModel;
 use serde::{Deserialize, Serialize};
 
 use super::EnvError;
+use super::mujoco_table::MujocoFile;
 use super::score::ScoreReference;
 
 /// The MuJoCo tasks nuno simulates: D4RL's and NeoRL's three locomotion
@@ -49,16 +53,9 @@ impl TaskName {
         }
     }
 
-    /// The task's fixed definition.
+    /// The task's fixed definition (`src/envs/tasks/<name>.toml`).
     pub fn spec(self) -> &'static TaskSpec {
-        match self {
-            TaskName::Hopper => &HOPPER,
-            TaskName::HalfCheetah => &HALF_CHEETAH,
-            TaskName::Walker2d => &WALKER2D,
-            TaskName::Swimmer => &SWIMMER,
-            TaskName::InvertedPendulum => &INVERTED_PENDULUM,
-            TaskName::Ant => &ANT,
-        }
+        built_in(self)
     }
 }
 
@@ -135,13 +132,13 @@ pub enum ResetNoise {
     UniformPositionNormalVelocity { scale: f64 },
 }
 
-/// The fixed definition of one task.
+/// The fixed definition of one task: its `[mujoco]` table, checked against
+/// its compiled model ([`super::mujoco_table`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct TaskSpec {
-    pub name: TaskName,
-    /// The MJCF model from the `gymnasium` wheel, embedded at build time.
-    pub xml: &'static str,
-    /// The model's qpos and qvel widths (checked against the compiled model in `tests/envs.rs`).
+    /// The MJCF model, compiled once per process and shared by every instance.
+    pub model: CompiledModel,
+    /// The model's qpos and qvel widths.
     pub nq: usize,
     pub nv: usize,
     /// Gymnasium's default observation is `qpos[observed_qpos_from..] ++ qvel`: the
@@ -151,7 +148,7 @@ pub struct TaskSpec {
     pub frame_skip: usize,
     /// The body whose frame's x gives the forward velocity (Gymnasium's ant reads its
     /// torso, `get_body_com`); `None`: the root's qpos[0] (the planar robots, swimmer).
-    pub forward_body: Option<&'static str>,
+    pub forward_body: Option<usize>,
     pub forward_reward_weight: f64,
     pub ctrl_cost_weight: f64,
     /// Reward added at every step (Gymnasium v4 pays it on the terminal step too).
@@ -162,183 +159,92 @@ pub struct TaskSpec {
     pub reset_noise: ResetNoise,
     /// Time limit; reaching it is a truncation, not a termination.
     pub max_episode_steps: usize,
-    /// D4RL's reference returns for the normalised score.
+    /// The reference returns of the normalised score (D4RL's for its tasks).
     pub d4rl_score: ScoreReference,
-    /// The reference returns NUNO uses for NeoRL tasks (NeoRL ships none). Tasks
-    /// outside NeoRL score the full-qpos layout against `d4rl_score`.
+    /// The reference returns where all of qpos is observed (NUNO's code's for
+    /// NeoRL's tasks, which NeoRL ships none of); others score it as `d4rl_score`.
     pub neorl_score: ScoreReference,
 }
 
-const HOPPER: TaskSpec = TaskSpec {
-    name: TaskName::Hopper,
-    xml: include_str!(concat!(env!("NUNO_MJCF_DIR"), "/hopper.xml")),
-    nq: 6,
-    nv: 6,
-    observed_qpos_from: 1,
-    frame_skip: 4,
-    forward_body: None,
-    forward_reward_weight: 1.0,
-    ctrl_cost_weight: 1e-3,
-    healthy_reward: 1.0,
-    health: HealthRule::Upright {
-        z_range: (0.7, f64::INFINITY),
-        angle_range: (-0.2, 0.2),
-        state_range: Some((-100.0, 100.0)),
-    },
-    velocity_clip: Some(10.0),
-    reset_noise: ResetNoise::Uniform { scale: 5e-3 },
-    max_episode_steps: 1000,
-    d4rl_score: ScoreReference {
-        random: -20.272305,
-        expert: 3234.3,
-    },
-    neorl_score: ScoreReference {
-        random: 5.0,
-        expert: 3294.0,
-    },
-};
+/// A compiled MuJoCo model, shared; two are equal when they are the same one.
+#[derive(Clone)]
+pub struct CompiledModel(pub Arc<MjModel>);
 
-const HALF_CHEETAH: TaskSpec = TaskSpec {
-    name: TaskName::HalfCheetah,
-    xml: include_str!(concat!(env!("NUNO_MJCF_DIR"), "/half_cheetah.xml")),
-    nq: 9,
-    nv: 9,
-    observed_qpos_from: 1,
-    frame_skip: 5,
-    forward_body: None,
-    forward_reward_weight: 1.0,
-    ctrl_cost_weight: 0.1,
-    healthy_reward: 0.0,
-    health: HealthRule::AlwaysHealthy,
-    velocity_clip: None,
-    reset_noise: ResetNoise::UniformPositionNormalVelocity { scale: 0.1 },
-    max_episode_steps: 1000,
-    d4rl_score: ScoreReference {
-        random: -280.178953,
-        expert: 12135.0,
-    },
-    neorl_score: ScoreReference {
-        random: -298.0,
-        expert: 12284.0,
-    },
-};
+impl PartialEq for CompiledModel {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
+}
 
-const WALKER2D: TaskSpec = TaskSpec {
-    name: TaskName::Walker2d,
-    xml: include_str!(concat!(env!("NUNO_MJCF_DIR"), "/walker2d.xml")),
-    nq: 9,
-    nv: 9,
-    observed_qpos_from: 1,
-    frame_skip: 4,
-    forward_body: None,
-    forward_reward_weight: 1.0,
-    ctrl_cost_weight: 1e-3,
-    healthy_reward: 1.0,
-    health: HealthRule::Upright {
-        z_range: (0.8, 2.0),
-        angle_range: (-1.0, 1.0),
-        state_range: None,
-    },
-    velocity_clip: Some(10.0),
-    reset_noise: ResetNoise::Uniform { scale: 5e-3 },
-    max_episode_steps: 1000,
-    d4rl_score: ScoreReference {
-        random: 1.629008,
-        expert: 4592.3,
-    },
-    neorl_score: ScoreReference {
-        random: 1.0,
-        expert: 5143.0,
-    },
-};
+impl fmt::Debug for CompiledModel {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("CompiledModel")
+    }
+}
 
-// Swimmer, InvertedPendulum and Ant are not in D4RL or NeoRL. Their score
-// references: `random` is the mean return of uniformly random actions over
-// 1000 Gymnasium episodes (seeds 0–999; `experiments/gymnasium_random_returns.py`),
-// as D4RL defines its own; `expert` is Gymnasium's `reward_threshold` for the
-// task (docs/paper-map.md).
+/// The built-in tasks' tables, in [`TaskName::ALL`]'s order.
+const TABLES: [&str; TaskName::ALL.len()] = [
+    include_str!("tasks/hopper.toml"),
+    include_str!("tasks/halfcheetah.toml"),
+    include_str!("tasks/walker2d.toml"),
+    include_str!("tasks/swimmer.toml"),
+    include_str!("tasks/invertedpendulum.toml"),
+    include_str!("tasks/ant.toml"),
+];
 
-const SWIMMER: TaskSpec = TaskSpec {
-    name: TaskName::Swimmer,
-    xml: include_str!(concat!(env!("NUNO_MJCF_DIR"), "/swimmer.xml")),
-    nq: 5,
-    nv: 5,
-    observed_qpos_from: 2,
-    frame_skip: 4,
-    forward_body: None,
-    forward_reward_weight: 1.0,
-    ctrl_cost_weight: 1e-4,
-    healthy_reward: 0.0,
-    health: HealthRule::AlwaysHealthy,
-    velocity_clip: None,
-    reset_noise: ResetNoise::Uniform { scale: 0.1 },
-    max_episode_steps: 1000,
-    d4rl_score: SWIMMER_SCORE,
-    neorl_score: SWIMMER_SCORE,
-};
+/// The MJCF models the tables name, from the `gymnasium` wheel (`make mujoco`).
+const MODELS: [(&str, &str); TaskName::ALL.len()] = [
+    (
+        "hopper.xml",
+        include_str!(concat!(env!("NUNO_MJCF_DIR"), "/hopper.xml")),
+    ),
+    (
+        "half_cheetah.xml",
+        include_str!(concat!(env!("NUNO_MJCF_DIR"), "/half_cheetah.xml")),
+    ),
+    (
+        "walker2d.xml",
+        include_str!(concat!(env!("NUNO_MJCF_DIR"), "/walker2d.xml")),
+    ),
+    (
+        "swimmer.xml",
+        include_str!(concat!(env!("NUNO_MJCF_DIR"), "/swimmer.xml")),
+    ),
+    (
+        "inverted_pendulum.xml",
+        include_str!(concat!(env!("NUNO_MJCF_DIR"), "/inverted_pendulum.xml")),
+    ),
+    (
+        "ant.xml",
+        include_str!(concat!(env!("NUNO_MJCF_DIR"), "/ant.xml")),
+    ),
+];
 
-const SWIMMER_SCORE: ScoreReference = ScoreReference {
-    random: SWIMMER_RANDOM,
-    expert: 360.0,
-};
+/// `task`'s table read and checked, once per process.
+fn built_in(task: TaskName) -> &'static TaskSpec {
+    static SPECS: [OnceLock<TaskSpec>; TaskName::ALL.len()] =
+        [const { OnceLock::new() }; TaskName::ALL.len()];
+    SPECS[task as usize].get_or_init(|| {
+        let checked = MujocoFile::parse(TABLES[task as usize]).and_then(|file| {
+            let xml = MODELS.iter().find(|(name, _)| *name == file.model_file());
+            let (_, xml) =
+                xml.ok_or_else(|| format!("no embedded model `{}`", file.model_file()))?;
+            file.check(xml)
+        });
+        // Embedded at build time and read by every test of the tasks: a
+        // broken one is a broken build, not bad input.
+        checked.unwrap_or_else(|e| panic!("the built-in {task} table: {e}"))
+    })
+}
 
-const INVERTED_PENDULUM: TaskSpec = TaskSpec {
-    name: TaskName::InvertedPendulum,
-    xml: include_str!(concat!(env!("NUNO_MJCF_DIR"), "/inverted_pendulum.xml")),
-    nq: 2,
-    nv: 2,
-    observed_qpos_from: 0,
-    frame_skip: 2,
-    forward_body: None,
-    forward_reward_weight: 0.0,
-    ctrl_cost_weight: 0.0,
-    healthy_reward: 1.0,
-    health: HealthRule::FiniteWithin {
-        qpos: 1,
-        range: (-0.2, 0.2),
-    },
-    velocity_clip: None,
-    reset_noise: ResetNoise::Uniform { scale: 0.01 },
-    max_episode_steps: 1000,
-    d4rl_score: INVERTED_PENDULUM_SCORE,
-    neorl_score: INVERTED_PENDULUM_SCORE,
-};
-
-const INVERTED_PENDULUM_SCORE: ScoreReference = ScoreReference {
-    random: INVERTED_PENDULUM_RANDOM,
-    expert: 950.0,
-};
-
-const ANT: TaskSpec = TaskSpec {
-    name: TaskName::Ant,
-    xml: include_str!(concat!(env!("NUNO_MJCF_DIR"), "/ant.xml")),
-    nq: 15,
-    nv: 14,
-    observed_qpos_from: 2,
-    frame_skip: 5,
-    forward_body: Some("torso"),
-    forward_reward_weight: 1.0,
-    ctrl_cost_weight: 0.5,
-    healthy_reward: 1.0,
-    health: HealthRule::FiniteWithin {
-        qpos: 2,
-        range: (0.2, 1.0),
-    },
-    velocity_clip: None,
-    reset_noise: ResetNoise::UniformPositionNormalVelocity { scale: 0.1 },
-    max_episode_steps: 1000,
-    d4rl_score: ANT_SCORE,
-    neorl_score: ANT_SCORE,
-};
-
-const ANT_SCORE: ScoreReference = ScoreReference {
-    random: ANT_RANDOM,
-    expert: 6000.0,
-};
-
-const SWIMMER_RANDOM: f64 = 0.485732;
-const INVERTED_PENDULUM_RANDOM: f64 = 6.02;
-const ANT_RANDOM: f64 = -61.327469;
+/// Routes MuJoCo's warnings to the `log` crate; it would otherwise print them
+/// and append them to MUJOCO_LOG.TXT in the working directory.
+pub(super) fn install_mujoco_logging() {
+    static LOGGING: Once = Once::new();
+    // SAFETY: called before every model is compiled (`MujocoFile::check`; Once
+    // blocks other threads until the hook is in), so no thread uses MuJoCo meanwhile.
+    LOGGING.call_once(|| unsafe { mujoco_rs::prelude::install_logging_hook() });
+}
 
 /// Which observation variant a task reports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
