@@ -10,6 +10,7 @@
 //! - [`ensemble`]: the Gaussian ensemble, MOPO's model, and its fit;
 //! - [`agent`]: the method list, SAC on penalised, truncated model rollouts,
 //!   behind the narrow batched `act` and `step` interfaces;
+//! - [`planning`]: candidate action sequences scored in a model;
 //! - [`experiment`]: grids of datasets × methods × seeds, each cell's result,
 //!   the aggregate tables and the model analyses;
 //! - [`nn`]: the MLP both use;
@@ -31,6 +32,7 @@ pub mod envs;
 pub mod experiment;
 pub mod infer;
 pub mod nn;
+pub mod planning;
 pub mod sde;
 #[cfg(feature = "server")]
 pub mod server;

@@ -19,21 +19,29 @@ const LAYERS: &[(&str, &[&str])] = &[
         &["shared", "nn", "infer", "envs", "data", "sde", "ensemble"],
     ),
     (
-        "artifact",
+        "planning",
         &[
             "shared", "nn", "infer", "envs", "data", "sde", "ensemble", "agent",
         ],
     ),
     (
+        "artifact",
+        &[
+            "shared", "nn", "infer", "envs", "data", "sde", "ensemble", "agent", "planning",
+        ],
+    ),
+    (
         "experiment",
         &[
-            "shared", "nn", "infer", "envs", "data", "sde", "ensemble", "agent", "artifact",
+            "shared", "nn", "infer", "envs", "data", "sde", "ensemble", "agent", "planning",
+            "artifact",
         ],
     ),
     (
         "server",
         &[
-            "shared", "nn", "infer", "envs", "data", "sde", "ensemble", "agent", "artifact",
+            "shared", "nn", "infer", "envs", "data", "sde", "ensemble", "agent", "planning",
+            "artifact",
         ],
     ),
 ];

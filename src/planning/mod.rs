@@ -1,0 +1,16 @@
+//! Planning next to the model: candidate action sequences scored in it (the
+//! one number per candidate a sampling planner needs), with η's penalty, a
+//! CVaR over particles and ε(H, α)'s truncation.
+
+mod score;
+
+pub use score::{CandidateScore, ScoreConfig, score_sequences};
+
+/// What a planning request got wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum PlanningError {
+    #[error("{0}")]
+    Invalid(String),
+    #[error(transparent)]
+    Cancelled(#[from] crate::shared::Cancelled),
+}

@@ -1,0 +1,225 @@
+//! Scoring candidate action sequences: each rolled open-loop from its start
+//! state through the model with `particles` samples (mbrl-lib's
+//! `evaluate_action_sequences`: particle p of candidate c is row c·P + p, a
+//! particle's rewards stop where its task says it fell), then reduced to one
+//! score per candidate. Every step goes through [`rollout_model_or_cancel`],
+//! the same rollout the policy loop and the server's `rollout` use.
+
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+use super::PlanningError;
+use crate::agent::{RolloutActions, RolloutConfig, StepOutcome, rollout_model_or_cancel};
+use crate::envs::Rules;
+use crate::shared::{BatchDynamics, Cancel};
+
+/// How candidates are rolled and scored.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScoreConfig {
+    /// H, the steps of every candidate.
+    pub horizon: usize,
+    /// Samples of each candidate's trajectory.
+    pub particles: usize,
+    /// γ of the returns: step t's reward weighs γ^t.
+    pub discount: f64,
+    /// λ of the penalised return, Σ γ^t (r_t − λ·η_t).
+    pub penalty: f64,
+    /// The share α of a candidate's particles whose returns the CVaR averages:
+    /// its worst ⌈α·P⌉ (risk-averse); `None` leaves the CVaR out.
+    pub cvar_alpha: Option<f64>,
+    /// ε(H, α): a particle stops before the step that takes its accumulated η
+    /// above this; its return is what it earned before. `None` never truncates.
+    pub threshold: Option<f32>,
+    /// Multiplies the model's noise (1 samples Σ, 0 follows the drift).
+    pub noise_scale: f32,
+}
+
+/// One candidate's score, over its particles.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+pub struct CandidateScore {
+    /// Mean over particles of Σ γ^t r_t.
+    pub mean_return: f64,
+    /// Mean over particles of Σ γ^t (r_t − λ·η_t).
+    pub penalized_return: f64,
+    /// Mean of the worst ⌈α·P⌉ particles' returns, when α was asked for.
+    pub cvar_return: Option<f64>,
+    /// Mean over particles of Σ η_t along the steps kept.
+    pub accumulated_eta: f64,
+    /// The largest η any particle met at a step it took.
+    pub max_eta: f64,
+    /// The first step (0-based) at which a particle's accumulated η passed
+    /// ε(H, α) and the step was dropped; `None` if none did.
+    pub truncated_at: Option<usize>,
+    /// The share of particles whose task rules ended them (the robot fell).
+    pub terminated: f64,
+    /// The share of particles whose model state stopped being finite.
+    pub diverged: f64,
+}
+
+/// Scores `candidates` action sequences from each of the start states:
+/// `starts` is `[B, obs_dim]`, `sequences` `[B, candidates, H, act_dim]`;
+/// the answer is `[B, candidates]`, row-major.
+#[allow(clippy::too_many_arguments)]
+pub fn score_sequences(
+    dynamics: &dyn BatchDynamics,
+    rules: &Rules,
+    starts: &[f32],
+    sequences: &[f32],
+    candidates: usize,
+    config: &ScoreConfig,
+    rng: &mut ChaCha8Rng,
+    cancel: &Cancel,
+) -> Result<Vec<CandidateScore>, PlanningError> {
+    let (obs_dim, act_dim) = (dynamics.obs_dim(), dynamics.act_dim());
+    check(starts, sequences, candidates, config, (obs_dim, act_dim))?;
+    // Each start once per candidate: the rollout's starts are the candidates.
+    let tiled: Vec<f32> = starts
+        .chunks_exact(obs_dim)
+        .flat_map(|start| std::iter::repeat_n(start, candidates).flatten().copied())
+        .collect();
+    let rollout = RolloutConfig {
+        horizon: config.horizon,
+        particles: config.particles,
+        penalty: config.penalty,
+        threshold: config.threshold,
+        noise_scale: config.noise_scale,
+    };
+    let actions = RolloutActions::Sequence(sequences);
+    let out = rollout_model_or_cancel(dynamics, actions, rules, &tiled, &rollout, rng, cancel)?;
+    let trace = &out.trace;
+    let particle = |r: usize| Particle {
+        rewards: &trace.rewards[r][..trace.kept[r]],
+        eta: &trace.eta[r][..trace.kept[r]],
+        seen_eta: &trace.eta[r],
+        outcome: trace.outcome[r],
+        kept: trace.kept[r],
+    };
+    let p = config.particles;
+    Ok((0..tiled.len() / obs_dim)
+        .map(|c| {
+            score_particles(
+                &(c * p..(c + 1) * p).map(particle).collect::<Vec<_>>(),
+                config,
+            )
+        })
+        .collect())
+}
+
+/// One particle's record: the rewards and η of the steps it kept, and η of
+/// every step it took (a truncating step's included).
+struct Particle<'a> {
+    rewards: &'a [f32],
+    eta: &'a [f32],
+    seen_eta: &'a [f32],
+    outcome: StepOutcome,
+    kept: usize,
+}
+
+fn score_particles(particles: &[Particle], config: &ScoreConfig) -> CandidateScore {
+    let discounted = |values: &mut dyn Iterator<Item = f64>| {
+        let mut weight = 1.0;
+        values.fold(0.0, |sum, v| {
+            let term = weight * v;
+            weight *= config.discount;
+            sum + term
+        })
+    };
+    let returns: Vec<f64> = (particles.iter())
+        .map(|p| discounted(&mut p.rewards.iter().map(|&r| f64::from(r))))
+        .collect();
+    let penalized = particles.iter().map(|p| {
+        let steps = p.rewards.iter().zip(p.eta);
+        discounted(&mut steps.map(|(&r, &e)| f64::from(r) - config.penalty * f64::from(e)))
+    });
+    let n = particles.len() as f64;
+    let share = |o: StepOutcome| particles.iter().filter(|p| p.outcome == o).count() as f64 / n;
+    CandidateScore {
+        mean_return: returns.iter().sum::<f64>() / n,
+        penalized_return: penalized.sum::<f64>() / n,
+        cvar_return: config.cvar_alpha.map(|alpha| lower_cvar(&returns, alpha)),
+        accumulated_eta: (particles.iter())
+            .map(|p| p.eta.iter().map(|&e| f64::from(e)).sum::<f64>())
+            .sum::<f64>()
+            / n,
+        max_eta: (particles.iter())
+            .flat_map(|p| p.seen_eta.iter().map(|&e| f64::from(e)))
+            .fold(0.0, f64::max),
+        truncated_at: (particles.iter())
+            .filter(|p| p.outcome == StepOutcome::Truncated)
+            .map(|p| p.kept)
+            .min(),
+        terminated: share(StepOutcome::Terminal),
+        diverged: share(StepOutcome::Diverged),
+    }
+}
+
+/// The mean of the lowest ⌈α·n⌉ of `values` (α in (0, 1]).
+fn lower_cvar(values: &[f64], alpha: f64) -> f64 {
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let k = ((alpha * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+    sorted[..k].iter().sum::<f64>() / k as f64
+}
+
+fn check(
+    starts: &[f32],
+    sequences: &[f32],
+    candidates: usize,
+    config: &ScoreConfig,
+    (obs_dim, act_dim): (usize, usize),
+) -> Result<(), PlanningError> {
+    let invalid = |message: String| Err(PlanningError::Invalid(message));
+    if config.horizon == 0 || config.particles == 0 || candidates == 0 {
+        return invalid("horizon, particles and candidates must each be at least 1".into());
+    }
+    if starts.is_empty() || !starts.len().is_multiple_of(obs_dim) {
+        return invalid(format!(
+            "starts hold {} values, not rows of {obs_dim}",
+            starts.len()
+        ));
+    }
+    let expected = starts.len() / obs_dim * candidates * config.horizon * act_dim;
+    if sequences.len() != expected {
+        return invalid(format!(
+            "sequences hold {} values; {} starts × {candidates} candidates × {} steps × {act_dim} \
+             actions are {expected}",
+            sequences.len(),
+            starts.len() / obs_dim,
+            config.horizon
+        ));
+    }
+    if !(config.discount > 0.0 && config.discount <= 1.0) {
+        return invalid(format!("discount {} is not in (0, 1]", config.discount));
+    }
+    if !(config.penalty.is_finite() && config.penalty >= 0.0) {
+        return invalid(format!("penalty {} is not a number ≥ 0", config.penalty));
+    }
+    if config.cvar_alpha.is_some_and(|a| !(a > 0.0 && a <= 1.0)) {
+        return invalid(format!(
+            "cvar_alpha {:?} is not in (0, 1]",
+            config.cvar_alpha
+        ));
+    }
+    if !(config.noise_scale.is_finite() && config.noise_scale >= 0.0) {
+        return invalid(format!(
+            "noise_scale {} is not a number ≥ 0",
+            config.noise_scale
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_lower_cvar_averages_the_worst_share() {
+        let returns = [4.0, -1.0, 2.0, 10.0, 0.0];
+        // ⌈0.4·5⌉ = 2 worst: −1 and 0.
+        assert_eq!(lower_cvar(&returns, 0.4), -0.5);
+        assert_eq!(lower_cvar(&returns, 0.01), -1.0);
+        assert_eq!(lower_cvar(&returns, 1.0), 3.0);
+    }
+}

@@ -1,0 +1,204 @@
+//! Scoring candidate action sequences (`planning::score_sequences`) against
+//! hand computations on a point mass whose every step is known: returns,
+//! their discount and η's penalty, termination, ε's truncation, and the CVaR
+//! over particles.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use nuno::envs::{Rules, SystemSpec};
+use nuno::planning::{CandidateScore, ScoreConfig, score_sequences};
+use nuno::shared::{BatchDynamics, BatchShape, Cancel, ModelStep};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+/// x′ = x + u + noise, η = |x| before the step.
+struct PointMass;
+
+impl BatchDynamics for PointMass {
+    fn shape(&self) -> BatchShape {
+        BatchShape {
+            obs_dim: 1,
+            act_dim: 1,
+            learns_reward: false,
+            dt: 1.0,
+        }
+    }
+    fn step(&self, states: &[f32], actions: &[f32], noise: &[f32]) -> ModelStep {
+        let next: Vec<f32> = (0..states.len())
+            .map(|i| states[i] + actions[i] + noise[i])
+            .collect();
+        ModelStep {
+            means: next.clone(),
+            next_states: next,
+            sigma: vec![1.0; states.len()],
+            h_eta: vec![0.0; states.len()],
+            eta: states.iter().map(|x| x.abs()).collect(),
+            truncation_signal: None,
+        }
+    }
+}
+
+/// The reward is the position reached; an episode ends outside [−5, 5].
+fn rules() -> Rules {
+    let text = "name = \"point\"\ndt = 1.0\nobservations = [\"x\"]\nactions = [\"u\"]\n\
+                action_low = [-10.0]\naction_high = [10.0]\n\
+                [reward]\nexpression = \"next_x\"\n\
+                [termination]\nbounds = { x = [-5.0, 5.0] }\n";
+    Rules::System(Arc::new(
+        SystemSpec::parse(text, Path::new("point.toml")).unwrap(),
+    ))
+}
+
+fn config(threshold: Option<f32>) -> ScoreConfig {
+    ScoreConfig {
+        horizon: 3,
+        particles: 2,
+        discount: 0.5,
+        penalty: 0.1,
+        cvar_alpha: None,
+        threshold,
+        noise_scale: 0.0,
+    }
+}
+
+/// Starts x = 0 and x = 1, two candidates each: [1, 1, 1] and [3, 3, 3]
+/// from 0; [−1, −1, −1] and [0, 0, 0] from 1.
+fn score(config: &ScoreConfig) -> Vec<CandidateScore> {
+    let starts = [0.0, 1.0];
+    let sequences = [
+        1.0, 1.0, 1.0, 3.0, 3.0, 3.0, -1.0, -1.0, -1.0, 0.0, 0.0, 0.0,
+    ];
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let cancel = Cancel::default();
+    score_sequences(
+        &PointMass,
+        &rules(),
+        &starts,
+        &sequences,
+        2,
+        config,
+        &mut rng,
+        &cancel,
+    )
+    .unwrap()
+}
+
+fn close(a: f64, b: f64) -> bool {
+    (a - b).abs() < 1e-6
+}
+
+#[test]
+fn scores_are_the_discounted_penalised_returns_worked_by_hand() {
+    let scores = score(&config(None));
+    assert_eq!(scores.len(), 4);
+    // From 0 by [1, 1, 1]: x = 1, 2, 3, η = 0, 1, 2: 1 + ½·2 + ¼·3 = 2.75;
+    // penalised 1 + ½·1.9 + ¼·2.8 = 2.65.
+    let s = scores[0];
+    assert!(
+        close(s.mean_return, 2.75) && close(s.penalized_return, 2.65),
+        "{s:?}"
+    );
+    assert!(
+        close(s.accumulated_eta, 3.0) && close(s.max_eta, 2.0),
+        "{s:?}"
+    );
+    assert_eq!(
+        (s.terminated, s.truncated_at, s.cvar_return),
+        (0.0, None, None)
+    );
+    // From 0 by [3, 3, 3]: x = 3, then 6 leaves [−5, 5]: that step is its
+    // last, kept as terminal: 3 + ½·6 = 6.
+    let s = scores[1];
+    assert!(
+        close(s.mean_return, 6.0) && close(s.accumulated_eta, 3.0),
+        "{s:?}"
+    );
+    assert_eq!(s.terminated, 1.0);
+    // From 1 by [−1, −1, −1]: x = 0, −1, −2: 0 − ½ − ½ = −1; η = 1, 0, 1.
+    let s = scores[2];
+    assert!(close(s.mean_return, -1.0) && close(s.max_eta, 1.0), "{s:?}");
+    assert!(close(s.penalized_return, -0.1 - 0.5 - 0.25 * 2.1), "{s:?}");
+    // From 1 by [0, 0, 0]: x stays 1: 1 + ½ + ¼; penalised 0.9 · 1.75.
+    let s = scores[3];
+    assert!(
+        close(s.mean_return, 1.75) && close(s.penalized_return, 1.575),
+        "{s:?}"
+    );
+}
+
+#[test]
+fn epsilon_truncates_before_the_step_that_passes_it() {
+    let scores = score(&config(Some(2.5)));
+    // Accumulated η reaches 3 > 2.5 at step 2 (0, 1, 2): that step is
+    // dropped, the return is what came before: 1 + ½·2.
+    assert_eq!(scores[0].truncated_at, Some(2));
+    assert!(close(scores[0].mean_return, 2.0), "{:?}", scores[0]);
+    // From 0 by [3, 3, 3], η = 0, 3: truncated at step 1, before its fall.
+    assert_eq!(scores[1].truncated_at, Some(1));
+    assert_eq!(scores[1].terminated, 0.0);
+    assert!(close(scores[1].mean_return, 3.0), "{:?}", scores[1]);
+    assert_eq!(scores[2].truncated_at, None);
+    assert_eq!(scores[3].truncated_at, Some(2));
+}
+
+#[test]
+fn the_cvar_is_the_mean_of_the_worst_particles_returns() {
+    let noisy = ScoreConfig {
+        particles: 8,
+        noise_scale: 1.0,
+        cvar_alpha: Some(1.0),
+        ..config(None)
+    };
+    let all = score(&noisy);
+    let worst = score(&ScoreConfig {
+        cvar_alpha: Some(0.25),
+        ..noisy
+    });
+    for (all, worst) in all.iter().zip(&worst) {
+        // The same seed gives the same particles.
+        assert_eq!(all.mean_return, worst.mean_return);
+        // α = 1 averages every particle; the worst quarter lies below.
+        assert!(close(all.cvar_return.unwrap(), all.mean_return), "{all:?}");
+        assert!(worst.cvar_return.unwrap() < all.mean_return, "{worst:?}");
+    }
+}
+
+#[test]
+fn mismatched_shapes_and_bad_settings_are_refused_by_name() {
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let cancel = Cancel::default();
+    let c = config(None);
+    let run = |starts: &[f32], sequences: &[f32], config: &ScoreConfig, rng: &mut ChaCha8Rng| {
+        score_sequences(
+            &PointMass,
+            &rules(),
+            starts,
+            sequences,
+            2,
+            config,
+            rng,
+            &cancel,
+        )
+        .unwrap_err()
+        .to_string()
+    };
+    let error = run(&[0.0], &[1.0; 5], &c, &mut rng);
+    assert!(
+        error.contains("sequences hold 5 values") && error.contains("are 6"),
+        "{error}"
+    );
+    let error = run(
+        &[0.0],
+        &[1.0; 6],
+        &ScoreConfig { discount: 0.0, ..c },
+        &mut rng,
+    );
+    assert!(error.contains("discount 0"), "{error}");
+    let bad_alpha = ScoreConfig {
+        cvar_alpha: Some(1.5),
+        ..c
+    };
+    let error = run(&[0.0], &[1.0; 6], &bad_alpha, &mut rng);
+    assert!(error.contains("cvar_alpha"), "{error}");
+}
