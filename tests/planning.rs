@@ -7,7 +7,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use nuno::envs::{Rules, SystemSpec};
-use nuno::planning::{CandidateScore, ScoreConfig, score_sequences};
+use nuno::planning::{CandidateScore, Candidates, ScoreConfig, score_sequences};
 use nuno::shared::{BatchDynamics, BatchShape, Cancel, ModelStep};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -71,17 +71,12 @@ fn score(config: &ScoreConfig) -> Vec<CandidateScore> {
     ];
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let cancel = Cancel::default();
-    score_sequences(
-        &PointMass,
-        &rules(),
-        &starts,
-        &sequences,
-        2,
-        config,
-        &mut rng,
-        &cancel,
-    )
-    .unwrap()
+    let candidates = Candidates {
+        starts: &starts,
+        sequences: &sequences,
+        per_start: 2,
+    };
+    score_sequences(&PointMass, &rules(), &candidates, config, &mut rng, &cancel).unwrap()
 }
 
 fn close(a: f64, b: f64) -> bool {
@@ -170,18 +165,14 @@ fn mismatched_shapes_and_bad_settings_are_refused_by_name() {
     let cancel = Cancel::default();
     let c = config(None);
     let run = |starts: &[f32], sequences: &[f32], config: &ScoreConfig, rng: &mut ChaCha8Rng| {
-        score_sequences(
-            &PointMass,
-            &rules(),
+        let candidates = Candidates {
             starts,
             sequences,
-            2,
-            config,
-            rng,
-            &cancel,
-        )
-        .unwrap_err()
-        .to_string()
+            per_start: 2,
+        };
+        score_sequences(&PointMass, &rules(), &candidates, config, rng, &cancel)
+            .unwrap_err()
+            .to_string()
     };
     let error = run(&[0.0], &[1.0; 5], &c, &mut rng);
     assert!(

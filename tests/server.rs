@@ -1647,3 +1647,144 @@ async fn step_and_rollout_sample_at_the_models_recorded_scale() {
     assert_eq!(rollout(None).await.noise_scale, scale);
     assert_eq!(rollout(Some(0.5)).await.noise_scale, 0.5);
 }
+
+/// Candidates `n` per start, each a scaled copy of [`actions`] so they differ.
+fn candidates(starts: usize, n: usize, h: usize) -> Vec<Vec<Vec<Vec<f32>>>> {
+    (0..starts)
+        .map(|b| {
+            (0..n)
+                .map(|c| {
+                    let scale = 1.0 + 0.3 * (b * n + c) as f32;
+                    let scaled = |a: Vec<f32>| a.into_iter().map(|x| x * scale).collect();
+                    actions(h).into_iter().map(scaled).collect()
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// `score` answers each candidate with the reduction of the rollouts the
+/// `rollout` route gives for the same starts (each once per candidate),
+/// actions and seed: discounted returns, penalised returns and the CVaR of
+/// the worst half, summed here from the rollout's own rewards.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn score_reduces_the_rollouts_of_its_candidates_to_one_answer_each() {
+    let server = Server::start(limits(), None).await;
+    let (h, n, p, gamma) = (5, 3, 4, 0.9f64);
+    let starts = upright(2);
+    let plans = candidates(2, n, h);
+    let request = json!({"states": starts, "actions": plans, "horizon": h, "particles": p,
+        "discount": gamma, "penalty": 0.5, "cvar_alpha": 0.5, "seed": 7});
+    let (status, body) = server
+        .post(&format!("/v1/models/{MODEL}/score"), &request)
+        .await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    assert_eq!(
+        (body["batch"].as_u64(), body["candidates"].as_u64()),
+        (Some(2), Some(3))
+    );
+
+    let tiled: Vec<Vec<f32>> = (starts.iter())
+        .flat_map(|s| std::iter::repeat_n(s.clone(), n))
+        .collect();
+    let flat: Vec<Vec<Vec<f32>>> = plans.into_iter().flatten().collect();
+    let rollout = json!({"states": tiled, "actions": flat, "horizon": h, "particles": p,
+        "penalty": 0.5, "seed": 7});
+    let (_, rolled) = server
+        .post(&format!("/v1/models/{MODEL}/rollout"), &rollout)
+        .await;
+    let rolled: RolloutResponse = serde_json::from_value(rolled).unwrap();
+    let discounted = |values: &[f32], length: usize| -> f64 {
+        let terms = values[..length].iter().enumerate();
+        terms
+            .map(|(k, &v)| gamma.powi(k as i32) * f64::from(v))
+            .sum()
+    };
+    for b in 0..2 {
+        for c in 0..n {
+            let particles = &rolled.trajectories[(b * n + c) * p..][..p];
+            let mut returns: Vec<f64> = (particles.iter())
+                .map(|t| discounted(&t.rewards, t.length))
+                .collect();
+            let penalized: f64 = (particles.iter())
+                .map(|t| discounted(&t.penalized_rewards, t.length))
+                .sum::<f64>()
+                / p as f64;
+            let mean = returns.iter().sum::<f64>() / p as f64;
+            returns.sort_by(f64::total_cmp);
+            let worst_half = (returns[0] + returns[1]) / 2.0;
+            let fell = particles.iter().filter(|t| t.terminal).count() as f64 / p as f64;
+            let s = &body["scores"][b][c];
+            let close = |field: &str, expected: f64| {
+                let got = s[field].as_f64().unwrap();
+                assert!(
+                    (got - expected).abs() < 1e-3 * (1.0 + expected.abs()),
+                    "{field}: {s}"
+                );
+            };
+            close("mean_return", mean);
+            close("penalized_return", penalized);
+            close("cvar_return", worst_half);
+            close("terminated", fell);
+        }
+    }
+}
+
+/// Shared candidates are each start's own, repeated; the answer's binary
+/// form holds the JSON's numbers; both or neither way of giving candidates,
+/// or starts with unequal candidate counts, are refused by name.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn shared_candidates_binary_answers_and_bad_score_requests() {
+    let server = Server::start(limits(), None).await;
+    let path = format!("/v1/models/{MODEL}/score");
+    let (h, n) = (4, 2);
+    let shared = candidates(1, n, h).remove(0);
+    let own = vec![shared.clone(), shared.clone()];
+    let base = json!({"states": upright(2), "horizon": h, "particles": 2, "seed": 3});
+    let with = |field: &str, value: &Value| {
+        let mut request = base.clone();
+        request[field] = value.clone();
+        request
+    };
+    let (status, by_start) = server.post(&path, &with("actions", &json!(own))).await;
+    assert_eq!(status, StatusCode::OK, "{by_start}");
+    let (_, by_shared) = server
+        .post(&path, &with("shared_actions", &json!(shared)))
+        .await;
+    assert_eq!(by_start["scores"], by_shared["scores"]);
+
+    let headers = [("accept", BINARY), ("content-type", "application/json")];
+    let body = with("actions", &json!(own)).to_string().into_bytes();
+    let answer = server.request("POST", &path, &headers, body).await;
+    assert_eq!(answer.status, StatusCode::OK);
+    let t = nuno::artifact::parse_safetensors(&answer.body, Path::new("answer")).unwrap();
+    assert_eq!(t["mean_return"].0, vec![2, n]);
+    for (i, value) in t["mean_return"].1.iter().enumerate() {
+        let json = by_start["scores"][i / n][i % n]["mean_return"]
+            .as_f64()
+            .unwrap();
+        assert!((f64::from(*value) - json).abs() < 1e-3 * (1.0 + json.abs()));
+    }
+    assert!(
+        t["cvar_return"].1.iter().all(|v| v.is_nan()),
+        "no CVaR asked"
+    );
+
+    let mut both = with("actions", &json!(own));
+    both["shared_actions"] = json!(shared);
+    let uneven = with("actions", &json!([shared.clone(), vec![shared[0].clone()]]));
+    for (request, needle) in [
+        (both, "exactly one"),
+        (base.clone(), "exactly one"),
+        (uneven, "`actions[1]` has 1 candidates, `actions[0]` has 2"),
+    ] {
+        let (status, body) = server.post(&path, &request).await;
+        assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{body}");
+        let message = body["error"]["message"]
+            .as_str()
+            .unwrap_or_default()
+            .to_string()
+            + body["error"].as_str().unwrap_or_default();
+        assert!(message.contains(needle), "{needle}: {body}");
+    }
+}

@@ -4,7 +4,7 @@
 
 mod score;
 
-pub use score::{CandidateScore, ScoreConfig, score_sequences};
+pub use score::{CandidateScore, Candidates, ScoreConfig, score_sequences};
 
 /// What a planning request got wrong.
 #[derive(Debug, thiserror::Error)]

@@ -57,21 +57,32 @@ pub struct CandidateScore {
     pub diverged: f64,
 }
 
-/// Scores `candidates` action sequences from each of the start states:
-/// `starts` is `[B, obs_dim]`, `sequences` `[B, candidates, H, act_dim]`;
-/// the answer is `[B, candidates]`, row-major.
-#[allow(clippy::too_many_arguments)]
+/// The sequences to score and where they start.
+#[derive(Debug, Clone, Copy)]
+pub struct Candidates<'a> {
+    /// Start states, `[B, obs_dim]`.
+    pub starts: &'a [f32],
+    /// `[B, per_start, H, act_dim]`: each start's candidates.
+    pub sequences: &'a [f32],
+    pub per_start: usize,
+}
+
+/// Scores every candidate from its start state; the answer is
+/// `[B, per_start]`, row-major.
 pub fn score_sequences(
     dynamics: &dyn BatchDynamics,
     rules: &Rules,
-    starts: &[f32],
-    sequences: &[f32],
-    candidates: usize,
+    candidates: &Candidates,
     config: &ScoreConfig,
     rng: &mut ChaCha8Rng,
     cancel: &Cancel,
 ) -> Result<Vec<CandidateScore>, PlanningError> {
     let (obs_dim, act_dim) = (dynamics.obs_dim(), dynamics.act_dim());
+    let Candidates {
+        starts,
+        sequences,
+        per_start: candidates,
+    } = *candidates;
     check(starts, sequences, candidates, config, (obs_dim, act_dim))?;
     // Each start once per candidate: the rollout's starts are the candidates.
     let tiled: Vec<f32> = starts

@@ -201,6 +201,7 @@ fn nullable_answers(spec: &mut Value) {
     for answer in [
         "StepResponse",
         "Trajectory",
+        "CandidateScore",
         "ActResponse",
         "ValidateResponse",
     ] {
@@ -223,6 +224,16 @@ fn state_limits(spec: &mut Value, limits: &Limits) {
             "maximum",
             limits.max_particles,
         ),
+        ("ScoreRequest", "states", "maxItems", limits.max_batch),
+        ("ScoreRequest", "actions", "maxItems", limits.max_batch),
+        (
+            "ScoreRequest",
+            "shared_actions",
+            "maxItems",
+            limits.max_batch,
+        ),
+        ("ScoreRequest", "horizon", "maximum", limits.max_horizon),
+        ("ScoreRequest", "particles", "maximum", limits.max_particles),
         ("ActRequest", "states", "maxItems", limits.max_batch),
         ("ValidateRequest", "actions", "maxItems", limits.max_horizon),
         (
@@ -240,10 +251,24 @@ fn state_limits(spec: &mut Value, limits: &Limits) {
     ];
     let schemas = &mut spec["components"]["schemas"];
     // One truncation rule at a time (null is the same as absent).
-    schemas["RolloutRequest"]["not"] = json!({
+    let one_rule = json!({
         "required": ["alpha", "threshold"],
         "properties": { "alpha": { "type": "number" }, "threshold": { "type": "number" } },
     });
+    schemas["RolloutRequest"]["not"] = one_rule.clone();
+    schemas["ScoreRequest"]["not"] = one_rule;
+    // Exactly one of the two ways to give candidates; each start's no more
+    // candidates than a batch has rows.
+    let given =
+        |field: &str| json!({ "required": [field], "properties": { field: { "type": "array" } } });
+    schemas["ScoreRequest"]["oneOf"] = json!([given("actions"), given("shared_actions")]);
+    // Array keywords hold only when the field is an array (null passes them).
+    let score = &mut schemas["ScoreRequest"]["properties"];
+    score["shared_actions"]["minItems"] = json!(1);
+    let per_start = &mut score["actions"];
+    per_start["minItems"] = json!(1);
+    per_start["items"]["minItems"] = json!(1);
+    per_start["items"]["maxItems"] = json!(limits.max_batch);
     for (schema, property, keyword, limit) in stated {
         let property = &mut schemas[schema]["properties"][property];
         debug_assert!(

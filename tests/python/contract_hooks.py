@@ -30,6 +30,10 @@ SCHEMA_CANNOT_STATE = [
     re.compile(r"`states` has \d+ rows but `actions` has \d+"),
     re.compile(r"`actions` has \d+ sequences for \d+ start states"),
     re.compile(r"`actions\[\d+\]` has \d+ steps, the horizon is \d+"),
+    # `score`: candidates per start, and each candidate's steps.
+    re.compile(r"`actions` has candidates for \d+ start states, `states` has \d+"),
+    re.compile(r"`actions\[\d+\]` has \d+ candidates, `actions\[0\]` has \d+"),
+    re.compile(r"`(shared_actions|actions\[\d+\])\[\d+\]` has \d+ steps, the horizon is \d+"),
     re.compile(r"input `\w+` has shape \[[^\]]*\] but \d+ values; expected \[\d+, \d+\]"),
     re.compile(r"`\w+` has \d+ values, not a whole number of rows of width \d+"),
     re.compile(r"`states` and `actions` differ in rows"),
@@ -81,6 +85,21 @@ def map_case(context, case):
         body["actions"] = _rows(_sized(actions, batch, [0.0] * ACT_DIM), ACT_DIM)
     elif path.endswith("/validate"):
         body["actions"] = _rows(actions, ACT_DIM)
+    elif path.endswith("/score"):
+        horizon = body.get("horizon")
+        steps = horizon if isinstance(horizon, int) else 0
+        sequence = [[0.0] * ACT_DIM] * steps
+
+        def candidates(sequences, count):
+            return [_rows(_sized(c, steps, [0.0] * ACT_DIM), ACT_DIM) for c in _sized(sequences, count, sequence)]
+
+        if isinstance(actions, list):
+            first = actions[0] if actions and isinstance(actions[0], list) else []
+            count = max(len(first), 1)
+            body["actions"] = [candidates(c, count) for c in _sized(actions, batch, [sequence])]
+        shared = body.get("shared_actions")
+        if isinstance(shared, list):
+            body["shared_actions"] = candidates(shared, len(shared))
     elif path.endswith("/rollout") and isinstance(actions, list):
         horizon = body.get("horizon")
         sequence = [[0.0] * ACT_DIM] * (horizon if isinstance(horizon, int) else 0)

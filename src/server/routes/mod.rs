@@ -10,6 +10,7 @@ mod kserve;
 mod kserve_binary;
 mod models;
 mod rollout;
+mod score;
 mod step;
 
 pub use act::{ActRequest, ActResponse};
@@ -22,6 +23,7 @@ pub use kserve::{
 };
 pub use models::{ModelDetail, ModelList, ModelSummary};
 pub use rollout::{RolloutRequest, RolloutResponse, Trajectory};
+pub use score::{ScoreRequest, ScoreResponse};
 pub use step::{StepRequest, StepResponse};
 
 use utoipa_axum::router::OpenApiRouter;
@@ -38,6 +40,7 @@ pub(super) fn api_routes() -> OpenApiRouter<AppState> {
         .routes(routes!(models::get_model))
         .routes(routes!(step::step))
         .routes(routes!(rollout::rollout))
+        .routes(routes!(score::score))
         .routes(routes!(act::act))
         .routes(routes!(evaluate::validate))
         .routes(routes!(evaluate::evaluate))

@@ -287,7 +287,7 @@ fn flatten_sequences(
 
 /// Where rollouts truncate: the request's own `threshold`, or the model's
 /// ε(h, α) for its `alpha`; neither, never.
-fn resolve_threshold(
+pub(super) fn resolve_threshold(
     threshold: Option<f32>,
     alpha: Option<f64>,
     horizon: usize,
