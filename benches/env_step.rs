@@ -18,7 +18,7 @@ const STEPS: usize = 100_000;
 const EVAL_EPISODES: usize = 64;
 
 fn rust_steps_per_second(name: TaskName) -> f64 {
-    let mut task = MujocoTask::new(TaskConfig::d4rl(name)).expect("task");
+    let mut task = MujocoTask::new(&TaskConfig::d4rl(name)).expect("task");
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let actions: Vec<Vec<f64>> = (0..STEPS)
         .map(|_| {
@@ -50,7 +50,7 @@ fn gymnasium_steps_per_second(name: TaskName) -> Option<f64> {
 
 fn evaluator_steps_per_second(name: TaskName) -> f64 {
     let config = EvaluationConfig::new(TaskConfig::d4rl(name), EVAL_EPISODES, 0);
-    let task = MujocoTask::new(config.task).expect("task");
+    let task = MujocoTask::new(&config.task).expect("task");
     let (low, high) = task.action_bounds();
     let f32s = |v: Vec<f64>| v.into_iter().map(|x| x as f32).collect();
     let policy = RandomPolicy::new(task.obs_dim(), f32s(low), f32s(high));

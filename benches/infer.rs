@@ -220,7 +220,7 @@ fn main() {
     let fused_policy = FusedActor::new(&burn_policy);
     let policies: [&dyn BatchPolicy; 2] = [&burn_policy, &fused_policy];
     let rules = Rules::from(TaskRules::new(
-        TaskConfig::d4rl(TaskName::Hopper),
+        &TaskConfig::d4rl(TaskName::Hopper),
         hopper.spec.dt,
     ));
     let batch = 50_000;
@@ -280,7 +280,7 @@ fn system_rules(
 ) {
     let spec = SystemSpec::parse(HOPPER_AS_DATA, std::path::Path::new("bench")).unwrap();
     let compiled = Rules::from(TaskRules::new(
-        TaskConfig::d4rl(TaskName::Hopper),
+        &TaskConfig::d4rl(TaskName::Hopper),
         hopper.spec.dt,
     ));
     let as_data = Rules::System(std::sync::Arc::new(spec.clone()));

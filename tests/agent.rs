@@ -256,7 +256,7 @@ impl BatchDynamics for DivergesWhereMarked {
 #[test]
 fn a_diverging_model_ends_its_rollouts_and_keeps_nothing_that_is_not_finite() {
     let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(task, spec.dt));
+    let rules = Rules::from(TaskRules::new(&task, spec.dt));
     let dynamics = DivergesWhereMarked {
         inner: ConstantEta { spec: spec.clone() },
         calls: Default::default(),
@@ -326,7 +326,7 @@ impl BatchPolicy for Constant {
 
 fn hopper() -> (TaskConfig, DynamicsSpec) {
     let task = TaskConfig::d4rl(TaskName::Hopper);
-    let probe = MujocoTask::new(task).unwrap();
+    let probe = MujocoTask::new(&task).unwrap();
     let spec = DynamicsSpec {
         obs_dim: probe.obs_dim(),
         act_dim: probe.act_dim(),
@@ -339,7 +339,7 @@ fn hopper() -> (TaskConfig, DynamicsSpec) {
 #[test]
 fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
     let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(task, spec.dt));
+    let rules = Rules::from(TaskRules::new(&task, spec.dt));
     let dynamics = ConstantEta { spec: spec.clone() };
     let policy = Constant(vec![0.5, -0.5, 0.25], spec.obs_dim);
     // An upright hopper: z = 1.25, everything else 0.
@@ -418,8 +418,8 @@ fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
 /// Steps `task` 3000 times with random actions, checking the known terminal rule
 /// on every step; returns the mean |known reward − simulator reward|.
 fn known_rules_against_the_simulator(task: TaskConfig) -> f64 {
-    let mut sim = MujocoTask::new(task).unwrap();
-    let rules = Rules::from(TaskRules::new(task, sim.dt()));
+    let mut sim = MujocoTask::new(&task).unwrap();
+    let rules = Rules::from(TaskRules::new(&task, sim.dt()));
     let mut obs = sim.reset(Some(1));
     let mut rng = ChaCha8Rng::seed_from_u64(2);
     let (mut steps, mut reward_error) = (0, 0.0f64);
@@ -555,7 +555,7 @@ fn the_model_buffer_holds_its_factor_of_rollouts() {
 /// control cost 1e-3·‖a‖²).
 #[test]
 fn the_known_reward_reads_the_velocity_it_is_told() {
-    let rules = Rules::from(TaskRules::of_task(TaskConfig::d4rl(TaskName::Hopper)).unwrap());
+    let rules = Rules::from(TaskRules::of_task(&TaskConfig::d4rl(TaskName::Hopper)).unwrap());
     let mut obs = vec![0.0f32; 11];
     obs[0] = 1.25;
     obs[5] = 1.0;
@@ -570,7 +570,7 @@ fn the_known_reward_reads_the_velocity_it_is_told() {
         .reward(&obs, &action, &next);
     assert!((mean - (2.0 + 1.0 - cost)).abs() < 1e-6, "{mean}");
     // Where root x is observed (NeoRL), the reward is its finite difference either way.
-    let neorl = Rules::from(TaskRules::of_task(TaskConfig::neorl(TaskName::Hopper)).unwrap());
+    let neorl = Rules::from(TaskRules::of_task(&TaskConfig::neorl(TaskName::Hopper)).unwrap());
     let (mut x, mut x_next) = (vec![0.0f32; 12], vec![0.0f32; 12]);
     (x[1], x_next[1], x_next[0]) = (1.25, 1.25, 0.016);
     let moved = neorl.with_forward_velocity(ForwardVelocity::Mean);
@@ -802,7 +802,7 @@ fn sde_rollouts_with_truncation_keep_nothing_past_epsilon() {
     let (model, metadata) = shipped_model();
     let dataset = small_dataset();
     let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(task, spec.dt));
+    let rules = Rules::from(TaskRules::new(&task, spec.dt));
     let device = Device::flex();
     let actor = seeded_init(&device, 1, || {
         Sac::new(
@@ -860,7 +860,7 @@ fn particles_equal_the_model_step_on_repeated_rows() {
     use rand::Rng;
     let (model, metadata) = shipped_model();
     let rules = Rules::from(TaskRules::new(
-        TaskConfig::d4rl(TaskName::Hopper),
+        &TaskConfig::d4rl(TaskName::Hopper),
         metadata.spec.dt,
     ));
     let (batch, particles, obs_dim, act_dim) = (5, 7, 11, 3);
@@ -973,7 +973,7 @@ fn cancelled_rollouts_and_evaluations_stop_at_the_next_step() {
     use nuno::shared::cancel::Cancelled;
     let (model, metadata) = shipped_model();
     let rules = Rules::from(TaskRules::new(
-        TaskConfig::d4rl(TaskName::Hopper),
+        &TaskConfig::d4rl(TaskName::Hopper),
         metadata.spec.dt,
     ));
     let policy = CancelAt {
@@ -1039,7 +1039,7 @@ impl BatchDynamics for TwoSignals {
 #[test]
 fn rollouts_penalise_eta_but_truncate_on_the_models_own_signal() {
     let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(task, spec.dt));
+    let rules = Rules::from(TaskRules::new(&task, spec.dt));
     let dynamics = TwoSignals {
         inner: ConstantEta { spec: spec.clone() },
     };
@@ -1137,7 +1137,7 @@ fn a_threshold_computed_through_rollouts_agrees_with_the_models_own_table() {
     let (model, _) = shipped_model();
     let dataset = small_dataset();
     let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(task, spec.dt));
+    let rules = Rules::from(TaskRules::new(&task, spec.dt));
     let config = nuno::sde::ThresholdConfig::new()
         .with_horizons(vec![5])
         .with_alphas(vec![0.5, 0.9])

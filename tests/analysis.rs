@@ -71,7 +71,7 @@ fn data() -> Dataset {
 #[test]
 fn prediction_error_of_a_no_change_model_is_the_datas_own_drift() {
     let data = data();
-    let rules = Rules::from(TaskRules::of_task(task()).unwrap());
+    let rules = Rules::from(TaskRules::of_task(&task()).unwrap());
     let scale = nuno::data::Stats::fit(data.observations.view(), &Default::default()).std;
     let horizon = 5;
     let config = PredictionConfig {
@@ -159,16 +159,16 @@ fn uncertainty_is_probed_at_dataset_random_and_policy_actions() {
 fn exploitation_compares_the_real_task_with_the_model_and_its_penalty() {
     // Actions exact in f32, so the task gets the same numbers from both.
     let policy = Constant(vec![0.25, -0.125, 0.5]);
-    let rules = Rules::from(TaskRules::of_task(task()).unwrap());
+    let rules = Rules::from(TaskRules::of_task(&task()).unwrap());
     let config = ExploitationConfig {
         starts: 3,
         horizon: 40,
         penalty: 2.0,
         seed: 5,
     };
-    let result = exploitation(&Stationary, &rules, task(), &policy, &config).unwrap();
+    let result = exploitation(&Stationary, &rules, &task(), &policy, &config).unwrap();
     // The real task by hand from the same resets.
-    let mut env = MujocoTask::new(task()).unwrap();
+    let mut env = MujocoTask::new(&task()).unwrap();
     let mut per_step = vec![0.0f64; 40];
     for i in 0..3 {
         env.reset(Some(5 + i));

@@ -476,12 +476,12 @@ fn split_by_trajectory_keeps_trajectories_whole() {
 
 #[test]
 fn a_task_probe_matches_generated_widths() {
-    let task = MujocoTask::new(TaskConfig::neorl(TaskName::Walker2d)).unwrap();
+    let task = MujocoTask::new(&TaskConfig::neorl(TaskName::Walker2d)).unwrap();
     let policy = PortableActor::rlkit_random(task.obs_dim(), task.act_dim(), &[16], 0);
-    let config = GenerateConfig::new(*task.config(), "random", 50, 0);
+    let config = GenerateConfig::new(task.config().clone(), "random", 50, 0);
     let dataset = generate(&config, &policy, "test", &|_| {}).unwrap();
     assert_eq!(dataset.obs_dim(), 18);
     dataset
-        .check_system(&System::Task(*task.config()), Path::new("generated"))
+        .check_system(&System::Task(task.config().clone()), Path::new("generated"))
         .unwrap();
 }

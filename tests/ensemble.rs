@@ -475,7 +475,7 @@ fn a_saved_ensemble_loads_to_the_same_steps_and_refuses_damage() {
     let task = TaskConfig::d4rl(TaskName::Hopper);
     let policy = PortableActor::rlkit_random(11, 3, &[32, 32], 0);
     let hopper = generate(
-        &GenerateConfig::new(task, "random", 1000, 0),
+        &GenerateConfig::new(task.clone(), "random", 1000, 0),
         &policy,
         "test",
         &|_| {},
@@ -497,14 +497,15 @@ fn a_saved_ensemble_loads_to_the_same_steps_and_refuses_damage() {
         dir.path(),
         &fitted(),
         &small_config(),
-        &System::Task(task),
+        &System::Task(task.clone()),
         None,
     )
     .unwrap_err()
     .to_string();
     assert!(error.contains("takes 3 inputs"), "{error}");
-    let saved = nuno::artifact::save_ensemble(dir.path(), &fit, &config, &System::Task(task), None)
-        .unwrap();
+    let saved =
+        nuno::artifact::save_ensemble(dir.path(), &fit, &config, &System::Task(task.clone()), None)
+            .unwrap();
     assert_eq!(
         (saved.kind.as_str(), saved.obs_dim, saved.act_dim),
         ("gaussian-ensemble", 11, 3)
@@ -542,7 +543,7 @@ fn a_saved_ensemble_loads_to_the_same_steps_and_refuses_damage() {
         folder,
         nuno::artifact::ModelFolder::GaussianEnsemble { .. }
     ));
-    assert_eq!(folder.system().unwrap(), Some(System::Task(task)));
+    assert_eq!(folder.system().unwrap(), Some(System::Task(task.clone())));
     for kernel in [nuno::infer::Kernel::Burn, nuno::infer::Kernel::Fused] {
         let stepped = folder.dynamics(kernel).step(&states, &actions, &noise);
         for (a, b) in stepped.next_states.iter().zip(&step(&fit).next_states) {

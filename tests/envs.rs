@@ -26,7 +26,7 @@ fn dimensions_and_timesteps_are_d4rl_and_neorl() {
         (TaskName::InvertedPendulum, 4, 4, 1, 3.0, 0.04),
         (TaskName::Ant, 27, 29, 8, 1.0, 0.05),
     ] {
-        let task = MujocoTask::new(TaskConfig::d4rl(name)).unwrap();
+        let task = MujocoTask::new(&TaskConfig::d4rl(name)).unwrap();
         assert_eq!((task.obs_dim(), task.act_dim()), (d4rl, act), "{name}");
         assert!((task.dt() - dt).abs() < 1e-12, "{name} dt {}", task.dt());
         assert_eq!(task.action_bounds(), (vec![-limit; act], vec![limit; act]));
@@ -37,7 +37,7 @@ fn dimensions_and_timesteps_are_d4rl_and_neorl() {
             (spec.nq, spec.nv),
             "{name} widths"
         );
-        let mut task = MujocoTask::new(TaskConfig::neorl(name)).unwrap();
+        let mut task = MujocoTask::new(&TaskConfig::neorl(name)).unwrap();
         assert_eq!(task.obs_dim(), neorl, "{name} NeoRL");
         assert_eq!(task.reset(Some(0)).len(), neorl);
     }
@@ -90,8 +90,8 @@ fn state_split_pairs_each_position_with_its_velocity() {
         (TaskName::Ant, 0),
     ] {
         for config in [TaskConfig::d4rl(name), TaskConfig::neorl(name)] {
-            let from = config.layout.qpos_from(name);
-            let task = MujocoTask::new(config).unwrap();
+            let from = config.layout.qpos_from(name.spec());
+            let task = MujocoTask::new(&config).unwrap();
             let split = task.state_split();
             let hinges: Vec<usize> = (task.hinge_qpos().iter())
                 .filter(|&&q| q >= from && q - from < split.positions.len())
@@ -105,7 +105,7 @@ fn state_split_pairs_each_position_with_its_velocity() {
     // The pairing is physical: along a trajectory, each observed position's finite
     // difference correlates best, and strongly, with its paired velocity.
     for name in TaskName::ALL {
-        let mut task = MujocoTask::new(TaskConfig::d4rl(name)).unwrap();
+        let mut task = MujocoTask::new(&TaskConfig::d4rl(name)).unwrap();
         let split = task.state_split();
         let mut observations = vec![task.reset(Some(3))];
         for t in 0..40 {
@@ -167,8 +167,8 @@ fn normalised_scores_use_d4rl_reference_returns() {
 
 #[test]
 fn resets_are_seeded_and_noisy() {
-    let mut a = MujocoTask::new(TaskConfig::d4rl(TaskName::HalfCheetah)).unwrap();
-    let mut b = MujocoTask::new(TaskConfig::d4rl(TaskName::HalfCheetah)).unwrap();
+    let mut a = MujocoTask::new(&TaskConfig::d4rl(TaskName::HalfCheetah)).unwrap();
+    let mut b = MujocoTask::new(&TaskConfig::d4rl(TaskName::HalfCheetah)).unwrap();
     assert_eq!(a.reset(Some(7)), b.reset(Some(7)));
     assert_ne!(a.reset(Some(7)), a.reset(Some(8)));
     // Without a seed the generator moves on: each reset draws a new start
@@ -193,7 +193,7 @@ fn resets_are_seeded_and_noisy() {
 
 #[test]
 fn time_limit_truncates_without_terminating() {
-    let mut task = MujocoTask::new(TaskConfig::d4rl(TaskName::HalfCheetah)).unwrap();
+    let mut task = MujocoTask::new(&TaskConfig::d4rl(TaskName::HalfCheetah)).unwrap();
     task.reset(Some(0));
     let action = vec![0.1; task.act_dim()];
     for step in 1..=1000 {
@@ -205,7 +205,7 @@ fn time_limit_truncates_without_terminating() {
 
 #[test]
 fn bad_actions_and_states_are_refused_with_what_was_wrong() {
-    let mut task = MujocoTask::new(TaskConfig::d4rl(TaskName::Hopper)).unwrap();
+    let mut task = MujocoTask::new(&TaskConfig::d4rl(TaskName::Hopper)).unwrap();
     task.reset(Some(0));
     let err = task.step(&[0.0, 0.0]).unwrap_err();
     assert!(matches!(
@@ -245,7 +245,7 @@ fn bad_actions_and_states_are_refused_with_what_was_wrong() {
 #[test]
 fn evaluator_is_deterministic_and_independent_of_thread_count() {
     let config = EvaluationConfig::new(TaskConfig::d4rl(TaskName::Hopper), 13, 5);
-    let task = MujocoTask::new(config.task).unwrap();
+    let task = MujocoTask::new(&config.task).unwrap();
     let policy = random_policy(&task);
     let run = |threads: usize| {
         rayon::ThreadPoolBuilder::new()
@@ -290,8 +290,8 @@ impl BatchPolicy for Still {
 fn episode_seeds_wrap_around_the_largest_seed() {
     // Episode i resets with seed + i mod 2⁶⁴: from u64::MAX the second episode is seed 0's.
     let hopper = TaskConfig::d4rl(TaskName::Hopper);
-    let last = evaluate(&Still, &EvaluationConfig::new(hopper, 2, u64::MAX)).unwrap();
-    let zero = evaluate(&Still, &EvaluationConfig::new(hopper, 1, 0)).unwrap();
+    let last = evaluate(&Still, &EvaluationConfig::new(hopper.clone(), 2, u64::MAX)).unwrap();
+    let zero = evaluate(&Still, &EvaluationConfig::new(hopper.clone(), 1, 0)).unwrap();
     assert_eq!(last.returns[1], zero.returns[0]);
     assert_ne!(last.returns[0], last.returns[1]);
 }
@@ -314,10 +314,10 @@ impl BatchPolicy for Broken {
 #[test]
 fn evaluator_refuses_mismatched_policies() {
     let hopper = TaskConfig::d4rl(TaskName::Hopper);
-    let walker = MujocoTask::new(TaskConfig::d4rl(TaskName::Walker2d)).unwrap();
+    let walker = MujocoTask::new(&TaskConfig::d4rl(TaskName::Walker2d)).unwrap();
     let err = evaluate(
         &random_policy(&walker),
-        &EvaluationConfig::new(hopper, 2, 0),
+        &EvaluationConfig::new(hopper.clone(), 2, 0),
     )
     .unwrap_err();
     assert!(
@@ -331,7 +331,7 @@ fn evaluator_refuses_mismatched_policies() {
         ),
         "{err}"
     );
-    let err = evaluate(&Broken, &EvaluationConfig::new(hopper, 2, 0)).unwrap_err();
+    let err = evaluate(&Broken, &EvaluationConfig::new(hopper.clone(), 2, 0)).unwrap_err();
     assert!(
         matches!(
             err,
@@ -343,6 +343,6 @@ fn evaluator_refuses_mismatched_policies() {
         ),
         "{err}"
     );
-    let err = evaluate(&Broken, &EvaluationConfig::new(hopper, 0, 0)).unwrap_err();
+    let err = evaluate(&Broken, &EvaluationConfig::new(hopper.clone(), 0, 0)).unwrap_err();
     assert!(matches!(err, EnvError::NoEpisodes));
 }

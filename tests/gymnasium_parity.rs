@@ -44,7 +44,7 @@ struct Episodes<T> {
 
 /// Runs one seeded random-action episode in Rust and records it.
 fn run_episode(config: TaskConfig, seed: u64) -> (Episode, Outcome) {
-    let mut task = MujocoTask::new(config).unwrap();
+    let mut task = MujocoTask::new(&config).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let first_observation = task.reset(Some(seed));
     let (init_qpos, init_qvel) = task.initial_state();
@@ -55,7 +55,7 @@ fn run_episode(config: TaskConfig, seed: u64) -> (Episode, Outcome) {
         ..Outcome::default()
     };
     let mut episode = Episode {
-        task: config.name,
+        task: config.task.built_in().expect("a built-in task"),
         layout: config.layout,
         max_episode_steps: config.max_episode_steps,
         qpos: task.qpos().to_vec(),

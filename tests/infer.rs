@@ -58,7 +58,7 @@ fn normal(n: usize, rng: &mut ChaCha8Rng) -> Vec<f32> {
 }
 
 fn hopper_spec() -> DynamicsSpec {
-    let task = MujocoTask::new(TaskConfig::d4rl(TaskName::Hopper)).unwrap();
+    let task = MujocoTask::new(&TaskConfig::d4rl(TaskName::Hopper)).unwrap();
     DynamicsSpec {
         obs_dim: 11,
         act_dim: 3,
@@ -289,7 +289,7 @@ fn fused_ten_step_rollouts_match_burn_with_fixed_noise() {
     let fused_policy = FusedActor::new(&burn_policy);
     let fused_model = FusedSde::new(&model);
     let rules = Rules::from(TaskRules::new(
-        TaskConfig::d4rl(TaskName::Hopper),
+        &TaskConfig::d4rl(TaskName::Hopper),
         model.spec().dt,
     ));
     let data = hopper_data();

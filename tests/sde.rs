@@ -26,7 +26,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 fn hopper_spec() -> DynamicsSpec {
-    let task = MujocoTask::new(TaskConfig::d4rl(TaskName::Hopper)).unwrap();
+    let task = MujocoTask::new(&TaskConfig::d4rl(TaskName::Hopper)).unwrap();
     DynamicsSpec {
         obs_dim: task.obs_dim(),
         act_dim: task.act_dim(),

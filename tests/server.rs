@@ -322,7 +322,7 @@ async fn step_matches_the_library_in_json_and_binary() {
         }
         assert!((r.eta[b] - direct.eta[b]).abs() < 1e-6);
         let rules = Rules::from(TaskRules::new(
-            metadata.provenance.task.unwrap(),
+            metadata.provenance.task.as_ref().unwrap(),
             metadata.spec.dt,
         ));
         for p in 0..3 {
@@ -1475,7 +1475,7 @@ async fn a_gaussian_ensemble_is_served_by_the_same_routes() {
     let task = TaskConfig::d4rl(TaskName::Hopper);
     let policy = nuno::agent::PortableActor::rlkit_random(11, 3, &[32, 32], 0);
     let data = nuno::data::generate(
-        &nuno::data::GenerateConfig::new(task, "random", 1000, 0),
+        &nuno::data::GenerateConfig::new(task.clone(), "random", 1000, 0),
         &policy,
         "test",
         &|_| {},

@@ -13,7 +13,7 @@ use nuno::sde::{
 
 #[test]
 fn wgpu_matches_cpu_and_fits() {
-    let task = MujocoTask::new(TaskConfig::d4rl(TaskName::Hopper)).unwrap();
+    let task = MujocoTask::new(&TaskConfig::d4rl(TaskName::Hopper)).unwrap();
     let spec = DynamicsSpec {
         obs_dim: 11,
         act_dim: 3,

@@ -24,7 +24,7 @@ pub struct Hopper {
 impl Hopper {
     /// 20,000 transitions of a random network policy, seed 0.
     pub fn generate() -> Self {
-        let task = MujocoTask::new(TaskConfig::d4rl(TaskName::Hopper)).expect("task");
+        let task = MujocoTask::new(&TaskConfig::d4rl(TaskName::Hopper)).expect("task");
         let spec = DynamicsSpec {
             obs_dim: OBS,
             act_dim: ACT,

@@ -140,7 +140,7 @@ impl OnlineSac {
         device: &Device,
     ) -> Result<Self, AgentError> {
         config.validate()?;
-        let env = MujocoTask::new(task)?;
+        let env = MujocoTask::new(&task)?;
         let (low, high) = env.action_bounds();
         let mut actor = ActorConfig::new(
             env.obs_dim(),
@@ -178,7 +178,7 @@ impl OnlineSac {
     pub fn run_interval(&mut self) -> Result<OnlineRecord, AgentError> {
         let c = &self.config;
         let end = (self.step + c.checkpoint_every).min(c.steps);
-        let mut env = MujocoTask::new(self.task)?;
+        let mut env = MujocoTask::new(&self.task)?;
         self.recording = Recording::for_task(&env);
         let (low, high) = env.action_bounds();
         // A uniform action's log-density on the box.
@@ -283,7 +283,11 @@ impl OnlineSac {
         if self.config.eval_episodes == 0 {
             return Ok(EvalSummary::default());
         }
-        let config = EvaluationConfig::new(self.task, self.config.eval_episodes, self.config.seed);
+        let config = EvaluationConfig::new(
+            self.task.clone(),
+            self.config.eval_episodes,
+            self.config.seed,
+        );
         let policy = FusedActor::new(&self.policy(ActionMode::Deterministic));
         Ok(EvalSummary::from(&evaluate(&policy, &config)?))
     }

@@ -17,7 +17,7 @@ use super::policy::{PolicyMetadata, load_policy};
 use super::safetensors_file::write_bytes;
 use crate::agent::Actor;
 use crate::data::{BehaviourLevel, BehaviourPick};
-use crate::envs::{MujocoTask, TaskName};
+use crate::envs::{MujocoTask, TaskConfig, TaskName};
 
 pub const BEHAVIOUR_SCHEMA_VERSION: u32 = 1;
 const LEVELS: &str = "levels.json";
@@ -53,6 +53,18 @@ pub fn behaviour_dir(root: &Path, task: TaskName) -> PathBuf {
     root.join(task.as_str())
 }
 
+/// The built-in task a behaviour policy acts in (behaviour policies are
+/// D4RL's and NeoRL's recipes, which only the built-in tasks have).
+fn built_in(task: TaskConfig, run: &Path) -> Result<TaskName, ArtifactError> {
+    task.task.built_in().ok_or_else(|| {
+        ArtifactError::Invalid(format!(
+            "{}: behaviour policies are picked for the built-in tasks, not for `{}`",
+            run.display(),
+            task.task
+        ))
+    })
+}
+
 /// Copies `policy` (from `run`) into `root` as `level`, and records the pick.
 pub fn save_behaviour(
     root: &Path,
@@ -61,7 +73,7 @@ pub fn save_behaviour(
     level: BehaviourLevel,
     pick: &BehaviourPick,
 ) -> Result<PathBuf, ArtifactError> {
-    let task = policy.metadata.simulated_task(run)?.name;
+    let task = built_in(policy.metadata.simulated_task(run)?, run)?;
     let dir = behaviour_dir(root, task);
     std::fs::create_dir_all(&dir).map_err(|e| ArtifactError::io(&dir, e))?;
     let index_path = dir.join(LEVELS);
@@ -124,14 +136,14 @@ pub fn load_behaviour(
     })?;
     let (actor, metadata) = load_policy(&dir, level.as_str(), device)?;
     let policy_task = metadata.simulated_task(&dir)?;
-    if policy_task.name != task || index.task != task {
+    if policy_task.task != task || index.task != task {
         return Err(ArtifactError::Invalid(format!(
             "{}: `{level}` is a policy for {}, not {task}",
             dir.display(),
-            policy_task.name
+            policy_task.task
         )));
     }
-    let probe = MujocoTask::new(policy_task).map_err(|e| ArtifactError::Invalid(e.to_string()))?;
+    let probe = MujocoTask::new(&policy_task).map_err(|e| ArtifactError::Invalid(e.to_string()))?;
     let c = &actor.config;
     if (c.obs_dim, c.act_dim) != (probe.obs_dim(), probe.act_dim()) {
         return Err(ArtifactError::Invalid(format!(

@@ -75,7 +75,7 @@ pub fn save_ensemble(
     let metadata = EnsembleMetadata {
         schema_version: ENSEMBLE_SCHEMA_VERSION,
         kind: "gaussian-ensemble".into(),
-        task: system.simulator(),
+        task: system.task(),
         system: system.file_text(),
         obs_dim,
         act_dim,

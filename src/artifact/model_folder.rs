@@ -61,13 +61,15 @@ impl ModelFolder {
     pub fn system(&self) -> Result<Option<System>, ArtifactError> {
         let (task, file, record) = match self {
             Self::NeuralSde { metadata, .. } => (
-                metadata.provenance.task,
+                metadata.provenance.task.clone(),
                 metadata.provenance.system.as_deref(),
                 DYNAMICS_METADATA,
             ),
-            Self::GaussianEnsemble { metadata, .. } => {
-                (metadata.task, metadata.system.as_deref(), ENSEMBLE_METADATA)
-            }
+            Self::GaussianEnsemble { metadata, .. } => (
+                metadata.task.clone(),
+                metadata.system.as_deref(),
+                ENSEMBLE_METADATA,
+            ),
         };
         System::recorded(task, file, Path::new(record))
             .map_err(|e| ArtifactError::Invalid(e.to_string()))

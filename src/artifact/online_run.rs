@@ -106,7 +106,7 @@ pub fn start_online_run(dir: &Path, run: &OnlineSac) -> Result<(), ArtifactError
         &OnlineRunInfo {
             schema_version: ONLINE_RUN_SCHEMA_VERSION,
             config: run.config.clone(),
-            task: run.task,
+            task: run.task.clone(),
         },
     )
 }
@@ -143,7 +143,7 @@ pub fn save_online_checkpoint(dir: &Path, run: &OnlineSac) -> Result<PathBuf, Ar
         &dir.join(POLICIES),
         &policy_stem(to),
         &run.sac.actor,
-        &crate::envs::System::Task(run.task),
+        &crate::envs::System::Task(run.task.clone()),
         PolicyProvenance {
             step: to,
             normalized_score: record.map(|r| r.eval.normalized_score),
@@ -213,14 +213,14 @@ pub fn read_run_transitions(dir: &Path, to: usize) -> Result<Dataset, ArtifactEr
             dir.display()
         )));
     };
-    let probe = crate::envs::MujocoTask::new(info.task)
+    let probe = crate::envs::MujocoTask::new(&info.task)
         .map_err(|e| ArtifactError::Invalid(e.to_string()))?;
     let mut all = Recording::for_task(&probe);
     for interval in &state.intervals[..=last] {
         all.append(read_interval(dir, interval, &all)?);
     }
     let mut metadata = DatasetMetadata::new();
-    metadata.insert("task".into(), info.task.name.to_string());
+    metadata.insert("task".into(), info.task.task.to_string());
     metadata.insert(
         "observation_layout".into(),
         format!("{:?}", info.task.layout).to_lowercase(),

@@ -81,8 +81,8 @@ pub fn save_policy(
     let metadata = PolicyMetadata {
         schema_version: POLICY_SCHEMA_VERSION,
         actor: actor.config.clone(),
-        task: system.simulator(),
-        system: system.simulator().is_none().then(|| system.name()),
+        task: system.task(),
+        system: system.task().is_none().then(|| system.name()),
         provenance,
         weights_sha256: sha256_hex(&weights),
         tensors: tensors
@@ -99,9 +99,9 @@ impl PolicyMetadata {
     /// The task the policy acts in; an error naming `file` for a policy of a
     /// system described in a file, which has no simulator.
     pub fn simulated_task(&self, file: &Path) -> Result<TaskConfig, ArtifactError> {
-        self.task.ok_or_else(|| {
+        self.task.clone().ok_or_else(|| {
             ArtifactError::Invalid(format!(
-                "{}: a policy for `{}`, a system described in a file, with no simulator",
+                "{}: a policy for `{}`, a system described in a file: give the file (--system) to simulate it",
                 file.display(),
                 self.system.as_deref().unwrap_or("a system")
             ))

@@ -188,7 +188,7 @@ impl Dataset {
     pub fn check_system(&self, system: &System, file: &Path) -> Result<(), DataError> {
         let shape = system.shape()?;
         let what = match system {
-            System::Task(task) => format!("{} ({:?} layout)", task.name, task.layout),
+            System::Task(task) => format!("{} ({:?} layout)", task.task, task.layout),
             System::File(spec) => format!("system `{}`", spec.name),
         };
         for (key, got, expected) in [

@@ -48,12 +48,12 @@ impl GenerateConfig {
 
     pub fn new(task: TaskConfig, kind: &str, transitions: usize, seed: u64) -> Self {
         Self {
+            policy_layout: task.layout,
             task,
             budget: Budget::Transitions(transitions),
             seed,
             kind: kind.into(),
             episodes_per_round: 64,
-            policy_layout: task.layout,
         }
     }
 }
@@ -66,7 +66,7 @@ pub fn generate(
     policy_description: &str,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Dataset, DataError> {
-    let probe = MujocoTask::new(config.task)?;
+    let probe = MujocoTask::new(&config.task)?;
     let root_x = config.root_x_dropped();
     let expected = (probe.obs_dim() - root_x, probe.act_dim());
     if config.task.layout == ObservationLayout::D4rl && root_x == 1 {
@@ -80,7 +80,7 @@ pub fn generate(
             "the policy takes observations of width {} and gives actions of width {}; {} ({:?} observations) needs {} and {}",
             policy.obs_dim(),
             policy.act_dim(),
-            config.task.name,
+            config.task.task,
             config.policy_layout,
             expected.0,
             expected.1
@@ -119,7 +119,7 @@ pub fn generate(
     }
 
     let mut metadata = DatasetMetadata::new();
-    metadata.insert("task".into(), config.task.name.to_string());
+    metadata.insert("task".into(), config.task.task.to_string());
     metadata.insert(
         "observation_layout".into(),
         format!("{:?}", config.task.layout).to_lowercase(),
@@ -146,7 +146,7 @@ fn run_episode(
 ) -> Result<Recording, DataError> {
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     rng.set_stream(episode);
-    let mut task = MujocoTask::new(config.task)?;
+    let mut task = MujocoTask::new(&config.task)?;
     let reset_seed = rand::Rng::random::<u64>(&mut rng);
     let mut obs: Vec<f32> = task
         .reset(Some(reset_seed))

@@ -16,7 +16,7 @@ use crate::shared::cancel::Cancel;
 use crate::shared::{BatchPolicy, SeedStream, derive_seed, mean_std_population};
 
 /// What to evaluate and how.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EvaluationConfig {
     pub task: TaskConfig,
     pub episodes: usize,
@@ -68,7 +68,7 @@ pub fn evaluate_or_cancel(
     if config.episodes == 0 {
         return Err(EnvError::NoEpisodes);
     }
-    let probe = MujocoTask::new(config.task)?;
+    let probe = MujocoTask::new(&config.task)?;
     for (what, policy_dim, task_dim) in [
         ("observations of width", policy.obs_dim(), probe.obs_dim()),
         ("actions of width", policy.act_dim(), probe.act_dim()),
@@ -123,7 +123,7 @@ fn run_group(
     let mut tasks = Vec::with_capacity(episodes.len());
     let mut observations = Vec::with_capacity(episodes.len());
     for episode in episodes {
-        let mut task = MujocoTask::new(config.task)?;
+        let mut task = MujocoTask::new(&config.task)?;
         observations.push(task.reset(Some(derive_seed(
             config.seed,
             SeedStream::Episode(episode as u64),

@@ -21,7 +21,8 @@ pub use rules::{ForwardVelocity, Rules, TaskRules};
 pub use score::ScoreReference;
 pub use system::{ObservationBound, RewardExpression, SystemReward, SystemSpec};
 pub use task::{
-    HealthRule, Joint, JointKind, ObservationLayout, ResetNoise, StateSplit, TaskName, TaskSpec,
+    FileTask, HealthRule, Joint, JointKind, ObservationLayout, ResetNoise, StateSplit, Task,
+    TaskName, TaskSpec,
 };
 
 /// Everything that can go wrong in a task or an evaluation.
@@ -38,7 +39,7 @@ pub enum EnvError {
     )]
     UnknownTask(String),
     #[error("MuJoCo could not build the {task} model: {message}")]
-    Model { task: TaskName, message: String },
+    Model { task: String, message: String },
     #[error("{what} has {got} entries, the task expects {expected}")]
     Dimension {
         what: &'static str,

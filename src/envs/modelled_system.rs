@@ -48,15 +48,25 @@ impl System {
     /// The task's name (`hopper`), or the name the file gives.
     pub fn name(&self) -> String {
         match self {
-            Self::Task(task) => task.name.to_string(),
+            Self::Task(task) => task.task.to_string(),
             Self::File(spec) => spec.name.clone(),
         }
     }
 
-    /// The task to simulate, where there is one.
+    /// The task to simulate, where there is one: a built-in task, or the
+    /// `[mujoco]` table of a system's file.
     pub fn simulator(&self) -> Option<TaskConfig> {
         match self {
-            Self::Task(task) => Some(*task),
+            Self::Task(task) => Some(task.clone()),
+            Self::File(spec) => spec.simulation.clone(),
+        }
+    }
+
+    /// The built-in task, which artifacts record by name (a file's system
+    /// is recorded as its file's text).
+    pub fn task(&self) -> Option<TaskConfig> {
+        match self {
+            Self::Task(task) => Some(task.clone()),
             Self::File(_) => None,
         }
     }
@@ -66,7 +76,7 @@ impl System {
     pub fn shape(&self) -> Result<SystemShape, EnvError> {
         match self {
             Self::Task(task) => {
-                let probe = MujocoTask::new(*task)?;
+                let probe = MujocoTask::new(task)?;
                 let (action_low, action_high) = probe.action_bounds();
                 Ok(SystemShape {
                     obs_dim: probe.obs_dim(),
@@ -92,7 +102,7 @@ impl System {
     /// a file's system has one dt).
     pub fn rules_on(&self, dt: f64) -> Rules {
         match self {
-            Self::Task(task) => TaskRules::new(*task, dt).into(),
+            Self::Task(task) => TaskRules::new(task, dt).into(),
             Self::File(spec) => Rules::System(spec.clone()),
         }
     }
@@ -101,7 +111,7 @@ impl System {
     /// steps once per system step, like an ensemble, follows).
     pub fn rules(&self) -> Result<Rules, EnvError> {
         match self {
-            Self::Task(task) => Ok(TaskRules::of_task(*task)?.into()),
+            Self::Task(task) => Ok(TaskRules::of_task(task)?.into()),
             Self::File(spec) => Ok(Rules::System(spec.clone())),
         }
     }

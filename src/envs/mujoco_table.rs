@@ -45,10 +45,16 @@ pub(super) struct MujocoFile {
     mujoco: MujocoTable,
 }
 
+/// The table itself, as a system file holds it under `[mujoco]`.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct MujocoTable {
-    model: String,
+pub(super) struct MujocoTable {
+    /// The MJCF file: an embedded model's name in a built-in table, a path
+    /// relative to the system file in a user's.
+    model: Option<String>,
+    /// The MJCF itself, in place of `model` (what an artifact records, so
+    /// it needs no file to be read again).
+    model_xml: Option<String>,
     frame_skip: usize,
     observe_qpos_from: usize,
     velocity_clip: Option<f64>,
@@ -113,24 +119,50 @@ struct ReferenceTable {
     expert: f64,
 }
 
+/// Where a table's MJCF is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum ModelSource<'a> {
+    /// A file, by the name the table gives.
+    File(&'a str),
+    /// The MJCF's text.
+    Inline(&'a str),
+}
+
 impl MujocoFile {
     /// Reads the table from `text`.
     pub(super) fn parse(text: &str) -> Result<Self, String> {
         toml::from_str(text).map_err(|e| e.to_string())
     }
 
-    /// The MJCF file the table names.
-    pub(super) fn model_file(&self) -> &str {
-        &self.mujoco.model
+    pub(super) fn table(self) -> MujocoTable {
+        self.mujoco
+    }
+}
+
+impl MujocoTable {
+    /// Where the MJCF is: exactly one of `model` and `model_xml`.
+    pub(super) fn model_source(&self) -> Result<ModelSource<'_>, String> {
+        match (&self.model, &self.model_xml) {
+            (Some(file), None) => Ok(ModelSource::File(file)),
+            (None, Some(xml)) => Ok(ModelSource::Inline(xml)),
+            _ => Err(
+                "mujoco.model, mujoco.model_xml: give exactly one (the MJCF file, or its text)"
+                    .into(),
+            ),
+        }
     }
 
     /// The task the table describes, on the model compiled from `xml`,
     /// checked against it; a bad value is named by its key.
     pub(super) fn check(self, xml: &str) -> Result<TaskSpec, String> {
-        let t = self.mujoco;
+        let what = match self.model_source()? {
+            ModelSource::File(file) => format!("mujoco.model: `{file}`"),
+            ModelSource::Inline(_) => "mujoco.model_xml".to_string(),
+        };
+        let t = self;
         install_mujoco_logging();
-        let model = MjModel::from_xml_string(xml)
-            .map_err(|e| format!("mujoco.model: `{}` does not compile: {e}", t.model))?;
+        let model =
+            MjModel::from_xml_string(xml).map_err(|e| format!("{what} does not compile: {e}"))?;
         let (nq, nv) = (model.ffi().nq as usize, model.ffi().nv as usize);
         positive_count("mujoco.frame_skip", t.frame_skip)?;
         positive_count("mujoco.max_episode_steps", t.max_episode_steps)?;
@@ -313,14 +345,14 @@ mod tests {
     "#;
 
     fn check(table: &str) -> Result<TaskSpec, String> {
-        MujocoFile::parse(table)?.check(CART_POLE)
+        MujocoFile::parse(table)?.table().check(CART_POLE)
     }
 
     #[test]
     fn a_table_reads_into_the_task_it_describes() {
-        let file = MujocoFile::parse(TABLE).unwrap();
-        assert_eq!(file.model_file(), "cart_pole.xml");
-        let spec = file.check(CART_POLE).unwrap();
+        let table = MujocoFile::parse(TABLE).unwrap().table();
+        assert_eq!(table.model_source(), Ok(ModelSource::File("cart_pole.xml")));
+        let spec = table.check(CART_POLE).unwrap();
         assert_eq!((spec.nq, spec.nv, spec.frame_skip), (2, 2, 2));
         assert_eq!(
             spec.forward_body,
@@ -397,11 +429,19 @@ mod tests {
         }
         let error = MujocoFile::parse(TABLE)
             .unwrap()
+            .table()
             .check("<mujoco><bad")
             .unwrap_err();
         assert!(
             error.contains("`cart_pole.xml` does not compile"),
             "{error}"
         );
+        let both = TABLE.replacen(
+            "model = \"cart_pole.xml\"",
+            "model = \"cart_pole.xml\"\nmodel_xml = \"<mujoco/>\"",
+            1,
+        );
+        let error = check(&both).unwrap_err();
+        assert!(error.contains("give exactly one"), "{error}");
     }
 }

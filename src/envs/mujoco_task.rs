@@ -16,14 +16,13 @@ use serde::{Deserialize, Serialize};
 
 use super::EnvError;
 use super::score::ScoreReference;
-use super::task::{
-    Joint, JointKind, ObservationLayout, ResetNoise, StateSplit, TaskName, TaskSpec,
-};
+use super::task::{FileTask, ObservationLayout, ResetNoise, StateSplit, Task, TaskName, TaskSpec};
 
 /// Which task to run, in which variant.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct TaskConfig {
-    pub name: TaskName,
+    #[serde(rename = "name")]
+    pub task: Task,
     pub layout: ObservationLayout,
     /// Steps after which an episode is truncated.
     pub max_episode_steps: usize,
@@ -32,10 +31,19 @@ pub struct TaskConfig {
 impl TaskConfig {
     /// The D4RL variant (root x not observed, 1000-step limit).
     pub fn d4rl(name: TaskName) -> Self {
+        Self::own_layout(Task::BuiltIn(name))
+    }
+
+    /// A system file's task, observed as its table says.
+    pub fn of_file(task: Arc<FileTask>) -> Self {
+        Self::own_layout(Task::File(task))
+    }
+
+    fn own_layout(task: Task) -> Self {
         Self {
-            name,
+            max_episode_steps: task.spec().max_episode_steps,
+            task,
             layout: ObservationLayout::D4rl,
-            max_episode_steps: name.spec().max_episode_steps,
         }
     }
 
@@ -49,7 +57,7 @@ impl TaskConfig {
 
     /// The reference returns that define this variant's normalised score.
     pub fn score_reference(&self) -> ScoreReference {
-        let spec = self.name.spec();
+        let spec = self.task.spec();
         match self.layout {
             ObservationLayout::D4rl => spec.d4rl_score,
             ObservationLayout::Neorl => spec.neorl_score,
@@ -74,7 +82,6 @@ pub struct Transition {
 
 /// A task instance: one MuJoCo `MjData` over the task's shared model.
 pub struct MujocoTask {
-    spec: &'static TaskSpec,
     config: TaskConfig,
     data: MjData<Arc<MjModel>>,
     init_qpos: Vec<f64>,
@@ -95,17 +102,16 @@ impl std::fmt::Debug for MujocoTask {
 
 impl MujocoTask {
     /// A new instance in the model's initial state (call [`reset`](Self::reset) before stepping).
-    pub fn new(config: TaskConfig) -> Result<Self, EnvError> {
-        let spec = config.name.spec();
+    pub fn new(config: &TaskConfig) -> Result<Self, EnvError> {
+        let spec = config.task.spec();
         let model = spec.model.0.clone();
         let dt = model.opt().timestep * spec.frame_skip as f64;
         let data = MjData::try_new(model).map_err(|e| EnvError::Model {
-            task: config.name,
+            task: config.task.to_string(),
             message: e.to_string(),
         })?;
         Ok(Self {
-            spec,
-            config,
+            config: config.clone(),
             init_qpos: data.qpos().to_vec(),
             init_qvel: data.qvel().to_vec(),
             data,
@@ -119,8 +125,8 @@ impl MujocoTask {
         &self.config
     }
 
-    pub fn spec(&self) -> &'static TaskSpec {
-        self.spec
+    pub fn spec(&self) -> &TaskSpec {
+        self.config.task.spec()
     }
 
     /// Seconds of simulated time per step.
@@ -148,28 +154,12 @@ impl MujocoTask {
 
     /// Which observation entries are positions and velocities.
     pub fn state_split(&self) -> StateSplit {
-        let model = self.data.model();
-        let joints: Vec<Joint> = (model.jnt_type().iter())
-            .zip(model.jnt_qposadr())
-            .zip(model.jnt_dofadr())
-            .map(|((kind, &qpos), &dof)| Joint {
-                kind: match *kind {
-                    MjtJoint::mjJNT_FREE => JointKind::Free,
-                    MjtJoint::mjJNT_BALL => JointKind::Ball,
-                    MjtJoint::mjJNT_SLIDE => JointKind::Slide,
-                    _ => JointKind::Hinge,
-                },
-                qpos: qpos as usize,
-                dof: dof as usize,
-            })
-            .collect();
-        let (nq, nv) = (self.init_qpos.len(), self.init_qvel.len());
-        StateSplit::of_joints(&joints, nq, nv, self.qpos_from())
+        self.spec().state_split(self.qpos_from())
     }
 
     /// The first qpos entry the observation holds.
     fn qpos_from(&self) -> usize {
-        self.config.layout.qpos_from(self.config.name)
+        self.config.layout.qpos_from(self.spec())
     }
 
     /// The qpos indices of the model's hinge joints (angles, in radians).
@@ -207,7 +197,7 @@ impl MujocoTask {
         if let Some(seed) = seed {
             self.rng = ChaCha8Rng::seed_from_u64(seed);
         }
-        let (scale, normal_velocity) = match self.spec.reset_noise {
+        let (scale, normal_velocity) = match self.spec().reset_noise {
             ResetNoise::Uniform { scale } => (scale, false),
             ResetNoise::UniformPositionNormalVelocity { scale } => (scale, true),
         };
@@ -254,7 +244,7 @@ impl MujocoTask {
         check_vector("action", action, self.act_dim())?;
         let x_before = self.forward_position();
         self.data.ctrl_mut().copy_from_slice(action);
-        for _ in 0..self.spec.frame_skip {
+        for _ in 0..self.spec().frame_skip {
             self.data.step();
         }
         self.elapsed_steps += 1;
@@ -265,9 +255,9 @@ impl MujocoTask {
         // term whose weight is 0 is left out, as Gymnasium's inverted pendulum has none.
         let weighted = |weight: f64, value: f64| if weight == 0.0 { 0.0 } else { weight * value };
         let control = action.iter().map(|a| a * a).sum::<f64>();
-        let ctrl_cost = weighted(self.spec.ctrl_cost_weight, control);
-        let forward_reward = weighted(self.spec.forward_reward_weight, x_velocity);
-        let reward = (forward_reward + self.spec.healthy_reward) - ctrl_cost;
+        let ctrl_cost = weighted(self.spec().ctrl_cost_weight, control);
+        let forward_reward = weighted(self.spec().forward_reward_weight, x_velocity);
+        let reward = (forward_reward + self.spec().healthy_reward) - ctrl_cost;
         Ok(Transition {
             observation: self.observation(),
             reward,
@@ -281,7 +271,7 @@ impl MujocoTask {
     /// Where the forward velocity is measured: the forward body's frame x
     /// (MuJoCo's `xpos`, as of the last kinematics pass, as Gymnasium reads it), or qpos[0].
     fn forward_position(&self) -> f64 {
-        match self.spec.forward_body {
+        match self.spec().forward_body {
             Some(body) => self.data.xpos()[body][0],
             None => self.data.qpos()[0],
         }
@@ -289,7 +279,7 @@ impl MujocoTask {
 
     /// The current observation in the configured layout.
     pub fn observation(&self) -> Vec<f64> {
-        let clip = self.spec.velocity_clip.unwrap_or(f64::INFINITY);
+        let clip = self.spec().velocity_clip.unwrap_or(f64::INFINITY);
         let qpos = &self.data.qpos()[self.qpos_from()..];
         let qvel = self.data.qvel().iter().map(|v| v.clamp(-clip, clip));
         qpos.iter().copied().chain(qvel).collect()
@@ -304,7 +294,7 @@ impl MujocoTask {
             .chain(self.data.qvel())
             .copied()
             .collect();
-        self.spec.health.is_healthy(&state, 0)
+        self.spec().health.is_healthy(&state, 0)
     }
 }
 

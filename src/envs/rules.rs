@@ -12,7 +12,7 @@ use std::sync::Arc;
 use super::EnvError;
 use super::mujoco_task::{MujocoTask, TaskConfig};
 use super::system::{SystemReward, SystemSpec};
-use super::task::TaskSpec;
+use super::task::Task;
 
 /// Which observed root x velocity stands in for the forward velocity where the
 /// observations omit root x (D4RL's layout).
@@ -30,9 +30,9 @@ pub enum ForwardVelocity {
 crate::shared::named_enum!(ForwardVelocity, "forward velocity", ForwardVelocity::Next => "next", ForwardVelocity::Mean => "mean");
 
 /// Reward and termination of one task variant, on observations.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct TaskRules {
-    spec: &'static TaskSpec,
+    task: Task,
     /// The first qpos entry the observations hold (observation 0).
     qpos_from: usize,
     /// Observation index of qvel[0], the root x velocity.
@@ -53,20 +53,20 @@ impl TaskRules {
 
     /// The rules of `task` with its own observation split and step (what a
     /// model that steps once per task step, like an ensemble, follows).
-    pub fn of_task(task: TaskConfig) -> Result<Self, EnvError> {
-        let probe = MujocoTask::new(task)?;
-        Ok(Self::new(task, probe.dt()))
+    pub fn of_task(task: &TaskConfig) -> Result<Self, EnvError> {
+        let dt = MujocoTask::new(task)?.dt();
+        Ok(Self::new(task, dt))
     }
 
     /// The rules of `task`, whose observations are `dt` apart.
-    pub fn new(task: TaskConfig, dt: f64) -> Self {
-        let spec = task.name.spec();
-        let qpos_from = task.layout.qpos_from(task.name);
+    pub fn new(task: &TaskConfig, dt: f64) -> Self {
+        let spec = task.task.spec();
+        let qpos_from = task.layout.qpos_from(spec);
         Self {
-            spec,
-            qpos_from,
             x_velocity: spec.nq - qpos_from,
             root_x: (qpos_from == 0).then_some(0),
+            qpos_from,
+            task: task.task.clone(),
             dt,
             forward_velocity: ForwardVelocity::Next,
         }
@@ -74,17 +74,17 @@ impl TaskRules {
 
     /// These rules with the forward reward read from `velocity` (D4RL's layout;
     /// where root x is observed the reward stays its finite difference).
-    pub fn with_forward_velocity(self, velocity: ForwardVelocity) -> Self {
+    pub fn with_forward_velocity(&self, velocity: ForwardVelocity) -> Self {
         Self {
             forward_velocity: velocity,
-            ..self
+            ..self.clone()
         }
     }
 
     /// `r(s, a, s')`: forward velocity, healthy bonus (paid on every step, as in
     /// Gymnasium v4) and control cost.
     pub fn reward(&self, obs: &[f32], action: &[f32], next_obs: &[f32]) -> f32 {
-        let spec = self.spec;
+        let spec = self.task.spec();
         let control: f64 = action.iter().map(|&a| f64::from(a).powi(2)).sum();
         let after = f64::from(next_obs[self.x_velocity]);
         let velocity = match (self.root_x, self.forward_velocity) {
@@ -98,7 +98,7 @@ impl TaskRules {
 
     /// Whether `next_obs` is a terminal state (the robot fell).
     pub fn terminal(&self, next_obs: &[f32]) -> bool {
-        !self.spec.health.is_healthy(next_obs, self.qpos_from)
+        !self.task.spec().health.is_healthy(next_obs, self.qpos_from)
     }
 }
 

@@ -25,6 +25,14 @@
 //! bounds = { theta = [-0.2, 0.2] }
 //! ```
 //!
+//! A system that MuJoCo can simulate adds a `[mujoco]` table (its MJCF
+//! file, relative to the system file, and the rules it is stepped by: see
+//! [`super::mujoco_table`]); then `dt`, the action box and `[physics]` may be
+//! left out, taken from the model (its timestep × frame skip, its actuators'
+//! control ranges, its joints), and what is given is checked against it, as
+//! are the widths. Such a system is evaluated, generated from and trained
+//! on in the simulator as the built-in tasks are.
+//!
 //! Observations may come in any order: the state split is built from the
 //! names. A position without a velocity, or a velocity without a position,
 //! is left to the learned drift. Reward expressions read each observation by
@@ -35,26 +43,30 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
+use std::sync::Arc;
 
 use exmex::prelude::*;
 use serde::Deserialize;
 
 use super::EnvError;
-use super::task::StateSplit;
+use super::mujoco_table::{ModelSource, MujocoTable};
+use super::mujoco_task::TaskConfig;
+use super::task::{FileTask, StateSplit, TaskSpec};
 
 /// The file as written; checked into a [`SystemSpec`].
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct SystemFile {
     name: String,
-    dt: f64,
+    dt: Option<f64>,
     observations: Vec<String>,
     actions: Vec<String>,
-    action_low: Vec<f64>,
-    action_high: Vec<f64>,
+    action_low: Option<Vec<f64>>,
+    action_high: Option<Vec<f64>>,
     physics: Option<PhysicsFile>,
     reward: RewardFile,
     termination: Option<TerminationFile>,
+    mujoco: Option<MujocoTable>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -99,6 +111,8 @@ pub struct SystemSpec {
     pub reward: SystemReward,
     /// An episode ends when one of these observations leaves its interval.
     pub bounds: Vec<ObservationBound>,
+    /// The MuJoCo task that simulates the system, where the file has a `[mujoco]` table.
+    pub simulation: Option<TaskConfig>,
 }
 
 /// Where a system's reward comes from.
@@ -222,9 +236,24 @@ impl SystemSpec {
             file: file.to_path_buf(),
             message,
         };
-        let raw: SystemFile = toml::from_str(text).map_err(|e| error(e.to_string()))?;
-        let mut spec = raw.check().map_err(error)?;
-        spec.source = text.to_string();
+        let mut raw: SystemFile = toml::from_str(text).map_err(|e| error(e.to_string()))?;
+        let model = match raw.mujoco.as_ref() {
+            Some(table) => Some(read_model(table, file).map_err(error)?),
+            None => None,
+        };
+        let inlined = model
+            .as_ref()
+            .and_then(|(xml, from_file)| from_file.then_some(xml));
+        let source = match inlined {
+            Some(xml) => inline_model(text, xml).map_err(error)?,
+            None => text.to_string(),
+        };
+        let task = match (raw.mujoco.take(), model) {
+            (Some(table), Some((xml, _))) => Some(table.check(&xml).map_err(error)?),
+            _ => None,
+        };
+        let mut spec = raw.check(task).map_err(error)?;
+        spec.source = source;
         Ok(spec)
     }
 
@@ -247,22 +276,69 @@ impl SystemSpec {
     }
 }
 
+/// The MJCF a `[mujoco]` table names, read relative to the system file
+/// `file`, or given inline; and whether it came from a file.
+fn read_model(table: &MujocoTable, file: &Path) -> Result<(String, bool), String> {
+    match table.model_source()? {
+        ModelSource::Inline(xml) => Ok((xml.to_string(), false)),
+        ModelSource::File(name) => {
+            let path = file.parent().unwrap_or(Path::new("")).join(name);
+            let xml = std::fs::read_to_string(&path)
+                .map_err(|e| format!("mujoco.model: cannot read `{}`: {e}", path.display()))?;
+            Ok((xml, true))
+        }
+    }
+}
+
+/// `text` with its `[mujoco]` table's `model` file replaced by the file's
+/// contents (`model_xml`): what an artifact records, so the system reads
+/// again where the MJCF file is not. The rest stays as written.
+fn inline_model(text: &str, xml: &str) -> Result<String, String> {
+    let mut document: toml_edit::DocumentMut = text.parse().map_err(|e| format!("{e}"))?;
+    let table = document
+        .get_mut("mujoco")
+        .and_then(|item| item.as_table_like_mut())
+        .ok_or("mujoco: must be a table")?;
+    table.remove("model");
+    table.insert("model_xml", toml_edit::value(xml));
+    Ok(document.to_string())
+}
+
 impl SystemFile {
-    fn check(self) -> Result<SystemSpec, String> {
+    /// The checked system, simulated by `task` where the file has a `[mujoco]` table.
+    fn check(self, task: Option<TaskSpec>) -> Result<SystemSpec, String> {
         if self.name.trim().is_empty() {
             return Err("name: must not be empty".into());
         }
-        if !(self.dt.is_finite() && self.dt > 0.0) {
-            return Err(format!(
-                "dt: must be a positive number of seconds, got {}",
-                self.dt
-            ));
-        }
         let names = Names::new(&self.observations, &self.actions)?;
-        check_action_box(&self.action_low, &self.action_high, self.actions.len())?;
-        let split = match &self.physics {
-            Some(physics) => physics.split(&names)?,
-            None => StateSplit {
+        let model = task
+            .as_ref()
+            .map(|spec| ModelFacts::of(spec, &names))
+            .transpose()?;
+        let dt = match (self.dt, &model) {
+            (Some(dt), model) => check_dt(dt, model.as_ref())?,
+            (None, Some(model)) => model.dt,
+            (None, None) => return Err("dt: required (or a [mujoco] table to take it from)".into()),
+        };
+        let (action_low, action_high) = match (self.action_low, self.action_high, &model) {
+            (Some(low), Some(high), model) => {
+                check_action_box(&low, &high, self.actions.len())?;
+                if let Some(model) = model {
+                    model.check_action_box(&low, &high)?;
+                }
+                (low, high)
+            }
+            (None, None, Some(model)) => model.action_box()?,
+            _ => {
+                return Err(
+                    "action_low, action_high: give both (or neither, with a [mujoco] table)".into(),
+                );
+            }
+        };
+        let split = match (&self.physics, &model) {
+            (Some(physics), _) => physics.split(&names)?,
+            (None, Some(model)) => model.split.clone(),
+            (None, None) => StateSplit {
                 positions: Vec::new(),
                 velocities: (0..self.observations.len()).collect(),
                 position_velocity: Vec::new(),
@@ -274,18 +350,108 @@ impl SystemFile {
             Some(termination) => termination.bounds(&names)?,
             None => Vec::new(),
         };
+        let simulation = task.map(|spec| {
+            TaskConfig::of_file(Arc::new(FileTask {
+                name: self.name.clone(),
+                spec,
+            }))
+        });
         Ok(SystemSpec {
             source: String::new(),
             name: self.name,
-            dt: self.dt,
+            dt,
             observations: self.observations,
             actions: self.actions,
-            action_low: self.action_low,
-            action_high: self.action_high,
+            action_low,
+            action_high,
             split,
             reward,
             bounds,
+            simulation,
         })
+    }
+}
+
+fn check_dt(dt: f64, model: Option<&ModelFacts>) -> Result<f64, String> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(format!(
+            "dt: must be a positive number of seconds, got {dt}"
+        ));
+    }
+    match model {
+        // Written in decimal, a dt need not be the model's product to the last bit.
+        Some(model) if (dt - model.dt).abs() > 1e-9 * model.dt => Err(format!(
+            "dt: {dt} s, but the [mujoco] model's observations are {} s apart (timestep × frame_skip)",
+            model.dt
+        )),
+        Some(model) => Ok(model.dt),
+        None => Ok(dt),
+    }
+}
+
+/// What a `[mujoco]` table's model says about the system, checked against its names.
+struct ModelFacts {
+    dt: f64,
+    split: StateSplit,
+    /// Each actuator's control range (`None`: not limited).
+    controls: Vec<Option<(f64, f64)>>,
+}
+
+impl ModelFacts {
+    fn of(spec: &TaskSpec, names: &Names) -> Result<Self, String> {
+        let from = spec.observed_qpos_from;
+        let observed = spec.nq - from + spec.nv;
+        if names.observations.len() != observed {
+            return Err(format!(
+                "observations: {} names, but the [mujoco] model observes {observed} values (qpos[{from}..{}] and qvel[0..{}])",
+                names.observations.len(),
+                spec.nq,
+                spec.nv
+            ));
+        }
+        let controls = spec.control_ranges();
+        if names.actions.len() != controls.len() {
+            return Err(format!(
+                "actions: {} names, but the [mujoco] model has {} actuators",
+                names.actions.len(),
+                controls.len()
+            ));
+        }
+        Ok(Self {
+            dt: spec.dt(),
+            split: spec.state_split(from),
+            controls,
+        })
+    }
+
+    /// The actuators' control ranges, all of which must be limited.
+    fn action_box(&self) -> Result<(Vec<f64>, Vec<f64>), String> {
+        self.controls
+            .iter()
+            .enumerate()
+            .map(|(i, range)| {
+                range.ok_or_else(|| {
+                    format!("action_low, action_high: actuator {i} of the [mujoco] model has no ctrlrange; give the box here")
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()
+            .map(|ranges| ranges.into_iter().unzip())
+    }
+
+    /// A box given beside the model must be its control ranges where it has them
+    /// (MuJoCo clips controls to those).
+    fn check_action_box(&self, low: &[f64], high: &[f64]) -> Result<(), String> {
+        for (i, range) in self.controls.iter().enumerate() {
+            if let Some((l, h)) = *range
+                && (l, h) != (low[i], high[i])
+            {
+                return Err(format!(
+                    "action_low, action_high: action {i} has [{}, {}], but the [mujoco] model's control range is [{l}, {h}]",
+                    low[i], high[i]
+                ));
+            }
+        }
+        Ok(())
     }
 }
 

@@ -9,10 +9,11 @@ use std::str::FromStr;
 use std::sync::{Arc, Once, OnceLock};
 
 use mujoco_rs::prelude::MjModel;
+use mujoco_rs::wrappers::mj_model::MjtJoint;
 use serde::{Deserialize, Serialize};
 
 use super::EnvError;
-use super::mujoco_table::MujocoFile;
+use super::mujoco_table::{ModelSource, MujocoFile};
 use super::score::ScoreReference;
 
 /// The MuJoCo tasks nuno simulates: D4RL's and NeoRL's three locomotion
@@ -73,6 +74,91 @@ impl FromStr for TaskName {
             .into_iter()
             .find(|t| t.as_str() == s.to_ascii_lowercase())
             .ok_or_else(|| EnvError::UnknownTask(s.to_string()))
+    }
+}
+
+/// A MuJoCo task: one of the built-in ones, or a system file's `[mujoco]` table.
+#[derive(Debug, Clone)]
+pub enum Task {
+    BuiltIn(TaskName),
+    File(Arc<FileTask>),
+}
+
+/// A system file's MuJoCo task, under the name the file gives its system.
+#[derive(Debug)]
+pub struct FileTask {
+    pub name: String,
+    pub spec: TaskSpec,
+}
+
+impl Task {
+    /// The task's definition.
+    pub fn spec(&self) -> &TaskSpec {
+        match self {
+            Self::BuiltIn(name) => name.spec(),
+            Self::File(task) => &task.spec,
+        }
+    }
+
+    pub fn name(&self) -> &str {
+        match self {
+            Self::BuiltIn(name) => name.as_str(),
+            Self::File(task) => &task.name,
+        }
+    }
+
+    /// The built-in task this is, if it is one.
+    pub fn built_in(&self) -> Option<TaskName> {
+        match self {
+            Self::BuiltIn(name) => Some(*name),
+            Self::File(_) => None,
+        }
+    }
+}
+
+impl From<TaskName> for Task {
+    fn from(name: TaskName) -> Self {
+        Self::BuiltIn(name)
+    }
+}
+
+/// Built-in tasks are equal by name; a file's task only to itself (two
+/// files' tasks compare through the files' texts, `System`'s equality).
+impl PartialEq for Task {
+    fn eq(&self, other: &Self) -> bool {
+        match (self, other) {
+            (Self::BuiltIn(a), Self::BuiltIn(b)) => a == b,
+            (Self::File(a), Self::File(b)) => Arc::ptr_eq(a, b),
+            _ => false,
+        }
+    }
+}
+
+impl Eq for Task {}
+
+impl PartialEq<TaskName> for Task {
+    fn eq(&self, other: &TaskName) -> bool {
+        self.built_in() == Some(*other)
+    }
+}
+
+impl fmt::Display for Task {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// By name. Only built-in tasks read back: a file's task is recorded as its
+/// system file, whose name alone cannot rebuild it.
+impl Serialize for Task {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.name())
+    }
+}
+
+impl<'de> Deserialize<'de> for Task {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        TaskName::deserialize(deserializer).map(Self::BuiltIn)
     }
 }
 
@@ -166,6 +252,42 @@ pub struct TaskSpec {
     pub neorl_score: ScoreReference,
 }
 
+impl TaskSpec {
+    /// Seconds between observations: the model's timestep × frame skip.
+    pub fn dt(&self) -> f64 {
+        self.model.0.opt().timestep * self.frame_skip as f64
+    }
+
+    /// The split of the observation `qpos[qpos_from..] ++ qvel` by the model's joints.
+    pub fn state_split(&self, qpos_from: usize) -> StateSplit {
+        let model = &self.model.0;
+        let joints: Vec<Joint> = (model.jnt_type().iter())
+            .zip(model.jnt_qposadr())
+            .zip(model.jnt_dofadr())
+            .map(|((kind, &qpos), &dof)| Joint {
+                kind: match *kind {
+                    MjtJoint::mjJNT_FREE => JointKind::Free,
+                    MjtJoint::mjJNT_BALL => JointKind::Ball,
+                    MjtJoint::mjJNT_SLIDE => JointKind::Slide,
+                    _ => JointKind::Hinge,
+                },
+                qpos: qpos as usize,
+                dof: dof as usize,
+            })
+            .collect();
+        StateSplit::of_joints(&joints, self.nq, self.nv, qpos_from)
+    }
+
+    /// Each actuator's control range, `None` where it has none (not ctrl-limited).
+    pub fn control_ranges(&self) -> Vec<Option<(f64, f64)>> {
+        let model = &self.model.0;
+        (model.actuator_ctrllimited().iter())
+            .zip(model.actuator_ctrlrange())
+            .map(|(&limited, range)| limited.then_some((range[0], range[1])))
+            .collect()
+    }
+}
+
 /// A compiled MuJoCo model, shared; two are equal when they are the same one.
 #[derive(Clone)]
 pub struct CompiledModel(pub Arc<MjModel>);
@@ -226,10 +348,13 @@ fn built_in(task: TaskName) -> &'static TaskSpec {
         [const { OnceLock::new() }; TaskName::ALL.len()];
     SPECS[task as usize].get_or_init(|| {
         let checked = MujocoFile::parse(TABLES[task as usize]).and_then(|file| {
-            let xml = MODELS.iter().find(|(name, _)| *name == file.model_file());
-            let (_, xml) =
-                xml.ok_or_else(|| format!("no embedded model `{}`", file.model_file()))?;
-            file.check(xml)
+            let table = file.table();
+            let ModelSource::File(file) = table.model_source()? else {
+                return Err("a built-in table names its model file".into());
+            };
+            let xml = MODELS.iter().find(|(name, _)| *name == file);
+            let (_, xml) = xml.ok_or_else(|| format!("no embedded model `{file}`"))?;
+            table.check(xml)
         });
         // Embedded at build time and read by every test of the tasks: a
         // broken one is a broken build, not bad input.
@@ -251,7 +376,8 @@ pub(super) fn install_mujoco_logging() {
 #[serde(rename_all = "lowercase")]
 pub enum ObservationLayout {
     /// `qpos[k..] ++ qvel` with the task's `observed_qpos_from` k: D4RL
-    /// (Gymnasium's default, the root's horizontal coordinates excluded).
+    /// (Gymnasium's default, the root's horizontal coordinates excluded), and
+    /// a system file's task as its `[mujoco]` table observes it.
     #[default]
     D4rl,
     /// `qpos ++ qvel`: NeoRL, whose observations include the root x position.
@@ -259,10 +385,10 @@ pub enum ObservationLayout {
 }
 
 impl ObservationLayout {
-    /// The first qpos entry this layout observes for `task`.
-    pub fn qpos_from(self, task: TaskName) -> usize {
+    /// The first qpos entry this layout observes of a task defined by `spec`.
+    pub fn qpos_from(self, spec: &TaskSpec) -> usize {
         match self {
-            ObservationLayout::D4rl => task.spec().observed_qpos_from,
+            ObservationLayout::D4rl => spec.observed_qpos_from,
             ObservationLayout::Neorl => 0,
         }
     }

@@ -231,7 +231,7 @@ pub struct ExploitationConfig {
 pub fn exploitation(
     dynamics: &dyn BatchDynamics,
     rules: &Rules,
-    task: TaskConfig,
+    task: &TaskConfig,
     policy: &dyn BatchPolicy,
     config: &ExploitationConfig,
 ) -> Result<Exploitation, ExperimentError> {

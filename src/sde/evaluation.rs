@@ -139,7 +139,7 @@ pub fn compare_with_task(
     let state_dim = dynamics.state_dim();
     let particles = config.particles.max(1);
 
-    let mut real_task = MujocoTask::new(task)?;
+    let mut real_task = MujocoTask::new(&task)?;
     let start: Vec<f32> = real_task
         .reset(Some(config.seed))
         .iter()

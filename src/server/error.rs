@@ -16,7 +16,7 @@ pub enum ApiError {
     #[error("model `{0}` has no policy (train one with `nuno-trainer fit-policy`)")]
     NoPolicy(String),
     #[error(
-        "model `{model}` is of `{system}`, a system described in a file: there is no simulator to run it in"
+        "model `{model}` is of `{system}`, a system described in a file without a [mujoco] table: there is no simulator to run it in"
     )]
     NoSimulator { model: String, system: String },
     #[error("no route {0} (the API is listed at /docs and /openapi.json)")]

@@ -165,10 +165,10 @@ fn load_models(specs: &[String]) -> anyhow::Result<Vec<Model>> {
             "models of different systems: {} is {} ({:?}), {} is {} ({:?})",
             first.name,
             first.system.name(),
-            first.system.simulator().map(|t| t.layout),
+            first.system.task().map(|t| t.layout),
             other.name,
             other.system.name(),
-            other.system.simulator().map(|t| t.layout)
+            other.system.task().map(|t| t.layout)
         );
     }
     Ok(models)
@@ -310,7 +310,13 @@ fn write_exploitation(
     let mut rows: Vec<ExploitationRow> = Vec::new();
     let mut curves = Vec::new();
     for model in models {
-        let result = exploitation(model.dynamics.as_ref(), &model.rules, task, policy, &config)?;
+        let result = exploitation(
+            model.dynamics.as_ref(),
+            &model.rules,
+            &task,
+            policy,
+            &config,
+        )?;
         for k in 0..args.episode_steps {
             let (real, in_model) = (result.real[k], result.model[k]);
             let penalized = result.model_penalized[k];

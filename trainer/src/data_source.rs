@@ -5,6 +5,8 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use anyhow::Context;
+
 use nuno::artifact::{DatasetInfo, sha256_file};
 use nuno::data::{Dataset, DatasetFormat, read_system_dataset};
 use nuno::envs::{System, SystemSpec, TaskConfig, TaskName};
@@ -49,6 +51,17 @@ pub fn system_of(
         (Some(task), None) => Ok(System::Task(task_config(task, neorl))),
         (None, None) => anyhow::bail!("give --task or --system"),
     }
+}
+
+/// The MuJoCo task that simulates `system`: a built-in task, or its file's
+/// `[mujoco]` table.
+pub fn simulation_of(system: &System) -> anyhow::Result<TaskConfig> {
+    system.simulator().with_context(|| {
+        format!(
+            "`{}` has no [mujoco] table: nothing simulates it (docs/your-own-system.md)",
+            system.name()
+        )
+    })
 }
 
 impl DataSource {

@@ -19,7 +19,7 @@ use nuno::envs::{MujocoTask, System, TaskConfig, TaskName};
 use nuno::sde::ComputeDevice;
 use nuno::shared::BatchPolicy;
 
-use crate::data_source::task_config;
+use crate::data_source::{simulation_of, system_of, task_config};
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
@@ -62,8 +62,12 @@ pub enum Layout {
 
 #[derive(Debug, clap::Args)]
 pub struct GenerateArgs {
+    #[arg(long, required_unless_present = "system", conflicts_with = "system")]
+    task: Option<TaskName>,
+    /// A system file with a `[mujoco]` table, in place of --task (`--kind random` only:
+    /// the other recipes' behaviour policies are the built-in tasks').
     #[arg(long)]
-    task: TaskName,
+    system: Option<PathBuf>,
     #[arg(long, value_enum)]
     kind: Kind,
     #[arg(long, value_enum, default_value = "d4rl")]
@@ -157,6 +161,10 @@ fn check_generate(args: &GenerateArgs) -> anyhow::Result<()> {
         "--run and --accept-rerun are for --kind medium-replay only"
     );
     let neorl = args.layout == Layout::Neorl;
+    anyhow::ensure!(
+        args.system.is_none() || (args.kind == Kind::Random && !neorl),
+        "--system generates --kind random in its own layout (the other recipes' behaviour policies are the built-in tasks')"
+    );
     let extension = args.out.extension().and_then(|e| e.to_str());
     let wanted = if neorl { "npz" } else { "hdf5" };
     anyhow::ensure!(
@@ -171,17 +179,23 @@ fn check_generate(args: &GenerateArgs) -> anyhow::Result<()> {
 fn generate_cmd(args: GenerateArgs) -> anyhow::Result<()> {
     check_generate(&args)?;
     let neorl = args.layout == Layout::Neorl;
-    let task = task_config(args.task, neorl);
+    let task = simulation_of(&system_of(args.task, args.system.as_deref(), neorl)?)?;
     // Everything the recipe needs is loaded and checked before any episode runs.
     let level = level(args.kind, args.layout)?;
     let device = ComputeDevice::Cpu.device().map_err(anyhow::Error::msg)?;
+    // A system file generates only random data (checked above): its behaviour never loads.
+    let built_in = || {
+        task.task
+            .built_in()
+            .context("behaviour policies are the built-in tasks'")
+    };
     let load = |level| {
-        load_behaviour(&args.behaviour, args.task, level, &device)
+        load_behaviour(&args.behaviour, built_in()?, level, &device)
             .with_context(|| format!("loading the {level} behaviour policy"))
     };
     let dataset = match (args.kind, level) {
         (Kind::Random, _) => {
-            let probe = MujocoTask::new(task)?;
+            let probe = MujocoTask::new(&task)?;
             let policy = PortableActor::rlkit_random(
                 probe.obs_dim(),
                 probe.act_dim(),
@@ -201,7 +215,7 @@ fn generate_cmd(args: GenerateArgs) -> anyhow::Result<()> {
             let Some(run) = args.run.as_ref() else {
                 anyhow::bail!(
                     "--kind medium-replay needs --run, the online run the medium policy came from{}",
-                    rerun_hint(args.task, &behaviour)
+                    rerun_hint(built_in()?, &behaviour)
                 );
             };
             medium_replay(run, &behaviour, args.accept_rerun)?
@@ -214,7 +228,7 @@ fn generate_cmd(args: GenerateArgs) -> anyhow::Result<()> {
             let behaviour = load(level)?;
             let kind = name(args.kind);
             let kind = if neorl { format!("neorl-{kind}") } else { kind };
-            from_behaviour(task, &kind, &args, &behaviour)?
+            from_behaviour(&task, &kind, &args, &behaviour)?
         }
         (_, None) => unreachable!("every other kind has a level"),
     };
@@ -230,8 +244,8 @@ fn medium_expert(
     expert: &Behaviour,
 ) -> anyhow::Result<Dataset> {
     let parts = [
-        from_behaviour(task, "medium", args, medium)?,
-        from_behaviour(task, "expert", args, expert)?,
+        from_behaviour(&task, "medium", args, medium)?,
+        from_behaviour(&task, "expert", args, expert)?,
     ];
     let mut metadata = parts[0].metadata.clone();
     metadata.retain(|k, _| !k.starts_with("behaviour"));
@@ -281,12 +295,12 @@ fn write_dataset(dataset: &Dataset, out: &Path, neorl: bool) -> anyhow::Result<(
 
 /// Runs `behaviour`'s policy (actions sampled) in `task` for the recipe's budget.
 fn from_behaviour(
-    task: TaskConfig,
+    task: &TaskConfig,
     kind: &str,
     args: &GenerateArgs,
     behaviour: &Behaviour,
 ) -> anyhow::Result<Dataset> {
-    let mut config = GenerateConfig::new(task, kind, args.transitions, args.seed);
+    let mut config = GenerateConfig::new(task.clone(), kind, args.transitions, args.seed);
     if args.layout == Layout::Neorl {
         config.budget = Budget::Episodes(args.trajectories);
     }

@@ -1,13 +1,15 @@
 //! `nuno-trainer evaluate`: episodes of a policy in the real MuJoCo task.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use nuno::agent::{ActionMode, ActorPolicy, RandomPolicy};
-use nuno::artifact::{BEST_POLICY, load_policy};
-use nuno::envs::{EvaluationConfig, MujocoTask, TaskConfig, TaskName, evaluate};
+use nuno::artifact::{ArtifactError, BEST_POLICY, ModelFolder, PolicyMetadata, load_policy};
+use nuno::envs::{EvaluationConfig, MujocoTask, System, TaskConfig, TaskName, evaluate};
 use nuno::infer::Kernel;
 use nuno::shared::BatchPolicy;
+
+use crate::data_source::{simulation_of, system_of};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -22,8 +24,11 @@ pub struct Args {
     #[arg(long)]
     sampled: bool,
     /// Task: hopper, halfcheetah, walker2d, swimmer, invertedpendulum or ant (default: the policy's own task).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "system")]
     task: Option<TaskName>,
+    /// A system file with a `[mujoco]` table, simulated in place of a built-in task.
+    #[arg(long)]
+    system: Option<PathBuf>,
     /// Number of episodes.
     #[arg(long, default_value_t = 10)]
     episodes: usize,
@@ -31,7 +36,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// NeoRL's variant (observations include root x; NeoRL reference returns).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "system")]
     neorl: bool,
     /// Print the full report as JSON instead of a table.
     #[arg(long)]
@@ -42,19 +47,13 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let variant = |name| {
-        if args.neorl {
-            TaskConfig::neorl(name)
-        } else {
-            TaskConfig::d4rl(name)
-        }
+    let given = match (args.task, args.system.as_deref()) {
+        (None, None) => None,
+        (task, file) => Some(simulation_of(&system_of(task, file, args.neorl)?)?),
     };
     let (policy, task): (Box<dyn BatchPolicy>, TaskConfig) = if args.policy == "random" {
-        let name = args
-            .task
-            .context("--task is required with --policy random")?;
-        let task = variant(name);
-        let probe = MujocoTask::new(task)?;
+        let task = given.context("--task or --system is required with --policy random")?;
+        let probe = MujocoTask::new(&task)?;
         let (low, high) = probe.action_bounds();
         let to_f32 = |v: Vec<f64>| v.into_iter().map(|x| x as f32).collect();
         let random = RandomPolicy::new(probe.obs_dim(), to_f32(low), to_f32(high));
@@ -69,9 +68,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     dir.display()
                 )
             })?;
-        let task = match args.task {
-            Some(name) => variant(name),
-            None => metadata.simulated_task(&dir)?,
+        let task = match given {
+            Some(task) => task,
+            None => policy_task(&dir, &metadata)?,
         };
         let mode = if args.sampled {
             ActionMode::Sampled
@@ -80,9 +79,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         (args.kernel.policy(ActorPolicy { actor, mode }), task)
     };
-    let config = EvaluationConfig::new(task, args.episodes, args.seed);
+    let config = EvaluationConfig::new(task.clone(), args.episodes, args.seed);
     let report = evaluate(policy.as_ref(), &config)
-        .with_context(|| format!("evaluating {} on {}", args.policy, task.name))?;
+        .with_context(|| format!("evaluating {} on {}", args.policy, task.task))?;
 
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -100,7 +99,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     println!(
         "{} {} policy, {} episodes: return {:.2} ± {:.2}, normalised score {:.2} ± {:.2}",
-        task.name,
+        task.task,
         args.policy,
         args.episodes,
         report.mean_return,
@@ -109,4 +108,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.std_normalized_score
     );
     Ok(())
+}
+
+/// The task a policy acts in: the built-in one it records, or else the one
+/// the model folder it was saved in records (a system file's, whole).
+fn policy_task(dir: &Path, metadata: &PolicyMetadata) -> anyhow::Result<TaskConfig> {
+    let recorded = metadata.simulated_task(dir);
+    if recorded.is_ok() {
+        return Ok(recorded?);
+    }
+    let folder = match ModelFolder::load(dir, &burn::tensor::Device::flex()) {
+        Err(ArtifactError::NotAModel(_)) => return Ok(recorded?),
+        folder => folder?,
+    };
+    let system = folder.system()?;
+    let simulator = system.as_ref().and_then(System::simulator);
+    simulator.with_context(|| format!("{}: {}", dir.display(), recorded.unwrap_err()))
 }

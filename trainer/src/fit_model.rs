@@ -281,7 +281,7 @@ pub fn fit(plan: &Plan) -> anyhow::Result<()> {
     )?;
     print_calibration(&report.calibration);
     let provenance = DynamicsProvenance {
-        task: plan.system.simulator(),
+        task: plan.system.task(),
         system: plan.system.file_text(),
         fit: Some(plan.fit.clone()),
         thresholds: Some(report.thresholds.clone()),

@@ -527,8 +527,8 @@ fn load_model(plan: &Plan, device: &Device) -> anyhow::Result<(ModelFolder, Syst
     };
     if let Some(preset) = plan.preset {
         let matches = system
-            .simulator()
-            .is_some_and(|task| task.name == preset.task && task.layout == preset.layout);
+            .task()
+            .is_some_and(|task| task.task == preset.task && task.layout == preset.layout);
         anyhow::ensure!(
             matches,
             "preset {} is for {} ({:?}), the model is of {} ({:?})",
@@ -536,7 +536,7 @@ fn load_model(plan: &Plan, device: &Device) -> anyhow::Result<(ModelFolder, Syst
             preset.task,
             preset.layout,
             system.name(),
-            system.simulator().map(|t| t.layout)
+            system.task().map(|t| t.layout)
         );
     }
     Ok((folder, system))

@@ -69,7 +69,7 @@ pub async fn evaluate(
     let episodes = r.episodes.unwrap_or(DEFAULT_EPISODES.min(max_episodes));
     within("episodes", episodes, max_episodes)?;
     state.metrics.batch("evaluate", &r.model, episodes);
-    let config = EvaluationConfig::new(task, episodes, r.seed);
+    let config = EvaluationConfig::new(task.clone(), episodes, r.seed);
     let worker = model.clone();
     let report = state
         .compute(move |cancel| {
@@ -84,7 +84,7 @@ pub async fn evaluate(
         .await?;
     Ok(Json(EvaluateResponse {
         model: r.model,
-        task: task.name.to_string(),
+        task: task.task.to_string(),
         report,
     }))
 }
@@ -190,7 +190,7 @@ pub async fn validate(
     }))
 }
 
-/// The MuJoCo task `model` is of; a 409 for a system described in a file.
+/// The MuJoCo task `model` is of; a 409 for a system whose file has no `[mujoco]` table.
 fn simulator(model: &LoadedModel) -> Result<TaskConfig, ApiError> {
     model
         .system
