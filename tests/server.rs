@@ -1788,3 +1788,97 @@ async fn shared_candidates_binary_answers_and_bad_score_requests() {
         assert!(message.contains(needle), "{needle}: {body}");
     }
 }
+
+#[tokio::test]
+async fn plan_answers_what_the_score_route_scores_and_a_session_warm_starts() {
+    let server = Server::start(limits(), None).await;
+    let path = format!("/v1/models/{MODEL}/plan");
+    let state = upright(1).remove(0);
+    let request = json!({"state": state, "planner": "mppi", "horizon": 5, "population": 16,
+                         "iterations": 2, "noise_scale": 0.0, "seed": 1, "open_session": true});
+    let (status, first) = server.post(&path, &request).await;
+    assert_eq!(status, StatusCode::OK, "{first}");
+    let actions = first["actions"].as_array().unwrap();
+    assert_eq!(actions.len(), 5);
+    assert_eq!(first["first_action"], actions[0]);
+    assert_eq!(first["warm_started"], false);
+    let session = first["session"].as_str().unwrap().to_string();
+
+    // Noise off, one particle: the score route rolls the same plan to the same score.
+    let scored = json!({"states": [state], "shared_actions": [actions], "horizon": 5,
+                        "noise_scale": 0.0});
+    let (status, scores) = server
+        .post(&format!("/v1/models/{MODEL}/score"), &scored)
+        .await;
+    assert_eq!(status, StatusCode::OK, "{scores}");
+    let by_route = scores["scores"][0][0]["penalized_return"].as_f64().unwrap();
+    let by_plan = first["score"]["penalized_return"].as_f64().unwrap();
+    assert!(
+        (by_route - by_plan).abs() < 1e-6 * (1.0 + by_plan.abs()),
+        "{by_route} vs {by_plan}"
+    );
+    assert_eq!(first["objective"].as_f64().unwrap(), by_plan);
+
+    let mut next = request.clone();
+    next.as_object_mut().unwrap().remove("open_session");
+    next["session"] = json!(session);
+    let (status, second) = server.post(&path, &next).await;
+    assert_eq!(status, StatusCode::OK, "{second}");
+    assert_eq!(
+        (second["warm_started"].clone(), second["session"].clone()),
+        (json!(true), json!(session))
+    );
+
+    let with = |field: &str, value: Value| {
+        let mut r = request.clone();
+        r[field] = value;
+        r
+    };
+    let mut cem_with_temperature = with("planner", json!("cem"));
+    cem_with_temperature["temperature"] = json!(1.0);
+    for (bad, status_wanted, needle) in [
+        (
+            with("session", json!("nope")),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "not both",
+        ),
+        (
+            cem_with_temperature,
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "setting of mppi",
+        ),
+        (
+            with("state", json!([1.0, 2.0])),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "`state` has 2 values",
+        ),
+    ] {
+        let (status, body) = server.post(&path, &bad).await;
+        assert_eq!(status, status_wanted, "{body}");
+        assert!(body.to_string().contains(needle), "{needle}: {body}");
+    }
+    let mut unknown = next.clone();
+    unknown["session"] = json!("nope");
+    let (status, body) = server.post(&path, &unknown).await;
+    assert_eq!(status, StatusCode::NOT_FOUND, "{body}");
+    assert_eq!(body["error"]["code"], "session_not_found", "{body}");
+}
+
+#[tokio::test]
+async fn an_expired_session_is_a_404_not_a_cold_start() {
+    let expiring = Limits {
+        plan_session_ttl_s: 0,
+        ..limits()
+    };
+    let server = Server::start(expiring, None).await;
+    let path = format!("/v1/models/{MODEL}/plan");
+    let request = json!({"state": upright(1)[0], "planner": "cem", "horizon": 3,
+                         "population": 8, "iterations": 1, "open_session": true});
+    let (status, first) = server.post(&path, &request).await;
+    assert_eq!(status, StatusCode::OK, "{first}");
+    let continued = json!({"state": upright(1)[0], "planner": "cem", "horizon": 3,
+                           "population": 8, "iterations": 1, "session": first["session"]});
+    let (status, body) = server.post(&path, &continued).await;
+    assert_eq!(status, StatusCode::NOT_FOUND, "{body}");
+    assert!(body.to_string().contains("expired"), "{body}");
+}

@@ -44,6 +44,15 @@ struct Args {
     /// Model computations at once (default: the number of cores).
     #[arg(long, default_value_t = Limits::default().compute_slots)]
     compute_slots: usize,
+    /// Iterations of one `plan` call.
+    #[arg(long, default_value_t = Limits::default().max_plan_iterations)]
+    max_plan_iterations: usize,
+    /// `plan` sessions kept at once (the least recently used goes first).
+    #[arg(long, default_value_t = Limits::default().plan_sessions)]
+    plan_sessions: usize,
+    /// Seconds a `plan` session is kept after its last use.
+    #[arg(long, default_value_t = Limits::default().plan_session_ttl_s)]
+    plan_session_ttl: u64,
     /// What evaluates the models: the fused CPU path, or burn (the training code path): `fused` or `burn`.
     #[arg(long, default_value_t = Kernel::Fused, env = "NUNO_KERNEL")]
     kernel: Kernel,
@@ -72,6 +81,9 @@ fn main() -> ExitCode {
             request_timeout_s: args.request_timeout,
             concurrency: args.concurrency,
             compute_slots: args.compute_slots,
+            max_plan_iterations: args.max_plan_iterations,
+            plan_sessions: args.plan_sessions,
+            plan_session_ttl_s: args.plan_session_ttl,
         },
         token: args.token.filter(|t| !t.is_empty()),
         kernel: args.kernel,

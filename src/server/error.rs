@@ -19,6 +19,8 @@ pub enum ApiError {
         "model `{model}` is of `{system}`, a system described in a file without a [mujoco] table: there is no simulator to run it in"
     )]
     NoSimulator { model: String, system: String },
+    #[error("{0}")]
+    UnknownSession(String),
     #[error("no route {0} (the API is listed at /docs and /openapi.json)")]
     NoRoute(String),
     #[error("malformed request body: {0}")]
@@ -50,6 +52,7 @@ impl ApiError {
         match self {
             ApiError::UnknownModel(_) => (StatusCode::NOT_FOUND, "model_not_found"),
             ApiError::NoRoute(_) => (StatusCode::NOT_FOUND, "route_not_found"),
+            ApiError::UnknownSession(_) => (StatusCode::NOT_FOUND, "session_not_found"),
             ApiError::NoPolicy(_) => (StatusCode::CONFLICT, "no_policy"),
             ApiError::NoSimulator { .. } => (StatusCode::CONFLICT, "no_simulator"),
             ApiError::Malformed(_) => (StatusCode::BAD_REQUEST, "malformed_body"),
@@ -96,7 +99,7 @@ pub struct ErrorBody {
 
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 pub struct ErrorDetail {
-    /// Stable code: model_not_found, route_not_found, no_policy, no_simulator, malformed_body, invalid_request,
+    /// Stable code: model_not_found, route_not_found, session_not_found, no_policy, no_simulator, malformed_body, invalid_request,
     /// over_limit, body_too_large, unsupported_media_type, unauthorized, timeout, cancelled,
     /// internal.
     pub code: String,

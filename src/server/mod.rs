@@ -14,6 +14,7 @@ mod body;
 mod error;
 mod metrics;
 mod openapi;
+mod plan_sessions;
 mod registry;
 mod routes;
 mod rows;
@@ -66,6 +67,12 @@ pub struct Limits {
     pub concurrency: usize,
     /// Model computations running at once on the blocking pool.
     pub compute_slots: usize,
+    /// Iterations of one `plan` call.
+    pub max_plan_iterations: usize,
+    /// `plan` sessions kept at once (the least recently used goes first).
+    pub plan_sessions: usize,
+    /// Seconds a `plan` session is kept after its last use.
+    pub plan_session_ttl_s: u64,
 }
 
 impl Default for Limits {
@@ -81,6 +88,9 @@ impl Default for Limits {
             request_timeout_s: 120,
             concurrency: 64,
             compute_slots: std::thread::available_parallelism().map_or(2, |n| n.get()),
+            max_plan_iterations: 100,
+            plan_sessions: 1024,
+            plan_session_ttl_s: 300,
         }
     }
 }
@@ -116,6 +126,8 @@ pub struct AppState {
     pub config: Arc<ServerConfig>,
     pub registry: Arc<ModelRegistry>,
     pub metrics: Arc<Metrics>,
+    /// The `plan` route's sessions.
+    pub plan_sessions: Arc<plan_sessions::PlanSessions>,
     compute: Arc<Semaphore>,
 }
 
@@ -125,6 +137,10 @@ impl AppState {
         let (registry, report) = ModelRegistry::open(&config.models_dir, config.kernel);
         let state = Self {
             compute: Arc::new(Semaphore::new(config.limits.compute_slots.max(1))),
+            plan_sessions: Arc::new(plan_sessions::PlanSessions::new(
+                config.limits.plan_sessions,
+                std::time::Duration::from_secs(config.limits.plan_session_ttl_s),
+            )),
             config: Arc::new(config),
             registry: Arc::new(registry),
             metrics: Arc::new(Metrics::default()),

@@ -234,6 +234,15 @@ fn state_limits(spec: &mut Value, limits: &Limits) {
         ),
         ("ScoreRequest", "horizon", "maximum", limits.max_horizon),
         ("ScoreRequest", "particles", "maximum", limits.max_particles),
+        ("PlanRequest", "horizon", "maximum", limits.max_horizon),
+        ("PlanRequest", "particles", "maximum", limits.max_particles),
+        ("PlanRequest", "population", "maximum", limits.max_batch),
+        (
+            "PlanRequest",
+            "iterations",
+            "maximum",
+            limits.max_plan_iterations,
+        ),
         ("ActRequest", "states", "maxItems", limits.max_batch),
         ("ValidateRequest", "actions", "maxItems", limits.max_horizon),
         (
@@ -256,7 +265,8 @@ fn state_limits(spec: &mut Value, limits: &Limits) {
         "properties": { "alpha": { "type": "number" }, "threshold": { "type": "number" } },
     });
     schemas["RolloutRequest"]["not"] = one_rule.clone();
-    schemas["ScoreRequest"]["not"] = one_rule;
+    schemas["ScoreRequest"]["not"] = one_rule.clone();
+    plan_request_rules(schemas, one_rule);
     // Exactly one of the two ways to give candidates; each start's no more
     // candidates than a batch has rows.
     let given =
@@ -286,6 +296,25 @@ fn state_limits(spec: &mut Value, limits: &Limits) {
         }
     }
     kserve_constraints(schemas, limits);
+}
+
+/// What a plan request may not combine: each planner's own settings with the
+/// other's (null is absent), a session continued and one opened, α and a threshold.
+fn plan_request_rules(schemas: &mut Value, one_rule: Value) {
+    // Each planner's own settings, and none of the other's (null is absent).
+    let set = |fields: [&str; 2]| {
+        let one = |f: &str| json!({ "required": [f], "properties": { f: { "type": "number" } } });
+        json!({ "anyOf": [one(fields[0]), one(fields[1])] })
+    };
+    let planner_is = |name: &str| json!({ "properties": { "planner": { "const": name } } });
+    schemas["PlanRequest"]["allOf"] = json!([
+        { "if": planner_is("cem"), "then": { "not": set(["temperature", "smoothing"]) } },
+        { "if": planner_is("mppi"), "then": { "not": set(["elites", "momentum"]) } },
+    ]);
+    schemas["PlanRequest"]["not"] = json!({ "anyOf": [one_rule, {
+        "required": ["session", "open_session"],
+        "properties": { "session": { "type": "string" }, "open_session": { "const": true } },
+    }] });
 }
 
 /// What KServe `infer` takes, as far as a schema can say it: exactly the

@@ -8,7 +8,7 @@ Two things a JSON schema cannot state, and only these, are set aside:
   description), and some sizes are relations between fields (as many action
   rows as states, `horizon` actions per start, KServe's `data` holding
   shape's product of numbers). Schema-valid cases get the model's widths and
-  matching sizes before they are sent, so the server's other rules are what
+  matching sizes (a plan's `state` too) before they are sent, so the server's other rules are what
   they meet; a 422 naming a width, such a relation, a CVaR level α the
   model's threshold table lacks, or (asked with `clip: false`) an action
   outside the model's action box is not counted.
@@ -83,6 +83,8 @@ def map_case(context, case):
     actions = body.get("actions")
     if path.endswith("/step") and isinstance(actions, list):
         body["actions"] = _rows(_sized(actions, batch, [0.0] * ACT_DIM), ACT_DIM)
+    elif path.endswith("/plan") and isinstance(body.get("state"), list):
+        body["state"] = (body["state"] + [0.0] * OBS_DIM)[:OBS_DIM]
     elif path.endswith("/validate"):
         body["actions"] = _rows(actions, ACT_DIM)
     elif path.endswith("/score"):

@@ -9,6 +9,7 @@ mod health;
 mod kserve;
 mod kserve_binary;
 mod models;
+mod plan;
 mod rollout;
 mod score;
 mod step;
@@ -22,6 +23,7 @@ pub use kserve::{
     V2ModelMetadata, V2TensorMetadata,
 };
 pub use models::{ModelDetail, ModelList, ModelSummary};
+pub use plan::{PlanRequest, PlanResponse, PlannerName};
 pub use rollout::{RolloutRequest, RolloutResponse, Trajectory};
 pub use score::{ScoreRequest, ScoreResponse};
 pub use step::{StepRequest, StepResponse};
@@ -41,6 +43,7 @@ pub(super) fn api_routes() -> OpenApiRouter<AppState> {
         .routes(routes!(step::step))
         .routes(routes!(rollout::rollout))
         .routes(routes!(score::score))
+        .routes(routes!(plan::plan_route))
         .routes(routes!(act::act))
         .routes(routes!(evaluate::validate))
         .routes(routes!(evaluate::evaluate))

@@ -1,0 +1,298 @@
+//! `POST /v1/models/{id}/plan`: one control step of a sampling planner (MPPI
+//! or CEM) run in the model from one state, η-aware through the scores it
+//! maximises; an optional session keeps the plan so the next step
+//! warm-starts from it.
+
+use std::time::Instant;
+
+use axum::extract::{Path, State};
+use axum::response::Response;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use super::fields::{integer, one, optional_integer, unit};
+use super::rollout::resolve_threshold;
+use crate::planning::{
+    CandidateScore, CemConfig, MppiConfig, Optimizer, PlanConfig, PlanStart, PlanningError,
+    ScoreConfig, plan,
+};
+use crate::server::body::{RawBody, json_response};
+use crate::server::plan_sessions::PlanSessions;
+use crate::server::validate::{non_negative, within};
+use crate::server::{ApiError, AppState};
+
+/// The planners the route runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum PlannerName {
+    Mppi,
+    Cem,
+}
+
+#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PlanRequest {
+    /// The state to plan from, `[obs_dim]` (the model's).
+    pub state: Vec<f32>,
+    pub planner: PlannerName,
+    /// Steps H of the plan.
+    #[schema(minimum = 1)]
+    #[serde(deserialize_with = "integer")]
+    pub horizon: usize,
+    /// Candidates sampled per iteration.
+    #[schema(minimum = 1)]
+    #[serde(deserialize_with = "integer")]
+    pub population: usize,
+    #[schema(minimum = 1)]
+    #[serde(deserialize_with = "integer")]
+    pub iterations: usize,
+    /// Samples of each candidate (default 1).
+    #[serde(default = "one")]
+    #[schema(minimum = 1)]
+    #[serde(deserialize_with = "integer")]
+    pub particles: usize,
+    /// MPPI: weights exp((R − max R)/temperature) (default 1).
+    #[serde(default)]
+    #[schema(exclusive_minimum = 0)]
+    pub temperature: Option<f64>,
+    /// MPPI: β of the smoothed noise (default 0.9, mbrl-lib's).
+    #[serde(default)]
+    #[schema(exclusive_minimum = 0, maximum = 1)]
+    pub smoothing: Option<f64>,
+    /// CEM: the candidates each iteration refits to (default ⌈population / 10⌉;
+    /// at most the population, which more elites mean).
+    #[serde(default, deserialize_with = "optional_integer")]
+    #[schema(minimum = 1)]
+    pub elites: Option<usize>,
+    /// CEM: the share of the old distribution kept per refit (default 0.1).
+    #[serde(default)]
+    #[schema(minimum = 0, exclusive_maximum = 1)]
+    pub momentum: Option<f64>,
+    /// Sampling spread as a share of each action's half-range (default: CEM 0.5, MPPI 1).
+    #[serde(default)]
+    #[schema(exclusive_minimum = 0)]
+    pub noise: Option<f64>,
+    /// γ of the returns (default 1).
+    #[serde(default = "unit")]
+    #[schema(exclusive_minimum = 0, maximum = 1)]
+    pub discount: f64,
+    /// λ on η: candidates maximise Σ γ^t (r_t − λ·η_t) (default 1).
+    #[serde(default = "unit")]
+    #[schema(minimum = 0)]
+    pub penalty: f64,
+    /// Risk: maximise the CVaR of the return over this share of particles,
+    /// worst first, less λ·(mean accumulated η).
+    #[serde(default)]
+    #[schema(exclusive_minimum = 0, maximum = 1)]
+    pub cvar_alpha: Option<f64>,
+    /// CVaR level α of the truncation ε(H, α); or give `threshold`.
+    #[serde(default)]
+    #[schema(exclusive_minimum = 0, maximum = 1)]
+    pub alpha: Option<f64>,
+    #[serde(default)]
+    pub threshold: Option<f32>,
+    #[serde(default)]
+    #[serde(deserialize_with = "integer")]
+    pub seed: u64,
+    /// Multiplies ε (default: the model's own `sample_noise_scale`).
+    #[serde(default)]
+    #[schema(minimum = 0)]
+    pub noise_scale: Option<f32>,
+    /// Continue this session: warm-start from its last plan, shifted one step.
+    #[serde(default)]
+    pub session: Option<String>,
+    /// Open a session, named in the answer, that keeps this plan.
+    #[serde(default)]
+    pub open_session: bool,
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct PlanResponse {
+    pub model: String,
+    pub planner: PlannerName,
+    /// `[horizon][act_dim]`: the plan; its first row is the action to take now.
+    pub actions: Vec<Vec<f32>>,
+    pub first_action: Vec<f32>,
+    /// The plan scored once more after the last iteration.
+    pub score: CandidateScore,
+    /// What the planner maximised, for the plan.
+    pub objective: f64,
+    /// The session that keeps this plan, if any.
+    pub session: Option<String>,
+    /// Whether the search started from the session's last plan.
+    pub warm_started: bool,
+    /// Seconds the planning took, queueing for a compute slot excluded.
+    pub seconds: f64,
+}
+
+/// Plans `horizon` actions from `state` with MPPI or CEM over the model's
+/// η-penalised (or CVaR) returns, mbrl-lib's planners (docs/paper-map.md).
+/// With `open_session` the plan is kept under a new session id; with
+/// `session` the search starts from that session's last plan shifted one
+/// step, and the new plan replaces it. An unknown or expired session is a 404.
+#[utoipa::path(post, path = "/v1/models/{id}/plan", tag = "models",
+    params(("id" = String, Path, description = "Model id")),
+    request_body = PlanRequest,
+    responses(
+        (status = 200, description = "Success", body = PlanResponse),
+        (status = 400, description = "Malformed body", body = crate::server::ErrorBody),
+        (status = 404, description = "Unknown model, or an unknown or expired session", body = crate::server::ErrorBody),
+        (status = 422, description = "Wrong dimensions, a setting out of range, or over a limit", body = crate::server::ErrorBody),
+        (status = 503, description = "Timed out or cancelled", body = crate::server::ErrorBody),
+    ))]
+pub async fn plan_route(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    body: RawBody,
+) -> Result<Response, ApiError> {
+    let arrived = Instant::now();
+    let r: PlanRequest = body.json().await?;
+    let model = state.model(&id)?;
+    let config = plan_config(&r, &state, &model)?;
+    let start = checked_state(&r.state, model.obs_dim())?;
+    let sessions = state.plan_sessions.clone();
+    let session = match (&r.session, r.open_session) {
+        (Some(_), true) => {
+            return Err(ApiError::Invalid(
+                "give `session` (continue one) or `open_session` (start one), not both".into(),
+            ));
+        }
+        (Some(name), false) => Some(name.clone()),
+        (None, true) => Some(PlanSessions::new_id()),
+        (None, false) => None,
+    };
+    let warm = match &r.session {
+        Some(name) => Some(sessions.warm(name, &id, r.horizon, arrived)?),
+        None => None,
+    };
+    let population = config.population * config.score.particles * config.score.horizon;
+    state
+        .metrics
+        .batch("plan", &id, population * config.iterations);
+    state
+        .compute(move |cancel| {
+            let began = Instant::now();
+            let mut rng = ChaCha8Rng::seed_from_u64(r.seed);
+            let from = PlanStart {
+                state: &start,
+                action_box: &model.action_space,
+                warm: warm.as_deref(),
+            };
+            let found = plan(
+                model.batch_dynamics(),
+                &model.rules,
+                &from,
+                &config,
+                &mut rng,
+                cancel,
+            )
+            .map_err(|e| match e {
+                PlanningError::Invalid(message) => ApiError::Invalid(message),
+                PlanningError::Cancelled(c) => c.into(),
+            })?;
+            if let Some(name) = &session {
+                sessions.keep(name, &id, r.horizon, found.actions.clone(), Instant::now());
+            }
+            let act_dim = model.act_dim();
+            json_response(&PlanResponse {
+                model: id,
+                planner: r.planner,
+                first_action: found.actions[..act_dim].to_vec(),
+                actions: found.actions.chunks(act_dim).map(<[_]>::to_vec).collect(),
+                score: found.score,
+                objective: found.objective,
+                session,
+                warm_started: warm.is_some(),
+                seconds: began.elapsed().as_secs_f64(),
+            })
+        })
+        .await
+}
+
+/// The request's planner and scoring, with the defaults filled and the
+/// server's limits applied.
+fn plan_config(
+    r: &PlanRequest,
+    state: &AppState,
+    model: &crate::server::LoadedModel,
+) -> Result<PlanConfig, ApiError> {
+    let limits = &state.config.limits;
+    within("horizon", r.horizon, limits.max_horizon)?;
+    within("particles", r.particles, limits.max_particles)?;
+    within("population", r.population, limits.max_batch)?;
+    within(
+        "population × particles × horizon",
+        r.population * r.particles * r.horizon,
+        limits.max_rollout_steps,
+    )?;
+    within("iterations", r.iterations, limits.max_plan_iterations)?;
+    non_negative("penalty", r.penalty)?;
+    let misplaced = |field: &str, planner: &str| {
+        Err(ApiError::Invalid(format!(
+            "`{field}` is a setting of {planner}, not of this planner"
+        )))
+    };
+    let optimizer = match r.planner {
+        PlannerName::Mppi => {
+            if r.elites.is_some() || r.momentum.is_some() {
+                return misplaced("elites`/`momentum", "cem");
+            }
+            Optimizer::Mppi(MppiConfig {
+                temperature: r.temperature.unwrap_or(1.0),
+                smoothing: r.smoothing.unwrap_or(0.9),
+            })
+        }
+        PlannerName::Cem => {
+            if r.temperature.is_some() || r.smoothing.is_some() {
+                return misplaced("temperature`/`smoothing", "mppi");
+            }
+            Optimizer::Cem(CemConfig {
+                elites: r
+                    .elites
+                    .unwrap_or(r.population.div_ceil(10))
+                    .min(r.population),
+                momentum: r.momentum.unwrap_or(0.1),
+            })
+        }
+    };
+    let noise_scale = r
+        .noise_scale
+        .unwrap_or_else(|| model.batch_dynamics().sample_noise_scale());
+    non_negative("noise_scale", f64::from(noise_scale))?;
+    Ok(PlanConfig {
+        optimizer,
+        population: r.population,
+        iterations: r.iterations,
+        noise: r.noise.unwrap_or(match r.planner {
+            PlannerName::Cem => 0.5,
+            PlannerName::Mppi => 1.0,
+        }),
+        score: ScoreConfig {
+            horizon: r.horizon,
+            particles: r.particles,
+            discount: r.discount,
+            penalty: r.penalty,
+            cvar_alpha: r.cvar_alpha,
+            threshold: resolve_threshold(r.threshold, r.alpha, r.horizon, model)?,
+            noise_scale,
+        },
+    })
+}
+
+/// The state, `obs_dim` finite values.
+fn checked_state(state: &[f32], obs_dim: usize) -> Result<Vec<f32>, ApiError> {
+    if state.len() != obs_dim {
+        return Err(ApiError::Invalid(format!(
+            "`state` has {} values, the model's observations {obs_dim}",
+            state.len()
+        )));
+    }
+    if let Some(i) = state.iter().position(|v| !v.is_finite()) {
+        return Err(ApiError::Invalid(format!(
+            "`state[{i}]` is not a finite number"
+        )));
+    }
+    Ok(state.to_vec())
+}
