@@ -1791,7 +1791,12 @@ async fn shared_candidates_binary_answers_and_bad_score_requests() {
 
 #[tokio::test]
 async fn plan_answers_what_the_score_route_scores_and_a_session_warm_starts() {
-    let server = Server::start(limits(), None).await;
+    // Sessions that never expire: however slow the machine, the second call finds the first's plan.
+    let lasting = Limits {
+        plan_session_ttl_s: u64::MAX,
+        ..limits()
+    };
+    let server = Server::start(lasting, None).await;
     let path = format!("/v1/models/{MODEL}/plan");
     let state = upright(1).remove(0);
     let request = json!({"state": state, "planner": "mppi", "horizon": 5, "population": 16,
