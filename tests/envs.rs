@@ -346,3 +346,75 @@ fn evaluator_refuses_mismatched_policies() {
     let err = evaluate(&Broken, &EvaluationConfig::new(hopper.clone(), 0, 0)).unwrap_err();
     assert!(matches!(err, EnvError::NoEpisodes));
 }
+
+/// Plays each episode its own open-loop actions, counting its steps: state
+/// per episode, as model-predictive control keeps its last plan.
+struct OpenLoop {
+    steps: std::collections::HashMap<usize, usize>,
+}
+
+/// Episode `episode`'s action at step `t` (distinct per episode, in hopper's box).
+fn scripted(episode: usize, t: usize) -> [f64; 3] {
+    let phase = episode as f64 + 0.3 * t as f64;
+    [phase.sin(), (1.7 * phase).cos(), (0.5 * phase).sin()]
+}
+
+impl nuno::envs::EpisodeController for OpenLoop {
+    fn obs_dim(&self) -> usize {
+        11
+    }
+    fn act_dim(&self) -> usize {
+        3
+    }
+    fn act(
+        &mut self,
+        episodes: &[usize],
+        _: &[f32],
+        _: &mut rand_chacha::ChaCha8Rng,
+        _: &nuno::shared::Cancel,
+    ) -> Result<Vec<f32>, EnvError> {
+        let mut actions = Vec::new();
+        for &episode in episodes {
+            let t = self.steps.entry(episode).or_default();
+            actions.extend(scripted(episode, *t).map(|a| a as f32));
+            *t += 1;
+        }
+        Ok(actions)
+    }
+}
+
+#[test]
+fn a_controller_is_told_which_episode_each_row_is() {
+    // 11 episodes: two groups, whose episodes fall at different steps, so
+    // the rows a step sees are a shrinking subset of each group.
+    let config = EvaluationConfig::new(TaskConfig::d4rl(TaskName::Hopper), 11, 3);
+    let make = || OpenLoop {
+        steps: Default::default(),
+    };
+    let cancel = nuno::shared::Cancel::default();
+    let report = nuno::envs::evaluate_controlled(&make, &config, &cancel).unwrap();
+    // The reference: each episode's script played alone in a fresh task.
+    for episode in 0..11 {
+        let mut task = MujocoTask::new(&config.task).unwrap();
+        let seed = nuno::shared::derive_seed(3, nuno::shared::SeedStream::Episode(episode as u64));
+        task.reset(Some(seed));
+        let (mut total, mut length) = (0.0, 0);
+        loop {
+            let step = task
+                .step(&scripted(episode, length).map(|a| a as f32 as f64))
+                .unwrap();
+            total += step.reward;
+            length += 1;
+            if step.terminated || step.truncated {
+                break;
+            }
+        }
+        assert_eq!(report.returns[episode], total, "episode {episode}");
+        assert_eq!(report.lengths[episode], length, "episode {episode}");
+    }
+    let lengths: std::collections::HashSet<_> = report.lengths.iter().collect();
+    assert!(
+        lengths.len() > 1,
+        "every episode lasted as long: {lengths:?}"
+    );
+}

@@ -1850,7 +1850,7 @@ async fn plan_answers_what_the_score_route_scores_and_a_session_warm_starts() {
         (
             cem_with_temperature,
             StatusCode::UNPROCESSABLE_ENTITY,
-            "setting of mppi",
+            "settings of mppi",
         ),
         (
             with("state", json!([1.0, 2.0])),

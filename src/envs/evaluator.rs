@@ -5,6 +5,9 @@
 //! `i` resets with seed `seed + i` (mod 2⁶⁴) and group `g` draws policy noise from its own
 //! generator seeded by `(seed, g)`, so a report depends on the seed alone, not
 //! on the number of threads.
+//!
+//! What acts is a [`BatchPolicy`] or, for a controller that keeps something
+//! per episode (model-predictive control's last plan), an [`EpisodeController`].
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -50,6 +53,46 @@ pub struct EvaluationReport {
     pub std_normalized_score: f64,
 }
 
+/// What acts in evaluated episodes when a batch policy is not enough: it is
+/// told which episode each row is, so it can keep state per episode. One is
+/// made per group of episodes, so it never needs to be shared across threads.
+pub trait EpisodeController {
+    fn obs_dim(&self) -> usize;
+    fn act_dim(&self) -> usize;
+    /// Actions `[rows, act_dim]` for `observations` (`[rows, obs_dim]`); row
+    /// i is episode `episodes[i]`'s. A long step checks `cancel`.
+    fn act(
+        &mut self,
+        episodes: &[usize],
+        observations: &[f32],
+        rng: &mut ChaCha8Rng,
+        cancel: &Cancel,
+    ) -> Result<Vec<f32>, EnvError>;
+}
+
+/// A batch policy as a controller: it keeps nothing per episode.
+struct PolicyController<'a>(&'a dyn BatchPolicy);
+
+impl EpisodeController for PolicyController<'_> {
+    fn obs_dim(&self) -> usize {
+        self.0.obs_dim()
+    }
+
+    fn act_dim(&self) -> usize {
+        self.0.act_dim()
+    }
+
+    fn act(
+        &mut self,
+        _: &[usize],
+        observations: &[f32],
+        rng: &mut ChaCha8Rng,
+        _: &Cancel,
+    ) -> Result<Vec<f32>, EnvError> {
+        Ok(self.0.act(observations, rng))
+    }
+}
+
 /// Runs `policy` for `config.episodes` episodes of `config.task`.
 pub fn evaluate(
     policy: &dyn BatchPolicy,
@@ -65,13 +108,24 @@ pub fn evaluate_or_cancel(
     config: &EvaluationConfig,
     cancel: &Cancel,
 ) -> Result<EvaluationReport, EnvError> {
+    evaluate_controlled(&|| PolicyController(policy), config, cancel)
+}
+
+/// [`evaluate_or_cancel`] for a controller that keeps state per episode:
+/// `controller()` makes a fresh one for each group of episodes.
+pub fn evaluate_controlled<C: EpisodeController>(
+    controller: &(dyn Fn() -> C + Sync),
+    config: &EvaluationConfig,
+    cancel: &Cancel,
+) -> Result<EvaluationReport, EnvError> {
     if config.episodes == 0 {
         return Err(EnvError::NoEpisodes);
     }
     let probe = MujocoTask::new(&config.task)?;
+    let widths = controller();
     for (what, policy_dim, task_dim) in [
-        ("observations of width", policy.obs_dim(), probe.obs_dim()),
-        ("actions of width", policy.act_dim(), probe.act_dim()),
+        ("observations of width", widths.obs_dim(), probe.obs_dim()),
+        ("actions of width", widths.act_dim(), probe.act_dim()),
     ] {
         if policy_dim != task_dim {
             return Err(EnvError::PolicyMismatch {
@@ -89,7 +143,7 @@ pub fn evaluate_or_cancel(
         .enumerate()
         .map(|(g, &first)| {
             let episodes = first..(first + group).min(config.episodes);
-            run_group(policy, config, g as u64, episodes, cancel)
+            run_group(&mut controller(), config, g as u64, episodes, cancel)
         })
         .collect::<Result<_, _>>()?;
     let (returns, lengths): (Vec<f64>, Vec<usize>) = groups.into_iter().flatten().unzip();
@@ -112,7 +166,7 @@ pub fn evaluate_or_cancel(
 /// Steps the episodes of one group in lockstep until each has ended; returns
 /// (return, length) per episode.
 fn run_group(
-    policy: &dyn BatchPolicy,
+    controller: &mut impl EpisodeController,
     config: &EvaluationConfig,
     group_index: u64,
     episodes: std::ops::Range<usize>,
@@ -120,6 +174,7 @@ fn run_group(
 ) -> Result<Vec<(f64, usize)>, EnvError> {
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     rng.set_stream(group_index + 1);
+    let first = episodes.start;
     let mut tasks = Vec::with_capacity(episodes.len());
     let mut observations = Vec::with_capacity(episodes.len());
     for episode in episodes {
@@ -130,8 +185,8 @@ fn run_group(
         ))));
         tasks.push(task);
     }
-    let obs_dim = policy.obs_dim();
-    let act_dim = policy.act_dim();
+    let obs_dim = controller.obs_dim();
+    let act_dim = controller.act_dim();
     let mut results = vec![(0.0, 0); tasks.len()];
     let mut running: Vec<usize> = (0..tasks.len()).collect();
     let mut batch = Vec::with_capacity(tasks.len() * obs_dim);
@@ -141,7 +196,8 @@ fn run_group(
         for &i in &running {
             batch.extend(observations[i].iter().map(|&x| x as f32));
         }
-        let actions = policy.act(&batch, &mut rng);
+        let numbers: Vec<usize> = running.iter().map(|&i| first + i).collect();
+        let actions = controller.act(&numbers, &batch, &mut rng, cancel)?;
         if actions.len() != running.len() * act_dim {
             return Err(EnvError::PolicyOutput {
                 batch: running.len(),

@@ -14,7 +14,10 @@ mod score;
 mod system;
 mod task;
 
-pub use evaluator::{EvaluationConfig, EvaluationReport, evaluate, evaluate_or_cancel};
+pub use evaluator::{
+    EpisodeController, EvaluationConfig, EvaluationReport, evaluate, evaluate_controlled,
+    evaluate_or_cancel,
+};
 pub use modelled_system::{System, SystemShape};
 pub use mujoco_task::{MujocoTask, TaskConfig, Transition};
 pub use rules::{ForwardVelocity, Rules, TaskRules};
@@ -62,6 +65,9 @@ pub enum EnvError {
     },
     #[error("an evaluation needs at least one episode")]
     NoEpisodes,
+    /// An [`EpisodeController`] that could not act (a planner's bad setting).
+    #[error("the controller could not act: {0}")]
+    Controller(String),
     #[error(transparent)]
     Cancelled(#[from] crate::shared::cancel::Cancelled),
 }

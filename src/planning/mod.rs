@@ -1,13 +1,17 @@
 //! Planning next to the model: candidate action sequences scored in it (the
 //! one number per candidate a sampling planner needs), with η's penalty, a
 //! CVaR over particles and ε(H, α)'s truncation; and the sampling planners
-//! (CEM, MPPI) that search over those scores.
+//! (CEM, MPPI) that search over those scores; model-predictive control with
+//! them in the real task.
 
+mod mpc;
 mod plan;
 mod score;
 
+pub use mpc::evaluate_mpc;
 pub use plan::{
-    CemConfig, MppiConfig, Optimizer, Plan, PlanConfig, PlanStart, objective, plan, shifted,
+    CemConfig, MppiConfig, Optimizer, Plan, PlanBudget, PlanConfig, PlanStart, Planner,
+    PlannerSettings, objective, plan, shifted,
 };
 pub use score::{CandidateScore, Candidates, ScoreConfig, score_sequences};
 
@@ -18,4 +22,7 @@ pub enum PlanningError {
     Invalid(String),
     #[error(transparent)]
     Cancelled(#[from] crate::shared::Cancelled),
+    /// The real task MPC runs in.
+    #[error(transparent)]
+    Env(#[from] crate::envs::EnvError),
 }

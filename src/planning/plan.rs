@@ -14,12 +14,82 @@
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::PlanningError;
 use super::score::{CandidateScore, Candidates, ScoreConfig, score_sequences};
 use crate::envs::Rules;
 use crate::shared::{BatchDynamics, Cancel};
+
+/// The planners, by name: the server's `planner`, the trainer's `--planner`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
+#[serde(rename_all = "lowercase")]
+pub enum Planner {
+    Mppi,
+    Cem,
+}
+
+crate::shared::named_enum!(Planner, "planner", Planner::Mppi => "mppi", Planner::Cem => "cem");
+
+/// A planner's own settings as a caller gives them, each optional; what is
+/// left out takes mbrl-lib's default (PETS' for CEM).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PlannerSettings {
+    /// MPPI's temperature (default 1).
+    pub temperature: Option<f64>,
+    /// MPPI's β (default 0.9).
+    pub smoothing: Option<f64>,
+    /// CEM's elites (default ⌈population / 10⌉, at most the population).
+    pub elites: Option<usize>,
+    /// CEM's momentum α (default 0.1).
+    pub momentum: Option<f64>,
+    /// The sampling spread (default: CEM 0.5, MPPI 1; see [`PlanConfig::noise`]).
+    pub noise: Option<f64>,
+}
+
+impl Planner {
+    /// This planner with `settings` over its defaults, and its noise; a
+    /// setting of the other planner is refused, not ignored.
+    pub fn configure(
+        self,
+        settings: &PlannerSettings,
+        population: usize,
+    ) -> Result<(Optimizer, f64), PlanningError> {
+        let misplaced = |fields: &str, owner: Planner| {
+            Err(PlanningError::Invalid(format!(
+                "{fields} are settings of {owner}, not of {self}"
+            )))
+        };
+        let optimizer = match self {
+            Planner::Mppi => {
+                if settings.elites.is_some() || settings.momentum.is_some() {
+                    return misplaced("`elites` and `momentum`", Planner::Cem);
+                }
+                Optimizer::Mppi(MppiConfig {
+                    temperature: settings.temperature.unwrap_or(1.0),
+                    smoothing: settings.smoothing.unwrap_or(0.9),
+                })
+            }
+            Planner::Cem => {
+                if settings.temperature.is_some() || settings.smoothing.is_some() {
+                    return misplaced("`temperature` and `smoothing`", Planner::Mppi);
+                }
+                Optimizer::Cem(CemConfig {
+                    elites: (settings.elites)
+                        .unwrap_or(population.div_ceil(10))
+                        .min(population),
+                    momentum: settings.momentum.unwrap_or(0.1),
+                })
+            }
+        };
+        let noise = settings.noise.unwrap_or(match self {
+            Planner::Cem => 0.5,
+            Planner::Mppi => 1.0,
+        });
+        Ok((optimizer, noise))
+    }
+}
 
 /// Which planner, with its own settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -45,6 +115,39 @@ pub struct MppiConfig {
     /// β: each sampled action is β·(mean + noise) + (1 − β)·the one before
     /// (mbrl-lib: 0.9); 1 samples every step independently.
     pub smoothing: f64,
+}
+
+/// A planner's sizes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PlanBudget {
+    pub horizon: usize,
+    pub population: usize,
+    pub iterations: usize,
+    pub particles: usize,
+}
+
+impl PlanBudget {
+    /// mbrl-lib's PETS on hopper (`pets_hopper`).
+    pub const PETS_HOPPER: Self = Self {
+        horizon: 30,
+        population: 350,
+        iterations: 5,
+        particles: 20,
+    };
+    /// mbrl-lib's iCEM (`pets_icem_cartpole`).
+    pub const ICEM: Self = Self {
+        horizon: 10,
+        population: 200,
+        iterations: 5,
+        particles: 20,
+    };
+    /// `nuno-trainer evaluate --planner`'s default: PETS' search with one
+    /// particle, since 20 cost 20× per control step, and a 1000-step episode
+    /// replans 1000 times.
+    pub const MPC: Self = Self {
+        particles: 1,
+        ..Self::PETS_HOPPER
+    };
 }
 
 /// Everything one planning call needs besides the model and the start.
@@ -324,7 +427,7 @@ fn mean_and_unbiased_variance(values: &[f64]) -> (f64, f64) {
     (mean, variance)
 }
 
-fn check(
+pub(super) fn check(
     config: &PlanConfig,
     action_box: &[(f32, f32)],
     warm: Option<&[f32]>,

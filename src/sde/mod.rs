@@ -51,7 +51,7 @@ pub use rollout::{OpenLoop, OpenLoopRollout};
 pub use spec::{DynamicsSpec, PhysicalScales};
 pub use threshold::{
     ThresholdConfig, ThresholdTable, accumulated_eta, accumulated_eta_along, compute_thresholds,
-    cvar, window_starts_and_actions,
+    cvar, requested_threshold, window_starts_and_actions,
 };
 
 /// Everything that can go wrong building, fitting, saving or loading a model.
@@ -66,4 +66,7 @@ pub enum SdeError {
     /// What the caller's per-evaluation hook (a checkpoint's writer) reported.
     #[error("SDE fit checkpoint: {0}")]
     Checkpoint(String),
+    /// A truncation threshold asked for that the model's table cannot give.
+    #[error("{0}")]
+    Threshold(String),
 }

@@ -111,6 +111,31 @@ impl ThresholdTable {
     }
 }
 
+/// The truncation threshold a caller asks for: `threshold` outright, or
+/// ε(h = `horizon`, α = `alpha`) from a model's `table`; neither is none.
+pub fn requested_threshold(
+    table: Option<&ThresholdTable>,
+    threshold: Option<f32>,
+    alpha: Option<f64>,
+    horizon: usize,
+) -> Result<Option<f32>, SdeError> {
+    let refuse = |message: String| Err(SdeError::Threshold(message));
+    match (threshold, alpha) {
+        (Some(_), Some(_)) => refuse("give `alpha` or `threshold`, not both".into()),
+        (Some(t), None) if t.is_finite() => Ok(Some(t)),
+        (Some(t), None) => refuse(format!("`threshold` must be finite, got {t}")),
+        (None, Some(alpha)) => match table.and_then(|t| t.get(horizon, alpha)) {
+            Some(epsilon) => Ok(Some(epsilon)),
+            None => refuse(format!(
+                "the model has no ε(h = {horizon}, α = {alpha}); its table covers h ∈ {:?}, α ∈ {:?}",
+                table.map(|t| t.horizons.clone()).unwrap_or_default(),
+                table.map(|t| t.alphas.clone()).unwrap_or_default()
+            )),
+        },
+        (None, None) => Ok(None),
+    }
+}
+
 /// CVaR_α of `values`: the mean of the values at or above the α-quantile; α ≥ 1
 /// gives the maximum. `None` for no values (there is no tail to average).
 pub fn cvar(values: &[f32], alpha: f64) -> Option<f32> {

@@ -76,6 +76,18 @@ impl From<crate::shared::cancel::Cancelled> for ApiError {
     }
 }
 
+impl From<crate::planning::PlanningError> for ApiError {
+    fn from(error: crate::planning::PlanningError) -> Self {
+        use crate::planning::PlanningError;
+        match error {
+            PlanningError::Invalid(message) => ApiError::Invalid(message),
+            PlanningError::Cancelled(_) => ApiError::Cancelled,
+            PlanningError::Env(crate::envs::EnvError::Cancelled(_)) => ApiError::Cancelled,
+            PlanningError::Env(e) => ApiError::Internal(e.to_string()),
+        }
+    }
+}
+
 impl ApiError {
     /// What the client is told. An internal error's detail may name paths or
     /// internals: it goes to the log under a fresh id, and the client gets the id.

@@ -23,7 +23,7 @@ pub use kserve::{
     V2ModelMetadata, V2TensorMetadata,
 };
 pub use models::{ModelDetail, ModelList, ModelSummary};
-pub use plan::{PlanRequest, PlanResponse, PlannerName};
+pub use plan::{PlanRequest, PlanResponse};
 pub use rollout::{RolloutRequest, RolloutResponse, Trajectory};
 pub use score::{ScoreRequest, ScoreResponse};
 pub use step::{StepRequest, StepResponse};

@@ -15,28 +15,19 @@ use utoipa::ToSchema;
 use super::fields::{integer, one, optional_integer, unit};
 use super::rollout::resolve_threshold;
 use crate::planning::{
-    CandidateScore, CemConfig, MppiConfig, Optimizer, PlanConfig, PlanStart, PlanningError,
-    ScoreConfig, plan,
+    CandidateScore, PlanConfig, PlanStart, Planner, PlannerSettings, ScoreConfig, plan,
 };
 use crate::server::body::{RawBody, json_response};
 use crate::server::plan_sessions::PlanSessions;
 use crate::server::validate::{non_negative, within};
 use crate::server::{ApiError, AppState};
 
-/// The planners the route runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, ToSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum PlannerName {
-    Mppi,
-    Cem,
-}
-
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PlanRequest {
     /// The state to plan from, `[obs_dim]` (the model's).
     pub state: Vec<f32>,
-    pub planner: PlannerName,
+    pub planner: Planner,
     /// Steps H of the plan.
     #[schema(minimum = 1)]
     #[serde(deserialize_with = "integer")]
@@ -111,7 +102,7 @@ pub struct PlanRequest {
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct PlanResponse {
     pub model: String,
-    pub planner: PlannerName,
+    pub planner: Planner,
     /// `[horizon][act_dim]`: the plan; its first row is the action to take now.
     pub actions: Vec<Vec<f32>>,
     pub first_action: Vec<f32>,
@@ -187,11 +178,7 @@ pub async fn plan_route(
                 &config,
                 &mut rng,
                 cancel,
-            )
-            .map_err(|e| match e {
-                PlanningError::Invalid(message) => ApiError::Invalid(message),
-                PlanningError::Cancelled(c) => c.into(),
-            })?;
+            )?;
             if let Some(name) = &session {
                 sessions.keep(name, &id, r.horizon, found.actions.clone(), Instant::now());
             }
@@ -229,34 +216,14 @@ fn plan_config(
     )?;
     within("iterations", r.iterations, limits.max_plan_iterations)?;
     non_negative("penalty", r.penalty)?;
-    let misplaced = |field: &str, planner: &str| {
-        Err(ApiError::Invalid(format!(
-            "`{field}` is a setting of {planner}, not of this planner"
-        )))
+    let settings = PlannerSettings {
+        temperature: r.temperature,
+        smoothing: r.smoothing,
+        elites: r.elites,
+        momentum: r.momentum,
+        noise: r.noise,
     };
-    let optimizer = match r.planner {
-        PlannerName::Mppi => {
-            if r.elites.is_some() || r.momentum.is_some() {
-                return misplaced("elites`/`momentum", "cem");
-            }
-            Optimizer::Mppi(MppiConfig {
-                temperature: r.temperature.unwrap_or(1.0),
-                smoothing: r.smoothing.unwrap_or(0.9),
-            })
-        }
-        PlannerName::Cem => {
-            if r.temperature.is_some() || r.smoothing.is_some() {
-                return misplaced("temperature`/`smoothing", "mppi");
-            }
-            Optimizer::Cem(CemConfig {
-                elites: r
-                    .elites
-                    .unwrap_or(r.population.div_ceil(10))
-                    .min(r.population),
-                momentum: r.momentum.unwrap_or(0.1),
-            })
-        }
-    };
+    let (optimizer, noise) = r.planner.configure(&settings, r.population)?;
     let noise_scale = r
         .noise_scale
         .unwrap_or_else(|| model.batch_dynamics().sample_noise_scale());
@@ -265,10 +232,7 @@ fn plan_config(
         optimizer,
         population: r.population,
         iterations: r.iterations,
-        noise: r.noise.unwrap_or(match r.planner {
-            PlannerName::Cem => 0.5,
-            PlannerName::Mppi => 1.0,
-        }),
+        noise,
         score: ScoreConfig {
             horizon: r.horizon,
             particles: r.particles,

@@ -17,6 +17,7 @@ use crate::agent::{
     rollout_model_or_cancel,
 };
 use crate::artifact::NamedTensors;
+use crate::sde::requested_threshold;
 use crate::server::body::{
     Format, RawBody, TensorBytes, answer_format, json_response, tensors_response,
 };
@@ -285,35 +286,16 @@ fn flatten_sequences(
     Ok(flat)
 }
 
-/// Where rollouts truncate: the request's own `threshold`, or the model's
-/// ε(h, α) for its `alpha`; neither, never.
+/// The request's truncation threshold: `threshold`, or ε(h, α) from the
+/// model's table.
 pub(super) fn resolve_threshold(
     threshold: Option<f32>,
     alpha: Option<f64>,
     horizon: usize,
     model: &LoadedModel,
 ) -> Result<Option<f32>, ApiError> {
-    match (threshold, alpha) {
-        (Some(_), Some(_)) => Err(ApiError::Invalid(
-            "give `alpha` or `threshold`, not both".into(),
-        )),
-        (Some(t), None) if t.is_finite() => Ok(Some(t)),
-        (Some(t), None) => Err(ApiError::Invalid(format!(
-            "`threshold` must be finite, got {t}"
-        ))),
-        (None, Some(alpha)) => {
-            let table = model.thresholds();
-            let epsilon = table.and_then(|t| t.get(horizon, alpha)).ok_or_else(|| {
-                ApiError::Invalid(format!(
-                    "the model has no ε(h = {horizon}, α = {alpha}); its table covers h ∈ {:?}, α ∈ {:?}",
-                    table.map(|t| t.horizons.clone()).unwrap_or_default(),
-                    table.map(|t| t.alphas.clone()).unwrap_or_default()
-                ))
-            })?;
-            Ok(Some(epsilon))
-        }
-        (None, None) => Ok(None),
-    }
+    requested_threshold(model.thresholds(), threshold, alpha, horizon)
+        .map_err(|e| ApiError::Invalid(e.to_string()))
 }
 
 /// The trace's rows as JSON trajectories, start and particle named.

@@ -13,7 +13,7 @@ use utoipa::ToSchema;
 use super::fields::{integer, one, unit, yes};
 use super::rollout::resolve_threshold;
 use crate::artifact::NamedTensors;
-use crate::planning::{CandidateScore, Candidates, PlanningError, ScoreConfig, score_sequences};
+use crate::planning::{CandidateScore, Candidates, ScoreConfig, score_sequences};
 use crate::server::body::{
     Format, RawBody, TensorBytes, answer_format, json_response, tensors_response,
 };
@@ -175,11 +175,7 @@ pub async fn score(
                 &config,
                 &mut rng,
                 cancel,
-            )
-            .map_err(|e| match e {
-                PlanningError::Invalid(message) => ApiError::Invalid(message),
-                PlanningError::Cancelled(c) => c.into(),
-            })?;
+            )?;
             if answer == Format::Binary {
                 let tensors = binary_scores(&scores, [batch, candidates]);
                 return tensors_response(&tensors, noise_scale, clipped_rows);
