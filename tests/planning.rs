@@ -8,8 +8,8 @@ use std::sync::Arc;
 
 use nuno::envs::{Rules, SystemSpec};
 use nuno::planning::{
-    CandidateScore, Candidates, CemConfig, MppiConfig, Optimizer, Plan, PlanConfig, PlanStart,
-    ScoreConfig, plan, score_sequences,
+    CandidateScore, Candidates, CemConfig, Cost, CostTerm, MppiConfig, Optimizer, Plan, PlanConfig,
+    PlanStart, ScoreConfig, plan, score_sequences,
 };
 use nuno::shared::{BatchDynamics, BatchShape, Cancel, ModelStep};
 use rand::SeedableRng;
@@ -62,6 +62,7 @@ fn config(threshold: Option<f32>) -> ScoreConfig {
         cvar_alpha: None,
         threshold,
         noise_scale: 0.0,
+        cost: Cost::default(),
     }
 }
 
@@ -185,16 +186,68 @@ fn mismatched_shapes_and_bad_settings_are_refused_by_name() {
     let error = run(
         &[0.0],
         &[1.0; 6],
-        &ScoreConfig { discount: 0.0, ..c },
+        &ScoreConfig {
+            discount: 0.0,
+            ..c.clone()
+        },
         &mut rng,
     );
     assert!(error.contains("discount 0"), "{error}");
     let bad_alpha = ScoreConfig {
         cvar_alpha: Some(1.5),
-        ..c
+        ..c.clone()
     };
     let error = run(&[0.0], &[1.0; 6], &bad_alpha, &mut rng);
     assert!(error.contains("cvar_alpha"), "{error}");
+    let past = ScoreConfig {
+        cost: Cost {
+            terms: vec![CostTerm {
+                dimension: 1,
+                target: 0.0,
+                weight: 1.0,
+            }],
+            replace_reward: false,
+        },
+        ..c
+    };
+    let error = run(&[0.0], &[1.0; 6], &past, &mut rng);
+    assert!(
+        error.contains("cost term 0: observation 1 is past the model's 1"),
+        "{error}"
+    );
+}
+
+#[test]
+fn cost_terms_reward_the_targets_they_name_worked_by_hand() {
+    let cost = |replace_reward| Cost {
+        terms: vec![CostTerm {
+            dimension: 0,
+            target: 2.0,
+            weight: 0.5,
+        }],
+        replace_reward,
+    };
+    let added = score(&ScoreConfig {
+        cost: cost(false),
+        ..config(None)
+    });
+    // From 0 by [1, 1, 1]: x = 1, 2, 3, each 1 from the target but the
+    // middle: costs ½, 0, ½; rewards ½, 2, 2½: ½ + ½·2 + ¼·2½ = 2.125.
+    assert!(close(added[0].mean_return, 2.125), "{:?}", added[0]);
+    // η's penalty is as before: 0.1 · (0 + ½·1 + ¼·2).
+    assert!(
+        close(added[0].penalized_return, 2.125 - 0.1),
+        "{:?}",
+        added[0]
+    );
+    let replaced = score(&ScoreConfig {
+        cost: cost(true),
+        ..config(None)
+    });
+    // The costs alone: −½ + ½·0 − ¼·½.
+    assert!(close(replaced[0].mean_return, -0.625), "{:?}", replaced[0]);
+    // From 1 by [0, 0, 0]: x stays 1, cost ½ a step: −(½ + ¼ + ⅛).
+    assert!(close(replaced[3].mean_return, -0.875), "{:?}", replaced[3]);
 }
 
 /// Reach x = 2 from 0 in three steps of |u| ≤ 1: reward −(x′ − 2)², so the
@@ -208,6 +261,17 @@ fn reach_rules() -> Rules {
     ))
 }
 
+/// Three steps along the drift, undiscounted, no penalty: a plan's score is
+/// the positions it reaches.
+fn undiscounted_drift() -> ScoreConfig {
+    ScoreConfig {
+        particles: 1,
+        discount: 1.0,
+        penalty: 0.0,
+        ..config(None)
+    }
+}
+
 fn reach(optimizer: Optimizer, warm: Option<&[f32]>, seed: u64) -> Plan {
     let config = PlanConfig {
         optimizer,
@@ -217,15 +281,7 @@ fn reach(optimizer: Optimizer, warm: Option<&[f32]>, seed: u64) -> Plan {
             Optimizer::Cem(_) => 0.5,
             Optimizer::Mppi(_) => 1.0,
         },
-        score: ScoreConfig {
-            horizon: 3,
-            particles: 1,
-            discount: 1.0,
-            penalty: 0.0,
-            cvar_alpha: None,
-            threshold: None,
-            noise_scale: 0.0,
-        },
+        score: undiscounted_drift(),
     };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let start = PlanStart {
@@ -286,15 +342,7 @@ fn a_warm_start_begins_from_the_previous_plan_shifted() {
         population: 200,
         iterations: 1,
         noise: 0.5,
-        score: ScoreConfig {
-            horizon: 3,
-            particles: 1,
-            discount: 1.0,
-            penalty: 0.0,
-            cvar_alpha: None,
-            threshold: None,
-            noise_scale: 0.0,
-        },
+        score: undiscounted_drift(),
     };
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let warm = [0.3, -0.4, 0.5];

@@ -1730,6 +1730,73 @@ async fn score_reduces_the_rollouts_of_its_candidates_to_one_answer_each() {
     }
 }
 
+/// Cost terms replace or join the reward: the score of each candidate is
+/// worked from the rollout route's own trajectories (same seed) by hand.
+#[tokio::test]
+async fn score_cost_terms_reward_their_targets() {
+    let server = Server::start(limits(), None).await;
+    let (h, n, p) = (4, 2, 3);
+    let starts = upright(1);
+    let plans = candidates(1, n, h);
+    // Observation 0 is hopper's torso height, 1 its angle.
+    let terms = json!([{"observation": 0, "target": 1.2, "weight": 2.0},
+                       {"observation": 1, "target": 0.0}]);
+    let score = |replace: bool| {
+        json!({"states": starts, "actions": plans, "horizon": h, "particles": p,
+            "seed": 3, "cost": {"terms": terms, "replace_reward": replace}})
+    };
+    let path = format!("/v1/models/{MODEL}/score");
+    let (status, added) = server.post(&path, &score(false)).await;
+    assert_eq!(status, StatusCode::OK, "{added}");
+    let (_, replaced) = server.post(&path, &score(true)).await;
+
+    let flat: Vec<Vec<Vec<f32>>> = plans.iter().flatten().cloned().collect();
+    let tiled = vec![starts[0].clone(); n];
+    let rollout = json!({"states": tiled, "actions": flat, "horizon": h, "particles": p,
+        "seed": 3});
+    let (_, rolled) = server
+        .post(&format!("/v1/models/{MODEL}/rollout"), &rollout)
+        .await;
+    let rolled: RolloutResponse = serde_json::from_value(rolled).unwrap();
+    for c in 0..n {
+        let particles = &rolled.trajectories[c * p..][..p];
+        let (mut with_reward, mut costs_alone) = (0.0, 0.0);
+        for t in particles {
+            for k in 0..t.length {
+                let next = &t.states[k + 1];
+                let cost = 2.0 * f64::from(next[0] - 1.2).powi(2) + f64::from(next[1]).powi(2);
+                with_reward += f64::from(t.rewards[k]) - cost;
+                costs_alone -= cost;
+            }
+        }
+        for (body, expected) in [(&added, with_reward), (&replaced, costs_alone)] {
+            let got = body["scores"][0][c]["mean_return"].as_f64().unwrap();
+            let expected = expected / p as f64;
+            assert!(
+                (got - expected).abs() < 1e-3 * (1.0 + expected.abs()),
+                "candidate {c}: {got} against {expected}"
+            );
+        }
+    }
+    // Names need a system that names its observations; indices must fit.
+    for (term, needle) in [
+        (
+            json!({"observation": "height", "target": 1.0}),
+            "have no names; give the index",
+        ),
+        (
+            json!({"observation": 11, "target": 1.0}),
+            "observation 11 is past the model's 11",
+        ),
+    ] {
+        let mut bad = score(false);
+        bad["cost"]["terms"] = json!([term]);
+        let (status, body) = server.post(&path, &bad).await;
+        assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{body}");
+        assert!(body.to_string().contains(needle), "{needle}: {body}");
+    }
+}
+
 /// Shared candidates are each start's own, repeated; the answer's binary
 /// form holds the JSON's numbers; both or neither way of giving candidates,
 /// or starts with unequal candidate counts, are refused by name.

@@ -53,6 +53,15 @@ impl System {
         }
     }
 
+    /// The observations' names, where the system gives them (a file's; the
+    /// built-in tasks name none).
+    pub fn observation_names(&self) -> Option<&[String]> {
+        match self {
+            Self::Task(_) => None,
+            Self::File(spec) => Some(&spec.observations),
+        }
+    }
+
     /// The task to simulate, where there is one: a built-in task, or the
     /// `[mujoco]` table of a system's file.
     pub fn simulator(&self) -> Option<TaskConfig> {

@@ -13,7 +13,7 @@ pub use plan::{
     CemConfig, MppiConfig, Optimizer, Plan, PlanBudget, PlanConfig, PlanStart, Planner,
     PlannerSettings, objective, plan, shifted,
 };
-pub use score::{CandidateScore, Candidates, ScoreConfig, score_sequences};
+pub use score::{CandidateScore, Candidates, Cost, CostTerm, ScoreConfig, score_sequences};
 
 /// What a planning request got wrong.
 #[derive(Debug, thiserror::Error)]

@@ -151,7 +151,7 @@ impl PlanBudget {
 }
 
 /// Everything one planning call needs besides the model and the start.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct PlanConfig {
     pub optimizer: Optimizer,
     /// Candidates sampled per iteration.

@@ -14,7 +14,7 @@ use crate::envs::Rules;
 use crate::shared::{BatchDynamics, Cancel};
 
 /// How candidates are rolled and scored.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ScoreConfig {
     /// H, the steps of every candidate.
     pub horizon: usize,
@@ -32,6 +32,46 @@ pub struct ScoreConfig {
     pub threshold: Option<f32>,
     /// Multiplies the model's noise (1 samples Σ, 0 follows the drift).
     pub noise_scale: f32,
+    /// The caller's own terms in each step's reward (none: the model's reward).
+    pub cost: Cost,
+}
+
+/// A caller's quadratic costs on the observations a candidate reaches, added
+/// to the model's reward or replacing it: each kept step t is rewarded
+/// r_t − Σ_k w_k (s'_{t,k} − target_k)², or without the reward only the sum's
+/// negative (the parametrised reward mbrl-lib users write a function for).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Cost {
+    pub terms: Vec<CostTerm>,
+    /// Score on the costs alone, leaving the model's reward out.
+    pub replace_reward: bool,
+}
+
+/// weight · (s'_dimension − target)².
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CostTerm {
+    /// Which observation, 0-based.
+    pub dimension: usize,
+    pub target: f32,
+    pub weight: f32,
+}
+
+impl Cost {
+    /// A kept step's reward: the model's `reward` less the costs at its next
+    /// observation `next`.
+    fn reward(&self, reward: f32, next: &[f32]) -> f64 {
+        let cost: f64 = (self.terms.iter())
+            .map(|t| {
+                let miss = f64::from(next[t.dimension]) - f64::from(t.target);
+                f64::from(t.weight) * miss * miss
+            })
+            .sum();
+        if self.replace_reward {
+            -cost
+        } else {
+            f64::from(reward) - cost
+        }
+    }
 }
 
 /// One candidate's score, over its particles.
@@ -99,8 +139,16 @@ pub fn score_sequences(
     let actions = RolloutActions::Sequence(sequences);
     let out = rollout_model_or_cancel(dynamics, actions, rules, &tiled, &rollout, rng, cancel)?;
     let trace = &out.trace;
+    let rewards: Vec<Vec<f64>> = (0..trace.rows)
+        .map(|r| {
+            let next = trace.observations[r][obs_dim..].chunks_exact(obs_dim);
+            let kept = trace.rewards[r][..trace.kept[r]].iter().zip(next);
+            kept.map(|(&reward, s)| config.cost.reward(reward, s))
+                .collect()
+        })
+        .collect();
     let particle = |r: usize| Particle {
-        rewards: &trace.rewards[r][..trace.kept[r]],
+        rewards: &rewards[r],
         eta: &trace.eta[r][..trace.kept[r]],
         seen_eta: &trace.eta[r],
         outcome: trace.outcome[r],
@@ -120,7 +168,8 @@ pub fn score_sequences(
 /// One particle's record: the rewards and η of the steps it kept, and η of
 /// every step it took (a truncating step's included).
 struct Particle<'a> {
-    rewards: &'a [f32],
+    /// In f64: a caller's cost terms may be far outside f32's range.
+    rewards: &'a [f64],
     eta: &'a [f32],
     seen_eta: &'a [f32],
     outcome: StepOutcome,
@@ -137,11 +186,11 @@ fn score_particles(particles: &[Particle], config: &ScoreConfig) -> CandidateSco
         })
     };
     let returns: Vec<f64> = (particles.iter())
-        .map(|p| discounted(&mut p.rewards.iter().map(|&r| f64::from(r))))
+        .map(|p| discounted(&mut p.rewards.iter().copied()))
         .collect();
     let penalized = particles.iter().map(|p| {
         let steps = p.rewards.iter().zip(p.eta);
-        discounted(&mut steps.map(|(&r, &e)| f64::from(r) - config.penalty * f64::from(e)))
+        discounted(&mut steps.map(|(&r, &e)| r - config.penalty * f64::from(e)))
     });
     let n = particles.len() as f64;
     let share = |o: StepOutcome| particles.iter().filter(|p| p.outcome == o).count() as f64 / n;
@@ -217,6 +266,20 @@ fn check(
             "noise_scale {} is not a number ≥ 0",
             config.noise_scale
         ));
+    }
+    for (i, term) in config.cost.terms.iter().enumerate() {
+        if term.dimension >= obs_dim {
+            return invalid(format!(
+                "cost term {i}: observation {} is past the model's {obs_dim}",
+                term.dimension
+            ));
+        }
+        if !(term.target.is_finite() && term.weight.is_finite() && term.weight >= 0.0) {
+            return invalid(format!(
+                "cost term {i}: target {} and weight {} must be finite, the weight ≥ 0",
+                term.target, term.weight
+            ));
+        }
     }
     Ok(())
 }

@@ -7,8 +7,10 @@ Two things a JSON schema cannot state, and only these, are set aside:
 - row widths are the model's (`obs_dim`, `act_dim`, stated in each route's
   description), and some sizes are relations between fields (as many action
   rows as states, `horizon` actions per start, KServe's `data` holding
-  shape's product of numbers). Schema-valid cases get the model's widths and
-  matching sizes (a plan's `state` too) before they are sent, so the server's other rules are what
+  shape's product of numbers), and a cost term's observation is one of the
+  model's (by name or index). Schema-valid cases get the model's widths and
+  matching sizes (a plan's `state` too, cost terms an index the model has)
+  before they are sent, so the server's other rules are what
   they meet; a 422 naming a width, such a relation, a CVaR level α the
   model's threshold table lacks, or (asked with `clip: false`) an action
   outside the model's action box is not counted.
@@ -76,6 +78,12 @@ def map_case(context, case):
     if not positive or not isinstance(body, dict):
         return case
     path = case.operation.path
+    cost = body.get("cost")
+    if isinstance(cost, dict) and isinstance(cost.get("terms"), list):
+        for term in cost["terms"]:
+            if isinstance(term, dict) and "observation" in term:
+                index = term["observation"]
+                term["observation"] = int(index) % OBS_DIM if isinstance(index, (int, float)) else 0
     if "states" in body:
         body["states"] = _rows(body["states"], OBS_DIM)
     states = body.get("states")

@@ -13,7 +13,9 @@ use nuno::envs::{
     EvaluationConfig, EvaluationReport, MujocoTask, System, TaskConfig, TaskName, evaluate,
 };
 use nuno::infer::Kernel;
-use nuno::planning::{PlanBudget, PlanConfig, Planner, PlannerSettings, ScoreConfig, evaluate_mpc};
+use nuno::planning::{
+    Cost, PlanBudget, PlanConfig, Planner, PlannerSettings, ScoreConfig, evaluate_mpc,
+};
 use nuno::sde::requested_threshold;
 use nuno::shared::{BatchPolicy, Cancel};
 
@@ -246,6 +248,7 @@ impl PlanningFlags {
                 cvar_alpha: self.cvar_alpha,
                 threshold: requested_threshold(folder.thresholds(), None, self.alpha, horizon)?,
                 noise_scale,
+                cost: Cost::default(),
             },
         })
     }

@@ -12,6 +12,7 @@ mod models;
 mod plan;
 mod rollout;
 mod score;
+mod scoring;
 mod step;
 
 pub use act::{ActRequest, ActResponse};
@@ -26,6 +27,7 @@ pub use models::{ModelDetail, ModelList, ModelSummary};
 pub use plan::{PlanRequest, PlanResponse};
 pub use rollout::{RolloutRequest, RolloutResponse, Trajectory};
 pub use score::{ScoreRequest, ScoreResponse};
+pub use scoring::{CostRequest, CostTermRequest, ObservationRef};
 pub use step::{StepRequest, StepResponse};
 
 use utoipa_axum::router::OpenApiRouter;

@@ -13,13 +13,11 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::fields::{integer, one, optional_integer, unit};
-use super::rollout::resolve_threshold;
-use crate::planning::{
-    CandidateScore, PlanConfig, PlanStart, Planner, PlannerSettings, ScoreConfig, plan,
-};
+use super::scoring::{CostRequest, ScoringFields};
+use crate::planning::{CandidateScore, PlanConfig, PlanStart, Planner, PlannerSettings, plan};
 use crate::server::body::{RawBody, json_response};
 use crate::server::plan_sessions::PlanSessions;
-use crate::server::validate::{non_negative, within};
+use crate::server::validate::within;
 use crate::server::{ApiError, AppState};
 
 #[derive(Debug, Clone, Deserialize, ToSchema)]
@@ -97,6 +95,10 @@ pub struct PlanRequest {
     /// Open a session, named in the answer, that keeps this plan.
     #[serde(default)]
     pub open_session: bool,
+    /// Your own costs on the observations reached, added to the reward or
+    /// replacing it (a target for a joint, a position to reach).
+    #[serde(default)]
+    pub cost: Option<CostRequest>,
 }
 
 #[derive(Debug, Clone, Serialize, ToSchema)]
@@ -215,7 +217,6 @@ fn plan_config(
         limits.max_rollout_steps,
     )?;
     within("iterations", r.iterations, limits.max_plan_iterations)?;
-    non_negative("penalty", r.penalty)?;
     let settings = PlannerSettings {
         temperature: r.temperature,
         smoothing: r.smoothing,
@@ -224,24 +225,23 @@ fn plan_config(
         noise: r.noise,
     };
     let (optimizer, noise) = r.planner.configure(&settings, r.population)?;
-    let noise_scale = r
-        .noise_scale
-        .unwrap_or_else(|| model.batch_dynamics().sample_noise_scale());
-    non_negative("noise_scale", f64::from(noise_scale))?;
+    let score = ScoringFields {
+        horizon: r.horizon,
+        particles: r.particles,
+        discount: r.discount,
+        penalty: r.penalty,
+        cvar_alpha: r.cvar_alpha,
+        alpha: r.alpha,
+        threshold: r.threshold,
+        noise_scale: r.noise_scale,
+        cost: r.cost.as_ref(),
+    };
     Ok(PlanConfig {
         optimizer,
         population: r.population,
         iterations: r.iterations,
         noise,
-        score: ScoreConfig {
-            horizon: r.horizon,
-            particles: r.particles,
-            discount: r.discount,
-            penalty: r.penalty,
-            cvar_alpha: r.cvar_alpha,
-            threshold: resolve_threshold(r.threshold, r.alpha, r.horizon, model)?,
-            noise_scale,
-        },
+        score: score.config(model)?,
     })
 }
 

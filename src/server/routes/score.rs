@@ -11,14 +11,14 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::fields::{integer, one, unit, yes};
-use super::rollout::resolve_threshold;
+use super::scoring::{CostRequest, ScoringFields};
 use crate::artifact::NamedTensors;
-use crate::planning::{CandidateScore, Candidates, ScoreConfig, score_sequences};
+use crate::planning::{CandidateScore, Candidates, score_sequences};
 use crate::server::body::{
     Format, RawBody, TensorBytes, answer_format, json_response, tensors_response,
 };
 use crate::server::rows::Rows;
-use crate::server::validate::{answer_within, clip_actions, non_negative, within};
+use crate::server::validate::{answer_within, clip_actions, within};
 use crate::server::{ApiError, AppState, LoadedModel};
 
 #[derive(Debug, Clone, Deserialize, ToSchema)]
@@ -77,6 +77,9 @@ pub struct ScoreRequest {
     /// answers 422 instead.
     #[serde(default = "yes")]
     pub clip: bool,
+    /// Your own costs on the observations reached, added to the reward or replacing it.
+    #[serde(default)]
+    pub cost: Option<CostRequest>,
 }
 
 #[derive(Debug, Clone, Serialize, ToSchema)]
@@ -144,20 +147,19 @@ pub async fn score(
         Format::Binary,
         limits.max_answer_bytes,
     )?;
-    non_negative("penalty", r.penalty)?;
-    let noise_scale = r
-        .noise_scale
-        .unwrap_or_else(|| model.batch_dynamics().sample_noise_scale());
-    non_negative("noise_scale", f64::from(noise_scale))?;
-    let config = ScoreConfig {
+    let config = ScoringFields {
         horizon: r.horizon,
         particles: r.particles,
         discount: r.discount,
         penalty: r.penalty,
         cvar_alpha: r.cvar_alpha,
-        threshold: resolve_threshold(r.threshold, r.alpha, r.horizon, &model)?,
-        noise_scale,
-    };
+        alpha: r.alpha,
+        threshold: r.threshold,
+        noise_scale: r.noise_scale,
+        cost: r.cost.as_ref(),
+    }
+    .config(&model)?;
+    let noise_scale = config.noise_scale;
     state.metrics.batch("score", &id, rows * r.horizon);
     let worker = model.clone();
     state
