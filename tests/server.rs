@@ -1954,3 +1954,64 @@ async fn an_expired_session_is_a_404_not_a_cold_start() {
     assert_eq!(status, StatusCode::NOT_FOUND, "{body}");
     assert!(body.to_string().contains("expired"), "{body}");
 }
+
+/// Dynamic batching: eight concurrent step requests of different sizes,
+/// seeds and particles run their networks as one call (the batch is full at
+/// the server's `max_batch` rows, so it runs as soon as all have arrived,
+/// however slow the machine), and each answer has the same bytes as the same
+/// request to a server that runs every request alone.
+#[tokio::test]
+async fn batched_step_requests_answer_what_they_answer_alone() {
+    let sizes: Vec<usize> = (1..=8).collect();
+    let total: usize = sizes.iter().sum();
+    let requests: Vec<Vec<u8>> = (sizes.iter().enumerate())
+        .map(|(i, &n)| {
+            let mut states = upright(n);
+            for (k, row) in states.iter_mut().enumerate() {
+                row[5] += 0.01 * (i * 8 + k) as f32;
+            }
+            let body = json!({"states": states, "actions": actions(n),
+                "particles": 1 + i % 3, "seed": 100 + i as u64});
+            serde_json::to_vec(&body).unwrap()
+        })
+        .collect();
+    let alone = Server::start(
+        Limits {
+            batch_delay_us: 0,
+            ..limits()
+        },
+        None,
+    )
+    .await;
+    let together = Server::start(
+        Limits {
+            batch_delay_us: 600_000_000,
+            max_batch: total,
+            ..limits()
+        },
+        None,
+    )
+    .await;
+    let path = format!("/v1/models/{MODEL}/step");
+    let mut batched = tokio::task::JoinSet::new();
+    let together = Arc::new(together);
+    for (i, body) in requests.iter().enumerate() {
+        let (server, body, path) = (together.clone(), body.clone(), path.clone());
+        batched.spawn(async move { (i, server.post_raw(&path, "application/json", body).await) });
+    }
+    let mut answers = batched.join_all().await;
+    answers.sort_by_key(|(i, _)| *i);
+    for ((i, answer), body) in answers.iter().zip(&requests) {
+        assert_eq!(answer.status, StatusCode::OK, "request {i}");
+        let single = alone
+            .post_raw(&path, "application/json", body.clone())
+            .await;
+        assert_eq!(answer.body, single.body, "request {i}: batched ≠ alone");
+    }
+    let metrics = together.metrics().await;
+    assert!(metrics.contains("nuno_step_batches_total 1\n"), "{metrics}");
+    assert!(
+        metrics.contains("nuno_step_batched_requests_total 8\n"),
+        "{metrics}"
+    );
+}

@@ -30,7 +30,10 @@ pub use model_rollout::{
     ModelRollout, RolloutActions, RolloutConfig, RolloutStats, RolloutTrace, StepOutcome,
     rollout_model, rollout_model_or_cancel,
 };
-pub use model_step::{ParticleConfig, ParticleStep, penalized_reward, step_particles};
+pub use model_step::{
+    ParticleConfig, ParticleStep, particle_terms, penalized_reward, sample_particles,
+    step_particles,
+};
 pub use online_sac::{OnlineRecord, OnlineSac, OnlineSacConfig, OnlineSeconds};
 pub use policy::RandomPolicy;
 pub use policy_loop::{

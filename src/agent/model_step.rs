@@ -6,7 +6,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::envs::Rules;
-use crate::shared::{BatchDynamics, euler_maruyama, scaled_noise};
+use crate::shared::{BatchDynamics, ModelStep, euler_maruyama, scaled_noise};
 
 /// A batch step's results, row-major; `b` items, `p` particles, `d` = obs_dim.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -57,6 +57,40 @@ pub fn step_particles(
     config: ParticleConfig,
     rng: &mut ChaCha8Rng,
 ) -> ParticleStep {
+    let terms = particle_terms(dynamics, observations, actions);
+    sample_particles(
+        dynamics,
+        rules,
+        (observations, actions),
+        &terms,
+        config,
+        rng,
+    )
+}
+
+/// The networks' part of [`step_particles`]: drift, σ, h(η) and η depend on
+/// (s, a) only, so they run once per item (with ε = 0, s' is the mean). Rows
+/// are independent: the server runs many requests' items as one call.
+pub fn particle_terms(
+    dynamics: &dyn BatchDynamics,
+    observations: &[f32],
+    actions: &[f32],
+) -> ModelStep {
+    let batch = observations.len() / dynamics.obs_dim();
+    let states = dynamics.states_from_observations(observations);
+    dynamics.step(&states, actions, &vec![0.0; batch * dynamics.noise_dim()])
+}
+
+/// The rest of [`step_particles`] from the items' `terms`: each particle's
+/// noise (drawn from `rng`), its next state, reward and termination.
+pub fn sample_particles(
+    dynamics: &dyn BatchDynamics,
+    rules: &Rules,
+    (observations, actions): (&[f32], &[f32]),
+    terms: &ModelStep,
+    config: ParticleConfig,
+    rng: &mut ChaCha8Rng,
+) -> ParticleStep {
     let ParticleConfig {
         particles,
         penalty,
@@ -67,10 +101,7 @@ pub fn step_particles(
     let batch = observations.len() / obs_dim;
     let rows = batch * particles;
     let noise_dim = dynamics.noise_dim();
-    // Drift, σ, h(η) and η depend on (s, a) only: the networks run once per
-    // item (with ε = 0, so s' is the mean) and only the noise is per particle.
     let states = dynamics.states_from_observations(observations);
-    let terms = dynamics.step(&states, actions, &vec![0.0; batch * noise_dim]);
     // Particle p of item b is row b·particles + p, drawn in that order.
     let noise = scaled_noise(rows * noise_dim, noise_scale, rng);
     let sqrt_dt = dynamics.dt().sqrt() as f32;

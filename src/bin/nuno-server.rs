@@ -53,6 +53,10 @@ struct Args {
     /// Seconds a `plan` session is kept after its last use.
     #[arg(long, default_value_t = Limits::default().plan_session_ttl_s)]
     plan_session_ttl: u64,
+    /// Microseconds a `step` request waits for others to the same model, so
+    /// their networks run as one call (dynamic batching); 0 runs each alone.
+    #[arg(long, default_value_t = Limits::default().batch_delay_us)]
+    batch_delay_us: u64,
     /// What evaluates the models: the fused CPU path, or burn (the training code path): `fused` or `burn`.
     #[arg(long, default_value_t = Kernel::Fused, env = "NUNO_KERNEL")]
     kernel: Kernel,
@@ -82,6 +86,7 @@ fn main() -> ExitCode {
             concurrency: args.concurrency,
             compute_slots: args.compute_slots,
             max_plan_iterations: args.max_plan_iterations,
+            batch_delay_us: args.batch_delay_us,
             plan_sessions: args.plan_sessions,
             plan_session_ttl_s: args.plan_session_ttl,
         },

@@ -49,6 +49,8 @@ struct Table {
     batch: BTreeMap<String, Histogram>,
     items: BTreeMap<String, u64>,
     cancelled: u64,
+    step_batches: u64,
+    batched_steps: u64,
 }
 
 /// The server's metrics.
@@ -92,6 +94,14 @@ impl Metrics {
         self.with(|t| t.cancelled += 1);
     }
 
+    /// One network call of the step batcher, for `requests` requests.
+    pub fn step_batch(&self, requests: usize) {
+        self.with(|t| {
+            t.step_batches += 1;
+            t.batched_steps += requests as u64;
+        });
+    }
+
     /// The text exposition format.
     pub fn render(&self) -> String {
         self.with(|t| {
@@ -133,6 +143,12 @@ impl Metrics {
             );
             out.push_str("# TYPE nuno_computations_cancelled_total counter\n");
             let _ = writeln!(out, "nuno_computations_cancelled_total {}", t.cancelled);
+            out.push_str("# HELP nuno_step_batches_total Network calls of the step batcher (--batch-delay-us); nuno_step_batched_requests_total / this is the mean requests a call.\n");
+            out.push_str("# TYPE nuno_step_batches_total counter\n");
+            let _ = writeln!(out, "nuno_step_batches_total {}", t.step_batches);
+            out.push_str("# HELP nuno_step_batched_requests_total Step requests served by the batcher's calls.\n");
+            out.push_str("# TYPE nuno_step_batched_requests_total counter\n");
+            let _ = writeln!(out, "nuno_step_batched_requests_total {}", t.batched_steps);
             out
         })
     }

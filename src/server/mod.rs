@@ -18,6 +18,7 @@ mod plan_sessions;
 mod registry;
 mod routes;
 mod rows;
+mod step_batcher;
 mod validate;
 
 use std::net::SocketAddr;
@@ -73,6 +74,9 @@ pub struct Limits {
     pub plan_sessions: usize,
     /// Seconds a `plan` session is kept after its last use.
     pub plan_session_ttl_s: u64,
+    /// Microseconds a `step` request waits for others to the same model, to
+    /// run their networks as one call (0: each alone).
+    pub batch_delay_us: u64,
 }
 
 impl Default for Limits {
@@ -91,6 +95,7 @@ impl Default for Limits {
             max_plan_iterations: 100,
             plan_sessions: 1024,
             plan_session_ttl_s: 300,
+            batch_delay_us: 200,
         }
     }
 }
@@ -128,6 +133,8 @@ pub struct AppState {
     pub metrics: Arc<Metrics>,
     /// The `plan` route's sessions.
     pub plan_sessions: Arc<plan_sessions::PlanSessions>,
+    /// Where `step` requests meet others for one network call.
+    pub step_batcher: Arc<step_batcher::StepBatcher>,
     compute: Arc<Semaphore>,
 }
 
@@ -135,15 +142,23 @@ impl AppState {
     /// Loads the models in `config.models_dir`; the report says what failed.
     pub fn new(config: ServerConfig) -> (Self, ReloadReport) {
         let (registry, report) = ModelRegistry::open(&config.models_dir, config.kernel);
+        let compute = Arc::new(Semaphore::new(config.limits.compute_slots.max(1)));
+        let metrics = Arc::new(Metrics::default());
         let state = Self {
-            compute: Arc::new(Semaphore::new(config.limits.compute_slots.max(1))),
+            step_batcher: Arc::new(step_batcher::StepBatcher::new(
+                Duration::from_micros(config.limits.batch_delay_us),
+                config.limits.max_batch,
+                compute.clone(),
+                metrics.clone(),
+            )),
+            compute,
             plan_sessions: Arc::new(plan_sessions::PlanSessions::new(
                 config.limits.plan_sessions,
                 std::time::Duration::from_secs(config.limits.plan_session_ttl_s),
             )),
             config: Arc::new(config),
             registry: Arc::new(registry),
-            metrics: Arc::new(Metrics::default()),
+            metrics,
         };
         (state, report)
     }

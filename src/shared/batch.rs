@@ -28,6 +28,19 @@ pub struct ModelStep {
 }
 
 impl ModelStep {
+    /// Rows `rows` of a step of `[batch, state_dim]` rows, as their own step.
+    pub fn rows(&self, rows: std::ops::Range<usize>, state_dim: usize) -> ModelStep {
+        let wide = |v: &[f32]| v[rows.start * state_dim..rows.end * state_dim].to_vec();
+        ModelStep {
+            next_states: wide(&self.next_states),
+            means: wide(&self.means),
+            sigma: wide(&self.sigma),
+            h_eta: wide(&self.h_eta),
+            eta: self.eta[rows.clone()].to_vec(),
+            truncation_signal: (self.truncation_signal.as_ref()).map(|t| t[rows.clone()].to_vec()),
+        }
+    }
+
     /// Row `row`'s truncation signal: [`truncation_signal`](Self::truncation_signal), else η.
     pub fn truncation_at(&self, row: usize) -> f32 {
         self.truncation_signal

@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::fields::{integer, one, unit, yes};
-use crate::agent::{ParticleConfig, ParticleStep, step_particles};
+use crate::agent::{ParticleConfig, ParticleStep, particle_terms, sample_particles};
 use crate::artifact::NamedTensors;
 use crate::server::body::{Format, RawBody, TensorBytes, json_response, tensors_response};
 use crate::server::rows::{Rows, split_rows as rows};
@@ -151,19 +151,24 @@ pub async fn step(
     };
     let worker = model.clone();
     let format = body.format;
+    let batched = match state.step_batcher.enabled() {
+        true => Some(
+            (state.step_batcher)
+                .terms(model, observations.clone(), actions.clone())
+                .await?,
+        ),
+        false => None,
+    };
     // The answer is serialised in the compute work too: at batch 4096 its JSON
     // is megabytes.
     state
         .compute(move |_| {
             let mut rng = ChaCha8Rng::seed_from_u64(request.seed);
-            let result = step_particles(
-                worker.batch_dynamics(),
-                &worker.rules,
-                &observations,
-                &actions,
-                config,
-                &mut rng,
-            );
+            let dynamics = worker.batch_dynamics();
+            let terms =
+                batched.unwrap_or_else(|| particle_terms(dynamics, &observations, &actions));
+            let items = (observations.as_slice(), actions.as_slice());
+            let result = sample_particles(dynamics, &worker.rules, items, &terms, config, &mut rng);
             match format {
                 Format::Json => {
                     json_response(&step_response(&id, &result, noise_scale, clipped_rows))
