@@ -1955,50 +1955,68 @@ async fn an_expired_session_is_a_404_not_a_cold_start() {
     assert!(body.to_string().contains("expired"), "{body}");
 }
 
-/// Dynamic batching: eight concurrent step requests of different sizes,
-/// seeds and particles run their networks as one call (the batch is full at
-/// the server's `max_batch` rows, so it runs as soon as all have arrived,
-/// however slow the machine), and each answer has the same bytes as the same
-/// request to a server that runs every request alone.
-#[tokio::test]
+/// Dynamic batching: while the only compute slot is held (the hook holds
+/// the first request's batch), seven step requests of different sizes, seeds
+/// and particles queue; once it is released they run as one batch (events,
+/// not durations: the test waits for the queue gauge, whatever the machine's
+/// speed). Each answer has the same bytes as the same request to a server
+/// that runs every request alone.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn batched_step_requests_answer_what_they_answer_alone() {
-    let sizes: Vec<usize> = (1..=8).collect();
-    let total: usize = sizes.iter().sum();
-    let requests: Vec<Vec<u8>> = (sizes.iter().enumerate())
-        .map(|(i, &n)| {
-            let mut states = upright(n);
+    let requests: Vec<Vec<u8>> = (0..8)
+        .map(|i: usize| {
+            let mut states = upright(i + 1);
             for (k, row) in states.iter_mut().enumerate() {
                 row[5] += 0.01 * (i * 8 + k) as f32;
             }
-            let body = json!({"states": states, "actions": actions(n),
+            let body = json!({"states": states, "actions": actions(i + 1),
                 "particles": 1 + i % 3, "seed": 100 + i as u64});
             serde_json::to_vec(&body).unwrap()
         })
         .collect();
-    let alone = Server::start(
-        Limits {
-            batch_delay_us: 0,
-            ..limits()
-        },
-        None,
-    )
-    .await;
-    let together = Server::start(
-        Limits {
-            batch_delay_us: 600_000_000,
-            max_batch: total,
-            ..limits()
-        },
-        None,
-    )
-    .await;
+    let alone = Limits {
+        batch_delay_us: 0,
+        ..limits()
+    };
+    let alone = Server::start(alone, None).await;
+    let batching = Limits {
+        batch_delay_us: 600_000_000,
+        compute_slots: 1,
+        ..limits()
+    };
+    let (hook, release, started) = hold_first_computation();
+    let together =
+        Arc::new(Server::start_with_config(batching, |c| c.before_compute = Some(hook)).await);
     let path = format!("/v1/models/{MODEL}/step");
     let mut batched = tokio::task::JoinSet::new();
-    let together = Arc::new(together);
-    for (i, body) in requests.iter().enumerate() {
-        let (server, body, path) = (together.clone(), body.clone(), path.clone());
-        batched.spawn(async move { (i, server.post_raw(&path, "application/json", body).await) });
+    let send = |set: &mut tokio::task::JoinSet<_>, i: usize| {
+        let (server, body, path) = (together.clone(), requests[i].clone(), path.clone());
+        set.spawn(async move { (i, server.post_raw(&path, "application/json", body).await) });
+    };
+    let until = |what: &'static str| {
+        let server = together.clone();
+        async move {
+            for _ in 0..600 {
+                if server.metrics().await.contains(what) {
+                    return;
+                }
+                tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+            }
+            panic!("never: {what}");
+        }
+    };
+    send(&mut batched, 0);
+    for _ in 0..600 {
+        if started.load(Ordering::SeqCst) == 1 {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
     }
+    for i in 1..8 {
+        send(&mut batched, i);
+    }
+    until("nuno_step_queue_requests 7\n").await;
+    release.send(()).unwrap();
     let mut answers = batched.join_all().await;
     answers.sort_by_key(|(i, _)| *i);
     for ((i, answer), body) in answers.iter().zip(&requests) {
@@ -2009,7 +2027,7 @@ async fn batched_step_requests_answer_what_they_answer_alone() {
         assert_eq!(answer.body, single.body, "request {i}: batched ≠ alone");
     }
     let metrics = together.metrics().await;
-    assert!(metrics.contains("nuno_step_batches_total 1\n"), "{metrics}");
+    assert!(metrics.contains("nuno_step_batches_total 2\n"), "{metrics}");
     assert!(
         metrics.contains("nuno_step_batched_requests_total 8\n"),
         "{metrics}"

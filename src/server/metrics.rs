@@ -51,6 +51,7 @@ struct Table {
     cancelled: u64,
     step_batches: u64,
     batched_steps: u64,
+    step_queue: i64,
 }
 
 /// The server's metrics.
@@ -102,6 +103,11 @@ impl Metrics {
         });
     }
 
+    /// `change` more (or fewer) step requests waiting in the batcher's queue.
+    pub fn step_queue(&self, change: i64) {
+        self.with(|t| t.step_queue += change);
+    }
+
     /// The text exposition format.
     pub fn render(&self) -> String {
         self.with(|t| {
@@ -149,6 +155,9 @@ impl Metrics {
             out.push_str("# HELP nuno_step_batched_requests_total Step requests served by the batcher's calls.\n");
             out.push_str("# TYPE nuno_step_batched_requests_total counter\n");
             let _ = writeln!(out, "nuno_step_batched_requests_total {}", t.batched_steps);
+            out.push_str("# HELP nuno_step_queue_requests Step requests waiting for the batcher's next batch.\n");
+            out.push_str("# TYPE nuno_step_queue_requests gauge\n");
+            let _ = writeln!(out, "nuno_step_queue_requests {}", t.step_queue);
             out
         })
     }

@@ -148,7 +148,7 @@ impl AppState {
             step_batcher: Arc::new(step_batcher::StepBatcher::new(
                 Duration::from_micros(config.limits.batch_delay_us),
                 config.limits.max_batch,
-                compute.clone(),
+                (compute.clone(), config.before_compute.clone()),
                 metrics.clone(),
             )),
             compute,

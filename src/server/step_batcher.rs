@@ -1,22 +1,30 @@
 //! Dynamic batching of `step` requests (Triton's `dynamic_batching` with
-//! `max_queue_delay_microseconds`): the networks' part of concurrent requests
-//! for the same model that arrive within `--batch-delay-us` of the first runs
-//! as one call, and each request gets its rows back. The rest of a step
-//! (its particles' noise from its own seed, rewards, terminations, the
-//! answer) stays the request's own, so an answer is the same batched or
+//! `max_queue_delay_microseconds`): concurrent requests for the same model
+//! run as one computation. Their networks' part runs as one call, then each
+//! request's own rest (its particles' noise from its own seed, rewards,
+//! terminations, its answer) on its rows, so an answer is the same batched or
 //! alone: the networks' rows do not depend on one another.
 //!
-//! The batched call takes one compute slot; a request whose client left
+//! A batch forms once a compute slot is free (requests queue while every
+//! slot computes, so load makes batches larger), then waits for the requests
+//! already in a `step` handler (a lone request never waits), at most
+//! `--batch-delay-us`. It runs on that one slot; a request whose client left
 //! before its batch ran is skipped, and a batch of such requests runs nothing.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
-use tokio::sync::{Semaphore, mpsc, oneshot};
+use axum::response::Response;
+use tokio::sync::{Notify, Semaphore, mpsc, oneshot};
 
-use super::{ApiError, LoadedModel, Metrics};
+use super::{ApiError, ComputeHook, LoadedModel, Metrics};
 use crate::agent::particle_terms;
 use crate::shared::ModelStep;
+
+/// What a request does with its rows of the networks' terms: `(observations,
+/// actions, terms)` to its answer.
+pub type Finish = Box<dyn FnOnce(&[f32], &[f32], &ModelStep) -> Result<Response, ApiError> + Send>;
 
 /// Where `step` requests queue for their batch.
 pub struct StepBatcher {
@@ -24,26 +32,47 @@ pub struct StepBatcher {
     max_rows: usize,
     compute: Arc<Semaphore>,
     metrics: Arc<Metrics>,
+    hook: Option<ComputeHook>,
+    /// Requests in a `step` handler that have not queued yet.
+    arriving: Arc<Arriving>,
     /// Started with the first request, on its runtime.
     queue: OnceLock<mpsc::UnboundedSender<Job>>,
 }
 
-/// One request's items, and where its rows go.
+#[derive(Default)]
+struct Arriving {
+    count: AtomicUsize,
+    changed: Notify,
+}
+
+/// Held by a `step` handler from its start until its job is queued (or it
+/// gave up), so a batch knows whom to wait for.
+pub struct Arrival(Arc<Arriving>);
+
+impl Drop for Arrival {
+    fn drop(&mut self) {
+        self.0.count.fetch_sub(1, Ordering::SeqCst);
+        self.0.changed.notify_one();
+    }
+}
+
+/// One request's items and the rest of its work.
 struct Job {
     model: Arc<LoadedModel>,
     observations: Vec<f32>,
     actions: Vec<f32>,
-    reply: oneshot::Sender<ModelStep>,
+    finish: Finish,
+    reply: oneshot::Sender<Result<Response, ApiError>>,
 }
 
 impl StepBatcher {
     /// Batches within `delay` (zero: every request alone), at most `max_rows`
-    /// items a call (a batch that has them runs at once), each call on one of
-    /// `compute`'s slots.
+    /// items a call, each batch on one of `compute`'s slots, after `hook`
+    /// (as every computation: [`ServerConfig::before_compute`](super::ServerConfig)).
     pub fn new(
         delay: Duration,
         max_rows: usize,
-        compute: Arc<Semaphore>,
+        (compute, hook): (Arc<Semaphore>, Option<ComputeHook>),
         metrics: Arc<Metrics>,
     ) -> Self {
         Self {
@@ -51,6 +80,8 @@ impl StepBatcher {
             max_rows: max_rows.max(1),
             compute,
             metrics,
+            hook,
+            arriving: Arc::default(),
             queue: OnceLock::new(),
         }
     }
@@ -59,14 +90,22 @@ impl StepBatcher {
         !self.delay.is_zero()
     }
 
+    /// Says a request is on its way; hold it until [`run`](Self::run).
+    pub fn arrival(&self) -> Arrival {
+        self.arriving.count.fetch_add(1, Ordering::SeqCst);
+        Arrival(self.arriving.clone())
+    }
+
     /// The networks' terms of `observations` under `actions` in `model`
-    /// ([`particle_terms`]), computed with the other requests of its batch.
-    pub async fn terms(
+    /// ([`particle_terms`]), computed with the rest of its batch, then
+    /// `finish` on them: the request's answer.
+    pub async fn run(
         &self,
+        arrival: Arrival,
         model: Arc<LoadedModel>,
-        observations: Vec<f32>,
-        actions: Vec<f32>,
-    ) -> Result<ModelStep, ApiError> {
+        (observations, actions): (Vec<f32>, Vec<f32>),
+        finish: Finish,
+    ) -> Result<Response, ApiError> {
         let queue = self.queue.get_or_init(|| {
             let (sender, receiver) = mpsc::unbounded_channel();
             let batches = Batches {
@@ -74,6 +113,8 @@ impl StepBatcher {
                 max_rows: self.max_rows,
                 compute: self.compute.clone(),
                 metrics: self.metrics.clone(),
+                hook: self.hook.clone(),
+                arriving: self.arriving.clone(),
             };
             tokio::spawn(batches.run(receiver));
             sender
@@ -83,11 +124,14 @@ impl StepBatcher {
             model,
             observations,
             actions,
+            finish,
             reply,
         };
         let stopped = || ApiError::Internal("the step batcher stopped".into());
         queue.send(job).map_err(|_| stopped())?;
-        answer.await.map_err(|_| stopped())
+        self.metrics.step_queue(1);
+        drop(arrival);
+        answer.await.map_err(|_| stopped())?
     }
 }
 
@@ -97,38 +141,80 @@ struct Batches {
     max_rows: usize,
     compute: Arc<Semaphore>,
     metrics: Arc<Metrics>,
+    hook: Option<ComputeHook>,
+    arriving: Arc<Arriving>,
 }
 
 impl Batches {
     async fn run(self, mut queue: mpsc::UnboundedReceiver<Job>) {
         while let Some(first) = queue.recv().await {
-            let deadline = tokio::time::Instant::now() + self.delay;
-            let mut rows = first.rows();
-            let mut waiting = vec![first];
-            while rows < self.max_rows
-                && let Ok(Some(job)) = tokio::time::timeout_at(deadline, queue.recv()).await
-            {
+            let Ok(slot) = self.compute.clone().acquire_owned().await else {
+                return;
+            };
+            let waiting = self.gather(first, &mut queue).await;
+            self.metrics.step_queue(-(waiting.len() as i64));
+            let mut batches = self.batches(waiting).into_iter();
+            if let Some(batch) = batches.next() {
+                self.spawn(batch, slot);
+            }
+            // Other models' requests: each batch on a slot of its own.
+            for batch in batches {
+                let Ok(slot) = self.compute.clone().acquire_owned().await else {
+                    return;
+                };
+                self.spawn(batch, slot);
+            }
+        }
+    }
+
+    /// `first`, what is queued behind it, and the requests still arriving,
+    /// until `max_rows` items, nobody else arriving, or the delay.
+    async fn gather(&self, first: Job, queue: &mut mpsc::UnboundedReceiver<Job>) -> Vec<Job> {
+        let deadline = tokio::time::Instant::now() + self.delay;
+        let mut rows = first.rows();
+        let mut waiting = vec![first];
+        while rows < self.max_rows {
+            while let Ok(job) = queue.try_recv() {
                 rows += job.rows();
                 waiting.push(job);
             }
-            for batch in self.batches(waiting) {
-                let compute = self.compute.clone();
-                let metrics = self.metrics.clone();
-                tokio::spawn(async move {
-                    let Ok(slot) = compute.acquire_owned().await else {
-                        return;
-                    };
-                    let _ = tokio::task::spawn_blocking(move || {
-                        let _slot = slot;
-                        let requests = run_batch(batch);
-                        if requests > 0 {
-                            metrics.step_batch(requests);
-                        }
-                    })
-                    .await;
-                });
+            if rows >= self.max_rows || self.arriving.count.load(Ordering::SeqCst) == 0 {
+                break;
+            }
+            tokio::select! {
+                job = queue.recv() => match job {
+                    Some(job) => {
+                        rows += job.rows();
+                        waiting.push(job);
+                    }
+                    None => break,
+                },
+                () = self.arriving.changed.notified() => {}
+                () = tokio::time::sleep_until(deadline) => break,
             }
         }
+        waiting
+    }
+
+    /// Runs `batch` on the blocking pool, on `slot`.
+    fn spawn(&self, batch: Vec<Job>, slot: tokio::sync::OwnedSemaphorePermit) {
+        let (metrics, hook) = (self.metrics.clone(), self.hook.clone());
+        // Requests that gave up while the batch waited for its slot are not
+        // computed; a batch of only those never starts.
+        let batch: Vec<Job> = batch.into_iter().filter(|j| !j.reply.is_closed()).collect();
+        if batch.is_empty() {
+            return;
+        }
+        tokio::task::spawn_blocking(move || {
+            let _slot = slot;
+            if let Some(ComputeHook(hook)) = hook {
+                hook();
+            }
+            let requests = run_batch(batch);
+            if requests > 0 {
+                metrics.step_batch(requests);
+            }
+        });
     }
 
     /// The jobs grouped by model (the same loaded copy), in arrival order,
@@ -158,8 +244,8 @@ impl Job {
     }
 }
 
-/// One network call for the batch's live requests; each gets its rows.
-/// Returns how many requests it served.
+/// One network call for the batch's live requests, then each one's own rest
+/// on its rows. Returns how many requests it served.
 fn run_batch(batch: Vec<Job>) -> usize {
     let live: Vec<Job> = batch.into_iter().filter(|j| !j.reply.is_closed()).collect();
     let Some(first) = live.first() else {
@@ -174,7 +260,9 @@ fn run_batch(batch: Vec<Job>) -> usize {
     let mut start = 0;
     for job in live {
         let rows = job.rows();
-        let _ = (job.reply).send(terms.rows(start..start + rows, dynamics.state_dim()));
+        let own = terms.rows(start..start + rows, dynamics.state_dim());
+        let answer = (job.finish)(&job.observations, &job.actions, &own);
+        let _ = job.reply.send(answer);
         start += rows;
     }
     served

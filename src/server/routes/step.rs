@@ -18,6 +18,7 @@ use crate::server::body::{Format, RawBody, TensorBytes, json_response, tensors_r
 use crate::server::rows::{Rows, split_rows as rows};
 use crate::server::validate::{answer_within, clip_actions, flat, non_negative, within};
 use crate::server::{ApiError, AppState};
+use crate::shared::ModelStep;
 
 /// A batch of observations and actions to step.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
@@ -109,6 +110,8 @@ pub async fn step(
     body: RawBody,
 ) -> Result<Response, ApiError> {
     let model = state.model(&id)?;
+    // Said before the body is parsed, so a batch waits for this request.
+    let arrival = (state.step_batcher.enabled()).then(|| state.step_batcher.arrival());
     let (obs_dim, act_dim) = (model.obs_dim(), model.act_dim());
     let (observations, mut actions, request) = match body.format {
         Format::Json => {
@@ -151,32 +154,28 @@ pub async fn step(
     };
     let worker = model.clone();
     let format = body.format;
-    let batched = match state.step_batcher.enabled() {
-        true => Some(
-            (state.step_batcher)
-                .terms(model, observations.clone(), actions.clone())
-                .await?,
-        ),
-        false => None,
-    };
     // The answer is serialised in the compute work too: at batch 4096 its JSON
     // is megabytes.
+    let finish = move |observations: &[f32], actions: &[f32], terms: &ModelStep| {
+        let mut rng = ChaCha8Rng::seed_from_u64(request.seed);
+        let dynamics = worker.batch_dynamics();
+        let items = (observations, actions);
+        let result = sample_particles(dynamics, &worker.rules, items, terms, config, &mut rng);
+        match format {
+            Format::Json => json_response(&step_response(&id, &result, noise_scale, clipped_rows)),
+            Format::Binary => tensors_response(&binary_response(result), noise_scale, clipped_rows),
+        }
+    };
+    if let Some(arrival) = arrival {
+        let items = (observations, actions);
+        return (state.step_batcher)
+            .run(arrival, model, items, Box::new(finish))
+            .await;
+    }
     state
         .compute(move |_| {
-            let mut rng = ChaCha8Rng::seed_from_u64(request.seed);
-            let dynamics = worker.batch_dynamics();
-            let terms =
-                batched.unwrap_or_else(|| particle_terms(dynamics, &observations, &actions));
-            let items = (observations.as_slice(), actions.as_slice());
-            let result = sample_particles(dynamics, &worker.rules, items, &terms, config, &mut rng);
-            match format {
-                Format::Json => {
-                    json_response(&step_response(&id, &result, noise_scale, clipped_rows))
-                }
-                Format::Binary => {
-                    tensors_response(&binary_response(result), noise_scale, clipped_rows)
-                }
-            }
+            let terms = particle_terms(model.batch_dynamics(), &observations, &actions);
+            finish(&observations, &actions, &terms)
         })
         .await
 }
