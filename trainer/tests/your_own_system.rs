@@ -271,6 +271,32 @@ fn the_tutorial_runs_from_a_csv_log_to_a_served_model() {
         r#"{"states": [[0.1, 0.0]], "actions": [[3.0]], "clip": false}"#,
     );
     assert_eq!(refused.0, 422, "{}", refused.1);
+    // Cost terms name the file's observations: `theta` is observation 0.
+    let score = |observation: &str| {
+        post(
+            &format!("{address}/v1/models/pendulum/score"),
+            &format!(
+                r#"{{"states": [[0.1, 0.0]], "shared_actions": [[[0.5], [0.5]]], "horizon": 2,
+                    "noise_scale": 0, "cost": {{"terms": [{{"observation": {observation},
+                    "target": 0.0, "weight": 2.0}}], "replace_reward": true}}}}"#
+            ),
+        )
+    };
+    let (by_name, by_index) = (score(r#""theta""#), score("0"));
+    assert_eq!((by_name.0, by_index.0), (200, 200), "{}", by_name.1);
+    let cost = &by_name.1["scores"][0][0]["mean_return"];
+    assert!(cost.as_f64().unwrap() < 0.0, "{}", by_name.1);
+    assert_eq!(cost, &by_index.1["scores"][0][0]["mean_return"]);
+    let unknown = score(r#""phi""#);
+    assert_eq!(unknown.0, 422, "{}", unknown.1);
+    assert!(
+        unknown
+            .1
+            .to_string()
+            .contains("no observation `phi` (the model's are theta, theta_dot)"),
+        "{}",
+        unknown.1
+    );
 }
 
 /// The tutorial's step: the torque of 3 clipped to 2, the mean next state
