@@ -1,5 +1,6 @@
 """Request bodies for the server load benchmark: hopper step batches as JSON and
-as safetensors (binary), and a rollout of 4096 starts x 10 steps with the policy."""
+as safetensors (binary), a rollout of 4096 starts x 10 steps with the policy, and
+plan calls."""
 import json
 import sys
 from pathlib import Path
@@ -26,15 +27,12 @@ for n in (1, 256, 4096):
     json.dumps({"states": states(4096).tolist(), "horizon": 10, "alpha": 0.99, "seed": 0})
 )
 
-# Planning (issue 33): a population of 400 candidates x horizon 30 scored with 1 and 5
-# particles, and plan calls at PETS' hopper and iCEM's sizes (planning::PlanBudget).
+# Planning (issue 33): plan calls at PETS' hopper sizes (CEM) and iCEM's (iCEM)
+# (planning::PlanBudget); the score bodies come from `cargo bench --bench score`.
 start = states(1)
-population = rng.uniform(-1, 1, size=(400, 30, 3)).astype(np.float32)
-for p in (1, 5):
-    (out / f"score-400x30-p{p}.json").write_text(json.dumps(
-        {"states": start.tolist(), "shared_actions": population.tolist(), "horizon": 30,
-         "particles": p, "seed": 0}))
-for name, (h, n, iters, p) in {"pets": (30, 350, 5, 20), "icem": (10, 200, 5, 20)}.items():
+for name, (planner, h, n, iters, p) in {
+    "pets": ("cem", 30, 350, 5, 20), "icem": ("icem", 10, 200, 5, 20)
+}.items():
     (out / f"plan-{name}.json").write_text(json.dumps(
-        {"state": start[0].tolist(), "planner": "cem", "horizon": h, "population": n,
+        {"state": start[0].tolist(), "planner": planner, "horizon": h, "population": n,
          "iterations": iters, "particles": p, "seed": 0}))

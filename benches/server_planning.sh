@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
 # Issue 33's planning and batching figures on loopback with wrk:
-# - batch-1 `step` requests/s and p99 at 1, 8 and 64 connections, with dynamic
-#   batching off (--batch-delay-us 0) and on (the default), one server each;
-# - `score` of 400 candidates x horizon 30 at 1 and 5 particles (JSON in, binary answer);
-# - `plan` calls at PETS' hopper sizes and iCEM's (CEM, 20 particles).
+# - batch-1 `step` requests/s and p99 at 1, 8 and 64 connections, and `score` at iCEM's
+#   size at 8, with dynamic batching off (--batch-delay-us 0) and on (the default), one
+#   server each;
+# - `score` of 400 candidates x horizon 30 at 1 and 5 particles, binary both ways, on the
+#   bodies `cargo bench --bench score` writes after measuring the same work in process
+#   (the EM step at the same batch, and `score_sequences`), in the same run;
+# - `plan` calls at PETS' hopper sizes (CEM) and iCEM's (iCEM), 20 particles.
 # Needs `make venv` and a release build; results go to BENCHMARKS.md by hand.
 PORT="${PORT:-18091}"
 DURATION="${DURATION:-10s}"
@@ -26,14 +29,18 @@ restart() { # batch delay in µs
 post_load() { # wrk needs a connection per thread
   wrk -t$(( CONNECTIONS < 2 ? 1 : 2 )) -c"$CONNECTIONS" -d"$1" --timeout 120s --latency -s benches/wrk_post.lua "$2" -- "$3" "$4" ${5:-}
 }
+echo "== in process, the same run (and the score bodies)"
+NUNO_SCORE_BODIES="$WORK" cargo bench --bench score 2>/dev/null
 export RUST_LOG=warn
 for delay in 0 200; do
   restart $delay
   for c in 1 8 64; do step_at $c; done
+  echo "== score 200 x 10 (iCEM's size), 1 particle (binary), 8 connections, batch delay ${DELAY} µs"
+  CONNECTIONS=8 post_load "$DURATION" "$url/score" "$WORK/score-200x10-p1.bin" application/octet-stream application/octet-stream | summary
 done
 for p in 1 5; do
-  echo "== score 400 x 30, $p particles (JSON in, binary answer), 1 connection"
-  CONNECTIONS=1 post_load "$DURATION" "$url/score" "$WORK/score-400x30-p$p.json" application/json application/octet-stream | summary
+  echo "== score 400 x 30, $p particles (binary both ways), 1 connection"
+  CONNECTIONS=1 post_load "$DURATION" "$url/score" "$WORK/score-400x30-p$p.bin" application/octet-stream application/octet-stream | summary
 done
 for name in icem pets; do
   echo "== plan, $name sizes: 3 calls"

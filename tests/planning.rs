@@ -1,15 +1,18 @@
 //! Scoring candidate action sequences (`planning::score_sequences`) against
 //! hand computations on a point mass whose every step is known: returns,
 //! their discount and η's penalty, termination, ε's truncation, and the CVaR
-//! over particles.
+//! over particles; against the model rollout's own trace; and several
+//! callers' candidates scored in one loop as each alone.
 
 use std::path::Path;
 use std::sync::Arc;
 
+use nuno::agent::{RolloutActions, RolloutConfig, StepOutcome, rollout_model};
 use nuno::envs::{Rules, SystemSpec};
 use nuno::planning::{
-    CandidateScore, Candidates, CemConfig, Cost, CostTerm, MppiConfig, Optimizer, Plan, PlanConfig,
-    PlanStart, ScoreConfig, plan, score_sequences,
+    CandidateScore, Candidates, CemConfig, Cost, CostTerm, IcemConfig, MppiConfig, Optimizer, Plan,
+    PlanConfig, PlanStart, PlanningError, ScoreConfig, ScoreGroup, plan, score_groups,
+    score_sequences,
 };
 use nuno::shared::{BatchDynamics, BatchShape, Cancel, ModelStep};
 use rand::SeedableRng;
@@ -278,7 +281,7 @@ fn reach(optimizer: Optimizer, warm: Option<&[f32]>, seed: u64) -> Plan {
         population: 200,
         iterations: 6,
         noise: match optimizer {
-            Optimizer::Cem(_) => 0.5,
+            Optimizer::Cem(_) | Optimizer::Icem(_) => 0.5,
             Optimizer::Mppi(_) => 1.0,
         },
         score: undiscounted_drift(),
@@ -288,6 +291,7 @@ fn reach(optimizer: Optimizer, warm: Option<&[f32]>, seed: u64) -> Plan {
         state: &[0.0],
         action_box: &[(-1.0, 1.0)],
         warm,
+        elites: &[],
     };
     plan(
         &PointMass,
@@ -304,14 +308,21 @@ const CEM: Optimizer = Optimizer::Cem(CemConfig {
     elites: 20,
     momentum: 0.1,
 });
+const ICEM: Optimizer = Optimizer::Icem(IcemConfig {
+    elites: 20,
+    momentum: 0.1,
+    decay: 1.3,
+    colored_noise: 2.0,
+    keep_elites: 0.3,
+});
 const MPPI: Optimizer = Optimizer::Mppi(MppiConfig {
     temperature: 0.05,
     smoothing: 1.0,
 });
 
 #[test]
-fn cem_and_mppi_find_the_plan_worked_by_hand() {
-    for optimizer in [CEM, MPPI] {
+fn cem_icem_and_mppi_find_the_plan_worked_by_hand() {
+    for optimizer in [CEM, ICEM, MPPI] {
         let plan = reach(optimizer, None, 7);
         // The first two actions push fully; the optimum's return is −1.
         assert!(
@@ -351,6 +362,7 @@ fn a_warm_start_begins_from_the_previous_plan_shifted() {
         state: &[0.0],
         action_box: &[(-1.0, 1.0)],
         warm: Some(warm),
+        elites: &[],
     };
     let plan = plan(
         &PointMass,
@@ -378,4 +390,222 @@ fn a_warm_start_begins_from_the_previous_plan_shifted() {
         bad.to_string().contains("warm start holds 2 values"),
         "{bad}"
     );
+}
+
+/// Scores from `rollout_model`'s full trace, reduced here by hand: the
+/// reference for the trace-free loop behind `score_sequences`.
+fn scores_from_trace(
+    starts: &[f32],
+    sequences: &[f32],
+    per_start: usize,
+    config: &ScoreConfig,
+    seed: u64,
+) -> Vec<(f64, f64, f64, Option<usize>)> {
+    let tiled: Vec<f32> = starts
+        .iter()
+        .flat_map(|&s| std::iter::repeat_n(s, per_start))
+        .collect();
+    let rollout = RolloutConfig {
+        horizon: config.horizon,
+        particles: config.particles,
+        penalty: config.penalty,
+        threshold: config.threshold,
+        noise_scale: config.noise_scale,
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let actions = RolloutActions::Sequence(sequences);
+    let trace = rollout_model(&PointMass, actions, &rules(), &tiled, &rollout, &mut rng).trace;
+    let p = config.particles;
+    (0..tiled.len())
+        .map(|c| {
+            let (mut ret, mut pen, mut eta) = (0.0, 0.0, 0.0);
+            let mut truncated_at = None::<usize>;
+            for r in c * p..(c + 1) * p {
+                let mut weight = 1.0;
+                for t in 0..trace.kept[r] {
+                    let reward = f64::from(trace.rewards[r][t]);
+                    let e = f64::from(trace.eta[r][t]);
+                    ret += weight * reward;
+                    pen += weight * (reward - config.penalty * e);
+                    eta += e;
+                    weight *= config.discount;
+                }
+                if trace.outcome[r] == StepOutcome::Truncated {
+                    let k = trace.kept[r];
+                    truncated_at = Some(truncated_at.map_or(k, |t| t.min(k)));
+                }
+            }
+            let n = p as f64;
+            (ret / n, pen / n, eta / n, truncated_at)
+        })
+        .collect()
+}
+
+#[test]
+fn scores_are_the_model_rollouts_returns_with_noise_and_truncation() {
+    let starts = [0.0, 1.0, -0.5];
+    let sequences: Vec<f32> = (0..3 * 2 * 4)
+        .map(|i| ((i % 5) as f32 - 2.0) * 0.4)
+        .collect();
+    let config = ScoreConfig {
+        horizon: 4,
+        particles: 5,
+        noise_scale: 0.7,
+        ..config(Some(3.0))
+    };
+    let candidates = Candidates {
+        starts: &starts,
+        sequences: &sequences,
+        per_start: 2,
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let scores = score_sequences(
+        &PointMass,
+        &rules(),
+        &candidates,
+        &config,
+        &mut rng,
+        &Cancel::default(),
+    )
+    .unwrap();
+    let reference = scores_from_trace(&starts, &sequences, 2, &config, 9);
+    let mut truncations = 0;
+    for (s, (ret, pen, eta, truncated_at)) in scores.iter().zip(&reference) {
+        assert!(close(s.mean_return, *ret), "{s:?} vs {ret}");
+        assert!(close(s.penalized_return, *pen), "{s:?} vs {pen}");
+        assert!(close(s.accumulated_eta, *eta), "{s:?} vs {eta}");
+        assert_eq!(s.truncated_at, *truncated_at, "{s:?}");
+        truncations += usize::from(truncated_at.is_some());
+    }
+    assert!(truncations > 0, "ε = 3 truncates some particle: {scores:?}");
+}
+
+#[test]
+fn groups_scored_together_score_as_each_alone() {
+    let rules = rules();
+    let settings = [
+        (vec![0.0, 1.0], 2, config(None), 1),
+        (
+            vec![0.5],
+            3,
+            ScoreConfig {
+                horizon: 2,
+                particles: 4,
+                noise_scale: 1.0,
+                ..config(Some(1.5))
+            },
+            2,
+        ),
+        (
+            vec![-1.0, 0.2, 3.0],
+            1,
+            ScoreConfig {
+                noise_scale: 0.3,
+                discount: 1.0,
+                ..config(None)
+            },
+            3,
+        ),
+    ];
+    let sequences: Vec<Vec<f32>> = (settings.iter())
+        .map(|(starts, per_start, config, _)| {
+            (0..starts.len() * per_start * config.horizon)
+                .map(|i| (i as f32 * 0.37).sin())
+                .collect()
+        })
+        .collect();
+    let candidates = |g: usize| Candidates {
+        starts: &settings[g].0,
+        sequences: &sequences[g],
+        per_start: settings[g].1,
+    };
+    let cancel = Cancel::default();
+    let alone: Vec<Vec<CandidateScore>> = (0..settings.len())
+        .map(|g| {
+            let mut rng = ChaCha8Rng::seed_from_u64(settings[g].3);
+            let c = candidates(g);
+            score_sequences(&PointMass, &rules, &c, &settings[g].2, &mut rng, &cancel).unwrap()
+        })
+        .collect();
+    let mut rngs: Vec<ChaCha8Rng> = (settings.iter())
+        .map(|s| ChaCha8Rng::seed_from_u64(s.3))
+        .collect();
+    let cancelled = Cancel::default();
+    cancelled.cancel();
+    let mut groups: Vec<ScoreGroup> = (rngs.iter_mut().enumerate())
+        .map(|(g, rng)| ScoreGroup {
+            candidates: candidates(g),
+            config: &settings[g].2,
+            rng,
+            cancel: &cancel,
+        })
+        .collect();
+    // A cancelled caller between them takes nothing from the others.
+    let mut spare = ChaCha8Rng::seed_from_u64(0);
+    groups.insert(
+        1,
+        ScoreGroup {
+            candidates: candidates(0),
+            config: &settings[0].2,
+            rng: &mut spare,
+            cancel: &cancelled,
+        },
+    );
+    let mut together = score_groups(&PointMass, &rules, groups).into_iter();
+    assert_eq!(together.next().unwrap().unwrap(), alone[0]);
+    assert!(matches!(
+        together.next(),
+        Some(Err(PlanningError::Cancelled(_)))
+    ));
+    assert_eq!(together.next().unwrap().unwrap(), alone[1]);
+    assert_eq!(together.next().unwrap().unwrap(), alone[2]);
+}
+
+/// iCEM's memory: one iteration of two candidates sampled at a tiny spread
+/// around the box's middle (both ≈ [0, 0, 0], return −12) finds nothing,
+/// unless the previous call's elite [−1, 1, 1] is among them, shifted to
+/// [1, 1, ≈0]: the optimum (return −1), which becomes the plan (momentum 0)
+/// and the elite this call leaves for the next.
+#[test]
+fn icem_tries_the_previous_calls_elites_shifted_one_step() {
+    let config = PlanConfig {
+        optimizer: Optimizer::Icem(IcemConfig {
+            elites: 1,
+            momentum: 0.0,
+            decay: 1.3,
+            colored_noise: 2.0,
+            keep_elites: 1.0,
+        }),
+        population: 2,
+        iterations: 1,
+        noise: 0.001,
+        score: undiscounted_drift(),
+    };
+    let run = |elites: &[f32]| {
+        let start = PlanStart {
+            state: &[0.0],
+            action_box: &[(-1.0, 1.0)],
+            warm: None,
+            elites,
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        plan(
+            &PointMass,
+            &reach_rules(),
+            &start,
+            &config,
+            &mut rng,
+            &Cancel::default(),
+        )
+        .unwrap()
+    };
+    let near =
+        |got: &[f32], want: [f32; 3]| got.iter().zip(want).all(|(g, w)| (g - w).abs() < 0.01);
+    let cold = run(&[]);
+    assert!(near(&cold.actions, [0.0, 0.0, 0.0]), "{cold:?}");
+    assert!((cold.objective + 12.0).abs() < 0.1, "{cold:?}");
+    let remembered = run(&[-1.0, 1.0, 1.0]);
+    assert!(near(&remembered.actions, [1.0, 1.0, 0.0]), "{remembered:?}");
+    assert!((remembered.objective + 1.0).abs() < 0.05, "{remembered:?}");
+    assert!(near(&remembered.elites, [1.0, 1.0, 0.0]), "{remembered:?}");
 }

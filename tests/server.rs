@@ -1798,7 +1798,8 @@ async fn score_cost_terms_reward_their_targets() {
 }
 
 /// Shared candidates are each start's own, repeated; the answer's binary
-/// form holds the JSON's numbers; both or neither way of giving candidates,
+/// form holds the JSON's numbers; a binary request answers the JSON one's
+/// bytes and its wrong metadata or shapes are named; both or neither way of giving candidates,
 /// or starts with unequal candidate counts, are refused by name.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn shared_candidates_binary_answers_and_bad_score_requests() {
@@ -1836,6 +1837,65 @@ async fn shared_candidates_binary_answers_and_bad_score_requests() {
         t["cvar_return"].1.iter().all(|v| v.is_nan()),
         "no CVaR asked"
     );
+
+    // The same request as safetensors, by start or shared: the same answer's bytes.
+    let states: Vec<f32> = upright(2).concat();
+    let own_flat: Vec<f32> = own.concat().concat().concat();
+    let shared_flat: Vec<f32> = shared.concat().concat();
+    let binary = |tensors: Vec<(&str, Vec<usize>, Vec<f32>)>, metadata: &[(&str, &str)]| {
+        let tensors: nuno::artifact::NamedTensors = (tensors.into_iter())
+            .map(|(name, shape, values)| (name.to_string(), (shape, values)))
+            .collect();
+        let metadata = (metadata.iter())
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect();
+        nuno::artifact::safetensors_bytes(&tensors, Some(metadata)).unwrap()
+    };
+    let options = [("particles", "2"), ("seed", "3"), ("horizon", "4")];
+    let both_binary = [("accept", BINARY), ("content-type", BINARY)];
+    for (name, shape, values) in [
+        ("actions", vec![2, n, h, 3], own_flat.clone()),
+        ("shared_actions", vec![n, h, 3], shared_flat),
+    ] {
+        let tensors = vec![
+            ("states", vec![2, 11], states.clone()),
+            (name, shape, values),
+        ];
+        let by_binary = server
+            .request("POST", &path, &both_binary, binary(tensors, &options))
+            .await;
+        assert_eq!(by_binary.status, StatusCode::OK, "{name}");
+        assert_eq!(by_binary.body, answer.body, "{name}: binary ≠ JSON request");
+    }
+    let own_tensors = || {
+        vec![
+            ("states", vec![2, 11], states.clone()),
+            ("actions", vec![2, n, h, 3], own_flat.clone()),
+        ]
+    };
+    let wrong_width = vec![
+        ("states", vec![2, 11], states.clone()),
+        ("actions", vec![2, n, h * 3, 1], own_flat.clone()),
+    ];
+    for (bytes, needle) in [
+        (
+            binary(own_tensors(), &[("particle", "2")]),
+            "metadata `particle`",
+        ),
+        (
+            binary(own_tensors(), &[("horizon", "5")]),
+            "`horizon` is 5 but `actions` has 4",
+        ),
+        (
+            binary(wrong_width, &[]),
+            "`actions` has shape [2, 2, 12, 1]",
+        ),
+    ] {
+        let answer = server.request("POST", &path, &both_binary, bytes).await;
+        assert_eq!(answer.status, StatusCode::UNPROCESSABLE_ENTITY, "{needle}");
+        let text = String::from_utf8_lossy(&answer.body).to_string();
+        assert!(text.contains(needle), "{needle}: {text}");
+    }
 
     let mut both = with("actions", &json!(own));
     both["shared_actions"] = json!(shared);
@@ -1963,16 +2023,49 @@ async fn an_expired_session_is_a_404_not_a_cold_start() {
 /// that runs every request alone.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn batched_step_requests_answer_what_they_answer_alone() {
-    let requests: Vec<Vec<u8>> = (0..8)
+    let requests: Vec<Value> = (0..8)
         .map(|i: usize| {
             let mut states = upright(i + 1);
             for (k, row) in states.iter_mut().enumerate() {
                 row[5] += 0.01 * (i * 8 + k) as f32;
             }
-            let body = json!({"states": states, "actions": actions(i + 1),
-                "particles": 1 + i % 3, "seed": 100 + i as u64});
-            serde_json::to_vec(&body).unwrap()
+            json!({"states": states, "actions": actions(i + 1),
+                "particles": 1 + i % 3, "seed": 100 + i as u64})
         })
+        .collect();
+    batched_requests_answer_what_they_answer_alone("step", requests).await;
+}
+
+/// The same for `score`: eight requests of different starts, candidates,
+/// horizons, particles, seeds, thresholds and cost terms share one rollout
+/// and each answers as alone.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn batched_score_requests_answer_what_they_answer_alone() {
+    let requests: Vec<Value> = (0..8)
+        .map(|i: usize| {
+            let (starts, n, h) = (1 + i % 2, 1 + i % 3, 2 + i % 4);
+            let mut request = json!({"states": upright(starts), "actions": candidates(starts, n, h),
+                "horizon": h, "particles": 1 + i % 3, "seed": 200 + i as u64,
+                "discount": 0.9, "cvar_alpha": 0.5});
+            if i % 2 == 1 {
+                request["threshold"] = json!(0.05 * i as f32);
+            }
+            if i % 4 == 2 {
+                request["cost"] = json!({"terms": [{"observation": 0, "target": 1.2}]});
+            }
+            request
+        })
+        .collect();
+    batched_requests_answer_what_they_answer_alone("score", requests).await;
+}
+
+/// Sends `requests` to `route` on a server that batches, all queued behind
+/// one held computation, and to one that runs each alone: the same bytes
+/// answer each, and the batcher ran them as two batches (the first request's,
+/// then the other seven's).
+async fn batched_requests_answer_what_they_answer_alone(route: &str, requests: Vec<Value>) {
+    let requests: Vec<Vec<u8>> = (requests.iter())
+        .map(|r| serde_json::to_vec(r).unwrap())
         .collect();
     let alone = Limits {
         batch_delay_us: 0,
@@ -1987,17 +2080,17 @@ async fn batched_step_requests_answer_what_they_answer_alone() {
     let (hook, release, started) = hold_first_computation();
     let together =
         Arc::new(Server::start_with_config(batching, |c| c.before_compute = Some(hook)).await);
-    let path = format!("/v1/models/{MODEL}/step");
+    let path = format!("/v1/models/{MODEL}/{route}");
     let mut batched = tokio::task::JoinSet::new();
     let send = |set: &mut tokio::task::JoinSet<_>, i: usize| {
         let (server, body, path) = (together.clone(), requests[i].clone(), path.clone());
         set.spawn(async move { (i, server.post_raw(&path, "application/json", body).await) });
     };
-    let until = |what: &'static str| {
+    let until = |what: String| {
         let server = together.clone();
         async move {
             for _ in 0..600 {
-                if server.metrics().await.contains(what) {
+                if server.metrics().await.contains(&what) {
                     return;
                 }
                 tokio::time::sleep(std::time::Duration::from_millis(100)).await;
@@ -2012,10 +2105,14 @@ async fn batched_step_requests_answer_what_they_answer_alone() {
         }
         tokio::time::sleep(std::time::Duration::from_millis(100)).await;
     }
-    for i in 1..8 {
+    for i in 1..requests.len() {
         send(&mut batched, i);
     }
-    until("nuno_step_queue_requests 7\n").await;
+    let queued = requests.len() - 1;
+    until(format!(
+        "nuno_batch_queue_requests{{route=\"{route}\"}} {queued}\n"
+    ))
+    .await;
     release.send(()).unwrap();
     let mut answers = batched.join_all().await;
     answers.sort_by_key(|(i, _)| *i);
@@ -2027,9 +2124,11 @@ async fn batched_step_requests_answer_what_they_answer_alone() {
         assert_eq!(answer.body, single.body, "request {i}: batched ≠ alone");
     }
     let metrics = together.metrics().await;
-    assert!(metrics.contains("nuno_step_batches_total 2\n"), "{metrics}");
-    assert!(
-        metrics.contains("nuno_step_batched_requests_total 8\n"),
-        "{metrics}"
+    let batches = format!("nuno_batches_total{{route=\"{route}\"}} 2\n");
+    assert!(metrics.contains(&batches), "{metrics}");
+    let served = format!(
+        "nuno_batched_requests_total{{route=\"{route}\"}} {}\n",
+        requests.len()
     );
+    assert!(metrics.contains(&served), "{metrics}");
 }

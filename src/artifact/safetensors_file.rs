@@ -27,7 +27,35 @@ pub fn safetensors_bytes(
                 .map_err(|e| ArtifactError::Safetensors(format!("tensor `{name}`: {e}")))
         })
         .collect::<Result<Vec<_>, _>>()?;
-    safetensors::serialize(views, metadata).map_err(|e| ArtifactError::Safetensors(e.to_string()))
+    let bytes = safetensors::serialize(views, metadata)
+        .map_err(|e| ArtifactError::Safetensors(e.to_string()))?;
+    Ok(with_sorted_header(bytes))
+}
+
+/// `bytes` with its JSON header's keys sorted: the crate writes the metadata
+/// in a `HashMap`'s order, which differs from run to run, and the same
+/// tensors should be the same bytes. Same keys, same length: the 8-byte
+/// length prefix and the data offsets stay as they are.
+fn with_sorted_header(mut bytes: Vec<u8>) -> Vec<u8> {
+    let Some(length) = (bytes.get(..8))
+        .and_then(|prefix| <[u8; 8]>::try_from(prefix).ok())
+        .and_then(|prefix| usize::try_from(u64::from_le_bytes(prefix)).ok())
+    else {
+        return bytes;
+    };
+    let Some(header) = bytes.get(8..8 + length) else {
+        return bytes;
+    };
+    // serde_json's map is a BTreeMap: re-serialising sorts the keys.
+    let sorted = serde_json::from_slice::<serde_json::Value>(header)
+        .and_then(|value| serde_json::to_vec(&value));
+    if let Ok(sorted) = sorted
+        && sorted.len() <= length
+    {
+        bytes[8..8 + sorted.len()].copy_from_slice(&sorted);
+        bytes[8 + sorted.len()..8 + length].fill(b' ');
+    }
+    bytes
 }
 
 /// `values` as little-endian bytes: borrowed where f32 already is (no copy of
@@ -92,4 +120,28 @@ pub fn parse_safetensors_with_metadata(
         tensors.insert(name, (info.shape.clone(), values));
     }
     Ok((tensors, parsed.metadata().clone().unwrap_or_default()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_same_tensors_and_metadata_are_the_same_bytes() {
+        let tensors = NamedTensors::from([
+            ("b".to_string(), (vec![2], vec![1.0, 2.0])),
+            ("a".to_string(), (vec![1, 3], vec![3.0, 4.0, 5.0])),
+        ]);
+        let keys: Vec<String> = (0..16).map(|i| format!("key{i}")).collect();
+        let metadata = |order: &mut dyn Iterator<Item = &String>| -> HashMap<String, String> {
+            order.map(|k| (k.clone(), format!("{k}-value"))).collect()
+        };
+        let first = safetensors_bytes(&tensors, Some(metadata(&mut keys.iter()))).unwrap();
+        let second = safetensors_bytes(&tensors, Some(metadata(&mut keys.iter().rev()))).unwrap();
+        assert_eq!(first, second);
+        let (read, read_metadata) =
+            parse_safetensors_with_metadata(&first, Path::new("bytes")).unwrap();
+        assert_eq!(read, tensors);
+        assert_eq!(read_metadata, metadata(&mut keys.iter()));
+    }
 }

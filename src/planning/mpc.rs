@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use rand_chacha::ChaCha8Rng;
 
 use super::PlanningError;
-use super::plan::{PlanConfig, PlanStart, check, plan};
+use super::plan::{Plan, PlanConfig, PlanStart, check, plan};
 use crate::envs::{
     EnvError, EpisodeController, EvaluationConfig, EvaluationReport, MujocoTask, Rules,
     evaluate_controlled,
@@ -16,13 +16,13 @@ use crate::envs::{
 use crate::shared::{BatchDynamics, Cancel};
 
 /// The planner as a controller of evaluated episodes: it keeps each
-/// episode's last plan.
+/// episode's last plan (and iCEM's elites).
 struct Mpc<'a> {
     dynamics: &'a dyn BatchDynamics,
     rules: &'a Rules,
     config: &'a PlanConfig,
     action_box: &'a [(f32, f32)],
-    plans: HashMap<usize, Vec<f32>>,
+    plans: HashMap<usize, Plan>,
 }
 
 impl EpisodeController for Mpc<'_> {
@@ -44,10 +44,12 @@ impl EpisodeController for Mpc<'_> {
         let (obs_dim, act_dim) = (self.obs_dim(), self.act_dim());
         let mut actions = Vec::with_capacity(episodes.len() * act_dim);
         for (&episode, state) in episodes.iter().zip(observations.chunks_exact(obs_dim)) {
+            let last = self.plans.get(&episode);
             let start = PlanStart {
                 state,
                 action_box: self.action_box,
-                warm: self.plans.get(&episode).map(Vec::as_slice),
+                warm: last.map(|p| p.actions.as_slice()),
+                elites: last.map_or(&[], |p| p.elites.as_slice()),
             };
             let found =
                 plan(self.dynamics, self.rules, &start, self.config, rng, cancel).map_err(|e| {
@@ -57,7 +59,7 @@ impl EpisodeController for Mpc<'_> {
                     }
                 })?;
             actions.extend_from_slice(&found.actions[..act_dim]);
-            self.plans.insert(episode, found.actions);
+            self.plans.insert(episode, found);
         }
         Ok(actions)
     }

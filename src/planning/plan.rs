@@ -1,5 +1,5 @@
-//! Sampling planners over [`score_sequences`]: the cross-entropy method and
-//! MPPI as mbrl-lib runs them (`mbrl/planning/trajectory_opt.py`; the facts
+//! Sampling planners over [`score_sequences`]: the cross-entropy method,
+//! iCEM and MPPI as mbrl-lib runs them (`mbrl/planning/trajectory_opt.py`; the facts
 //! are in `../shared/reference/nuno-code-and-planners.md`, Part B), with the
 //! objective a candidate's η-penalised return (or its CVaR over particles),
 //! and a warm start from the previous control step's plan.
@@ -17,6 +17,7 @@ use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
 use super::PlanningError;
+use super::colored_noise::ColoredNoise;
 use super::score::{CandidateScore, Candidates, ScoreConfig, score_sequences};
 use crate::envs::Rules;
 use crate::shared::{BatchDynamics, Cancel};
@@ -28,9 +29,10 @@ use crate::shared::{BatchDynamics, Cancel};
 pub enum Planner {
     Mppi,
     Cem,
+    Icem,
 }
 
-crate::shared::named_enum!(Planner, "planner", Planner::Mppi => "mppi", Planner::Cem => "cem");
+crate::shared::named_enum!(Planner, "planner", Planner::Mppi => "mppi", Planner::Cem => "cem", Planner::Icem => "icem");
 
 /// A planner's own settings as a caller gives them, each optional; what is
 /// left out takes mbrl-lib's default (PETS' for CEM).
@@ -40,11 +42,17 @@ pub struct PlannerSettings {
     pub temperature: Option<f64>,
     /// MPPI's β (default 0.9).
     pub smoothing: Option<f64>,
-    /// CEM's elites (default ⌈population / 10⌉, at most the population).
+    /// CEM's and iCEM's elites (default ⌈population / 10⌉, at most the population).
     pub elites: Option<usize>,
-    /// CEM's momentum α (default 0.1).
+    /// CEM's and iCEM's momentum α (default 0.1).
     pub momentum: Option<f64>,
-    /// The sampling spread (default: CEM 0.5, MPPI 1; see [`PlanConfig::noise`]).
+    /// iCEM's population decay: iteration i samples population·decay^(−i) (default 1.3).
+    pub decay: Option<f64>,
+    /// iCEM's noise exponent β: power ∝ f^(−β) along time (default 2; 0 is white).
+    pub colored_noise: Option<f64>,
+    /// iCEM's share of elites carried to the next iteration and call (default 0.3).
+    pub keep_elites: Option<f64>,
+    /// The sampling spread (default: CEM and iCEM 0.5, MPPI 1; see [`PlanConfig::noise`]).
     pub noise: Option<f64>,
 }
 
@@ -61,10 +69,21 @@ impl Planner {
                 "{fields} are settings of {owner}, not of {self}"
             )))
         };
+        let icem_only = settings.decay.is_some()
+            || settings.colored_noise.is_some()
+            || settings.keep_elites.is_some();
+        let mppi_only = settings.temperature.is_some() || settings.smoothing.is_some();
+        let elites = (settings.elites)
+            .unwrap_or(population.div_ceil(10))
+            .min(population);
+        let momentum = settings.momentum.unwrap_or(0.1);
         let optimizer = match self {
             Planner::Mppi => {
                 if settings.elites.is_some() || settings.momentum.is_some() {
                     return misplaced("`elites` and `momentum`", Planner::Cem);
+                }
+                if icem_only {
+                    return misplaced("`decay`, `colored_noise` and `keep_elites`", Planner::Icem);
                 }
                 Optimizer::Mppi(MppiConfig {
                     temperature: settings.temperature.unwrap_or(1.0),
@@ -72,19 +91,29 @@ impl Planner {
                 })
             }
             Planner::Cem => {
-                if settings.temperature.is_some() || settings.smoothing.is_some() {
+                if mppi_only {
                     return misplaced("`temperature` and `smoothing`", Planner::Mppi);
                 }
-                Optimizer::Cem(CemConfig {
-                    elites: (settings.elites)
-                        .unwrap_or(population.div_ceil(10))
-                        .min(population),
-                    momentum: settings.momentum.unwrap_or(0.1),
+                if icem_only {
+                    return misplaced("`decay`, `colored_noise` and `keep_elites`", Planner::Icem);
+                }
+                Optimizer::Cem(CemConfig { elites, momentum })
+            }
+            Planner::Icem => {
+                if mppi_only {
+                    return misplaced("`temperature` and `smoothing`", Planner::Mppi);
+                }
+                Optimizer::Icem(IcemConfig {
+                    elites,
+                    momentum,
+                    decay: settings.decay.unwrap_or(1.3),
+                    colored_noise: settings.colored_noise.unwrap_or(2.0),
+                    keep_elites: settings.keep_elites.unwrap_or(0.3),
                 })
             }
         };
         let noise = settings.noise.unwrap_or(match self {
-            Planner::Cem => 0.5,
+            Planner::Cem | Planner::Icem => 0.5,
             Planner::Mppi => 1.0,
         });
         Ok((optimizer, noise))
@@ -95,6 +124,7 @@ impl Planner {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Optimizer {
     Cem(CemConfig),
+    Icem(IcemConfig),
     Mppi(MppiConfig),
 }
 
@@ -105,6 +135,23 @@ pub struct CemConfig {
     pub elites: usize,
     /// α: the share of the old mean and variance kept at each refit (PETS: 0.1).
     pub momentum: f64,
+}
+
+/// The improved cross-entropy method (Pinneri et al. 2020; mbrl-lib's
+/// `ICEMOptimizer`): coloured noise along time, a population that shrinks
+/// each iteration, and elites carried to the next iteration and the next
+/// control step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IcemConfig {
+    pub elites: usize,
+    /// α, as CEM's.
+    pub momentum: f64,
+    /// Iteration i samples ⌈max(population·decay^(−i), 2·elites)⌉ (mbrl-lib: 1.3).
+    pub decay: f64,
+    /// β: the samples' power spectrum ∝ f^(−β) along time (mbrl-lib: 2).
+    pub colored_noise: f64,
+    /// The share of elites (rounded up) carried on (mbrl-lib: 0.3).
+    pub keep_elites: f64,
 }
 
 /// Model-predictive path integral control (mbrl-lib's `MPPIOptimizer`).
@@ -175,6 +222,9 @@ pub struct Plan {
     pub score: CandidateScore,
     /// What the planner maximised, for the plan.
     pub objective: f64,
+    /// iCEM's last elites, `[k, H, act_dim]`, for the next control step
+    /// ([`PlanStart::elites`]); empty for the other planners.
+    pub elites: Vec<f32>,
 }
 
 /// Where one planning call starts.
@@ -187,6 +237,9 @@ pub struct PlanStart<'a> {
     /// The previous control step's plan, `[H, act_dim]`: shifted one step
     /// here (mbrl-lib's `keep_last_solution`), it seeds the search.
     pub warm: Option<&'a [f32]>,
+    /// The previous call's [`Plan::elites`]: iCEM's first iteration samples
+    /// some of them shifted one step; the other planners ignore them.
+    pub elites: &'a [f32],
 }
 
 /// Plans from `start` in the model.
@@ -202,6 +255,7 @@ pub fn plan(
         state,
         action_box,
         warm,
+        elites,
     } = *start;
     check(config, action_box, warm, dynamics.act_dim())?;
     let problem = Problem {
@@ -211,15 +265,17 @@ pub fn plan(
         action_box,
         config,
     };
-    let actions = match config.optimizer {
-        Optimizer::Cem(cem) => problem.cem(&cem, warm, rng, cancel)?,
-        Optimizer::Mppi(mppi) => problem.mppi(&mppi, warm, rng, cancel)?,
+    let (actions, elites) = match config.optimizer {
+        Optimizer::Cem(cem) => (problem.cem(&cem, warm, rng, cancel)?, Vec::new()),
+        Optimizer::Icem(icem) => problem.icem(&icem, warm, elites, rng, cancel)?,
+        Optimizer::Mppi(mppi) => (problem.mppi(&mppi, warm, rng, cancel)?, Vec::new()),
     };
     let scores = problem.score(&actions, 1, rng, cancel)?;
     Ok(Plan {
         objective: objective(&scores[0], &config.score),
         score: scores[0],
         actions,
+        elites,
     })
 }
 
@@ -270,13 +326,15 @@ impl Problem<'_> {
         score_sequences(self.dynamics, self.rules, &candidates, config, rng, cancel)
     }
 
+    /// The objective of each sequence in `sequences`, `[count, H, act_dim]`.
     fn objectives(
         &self,
         sequences: &[f32],
         rng: &mut ChaCha8Rng,
         cancel: &Cancel,
     ) -> Result<Vec<f64>, PlanningError> {
-        let scores = self.score(sequences, self.config.population, rng, cancel)?;
+        let count = sequences.len() / (self.config.score.horizon * self.action_box.len());
+        let scores = self.score(sequences, count, rng, cancel)?;
         Ok(scores
             .iter()
             .map(|s| objective(s, &self.config.score))
@@ -293,6 +351,25 @@ impl Problem<'_> {
         per_step.cycle().take(steps * self.action_box.len()).unzip()
     }
 
+    /// The search's first mean: the warm plan shifted (its last row the
+    /// box's middle), else the middle throughout; and the first variance.
+    fn first_mean_and_variance(&self, warm: Option<&[f32]>) -> (Vec<f64>, Vec<f64>) {
+        let (low, high) = self.bounds();
+        let middle: Vec<f32> = (self.action_box.iter())
+            .map(|&(l, h)| (l + h) / 2.0)
+            .collect();
+        let mean: Vec<f64> = match warm {
+            Some(plan) => shifted(plan, middle.len(), &middle),
+            None => middle.repeat(self.config.score.horizon),
+        }
+        .into_iter()
+        .map(f64::from)
+        .collect();
+        let spread = |i: usize| self.config.noise * (high[i] - low[i]) / 2.0;
+        let variance = (0..mean.len()).map(|i| spread(i).powi(2)).collect();
+        (mean, variance)
+    }
+
     /// mbrl-lib's CEM: a truncated normal around μ (start: the warm plan
     /// shifted, else the box's middle), its variance kept within half the
     /// distance to the bounds; μ and the variance refitted to the elites.
@@ -304,18 +381,7 @@ impl Problem<'_> {
         cancel: &Cancel,
     ) -> Result<Vec<f32>, PlanningError> {
         let (low, high) = self.bounds();
-        let middle: Vec<f32> = (self.action_box.iter())
-            .map(|&(l, h)| (l + h) / 2.0)
-            .collect();
-        let mut mean: Vec<f64> = match warm {
-            Some(plan) => shifted(plan, middle.len(), &middle),
-            None => middle.repeat(self.config.score.horizon),
-        }
-        .into_iter()
-        .map(f64::from)
-        .collect();
-        let spread = |i: usize| self.config.noise * (high[i] - low[i]) / 2.0;
-        let mut variance: Vec<f64> = (0..mean.len()).map(|i| spread(i).powi(2)).collect();
+        let (mut mean, mut variance) = self.first_mean_and_variance(warm);
         let width = mean.len();
         for _ in 0..self.config.iterations {
             let population: Vec<f32> = (0..self.config.population)
@@ -341,6 +407,77 @@ impl Problem<'_> {
             }
         }
         Ok(mean.into_iter().map(|m| m as f32).collect())
+    }
+
+    /// mbrl-lib's iCEM: CEM's refit (the elites' biased variance) over
+    /// samples μ + σ·coloured noise clipped to the box, from a population that
+    /// decays each iteration; the first iteration adds some of the previous
+    /// call's elites shifted one step (their last step drawn from N(μ, σ) of
+    /// the last step), the middle ones some of the previous iteration's, the
+    /// last one μ itself. Returns μ and the last elites.
+    fn icem(
+        &self,
+        icem: &IcemConfig,
+        warm: Option<&[f32]>,
+        previous_call: &[f32],
+        rng: &mut ChaCha8Rng,
+        cancel: &Cancel,
+    ) -> Result<(Vec<f32>, Vec<f32>), PlanningError> {
+        let (low, high) = self.bounds();
+        let (mut mean, mut variance) = self.first_mean_and_variance(warm);
+        let (act_dim, horizon) = (self.action_box.len(), self.config.score.horizon);
+        let width = mean.len();
+        let noise = ColoredNoise::new(icem.colored_noise, horizon);
+        let keep = (icem.keep_elites * icem.elites as f64).ceil() as usize;
+        let mut elites: Vec<f32> = previous_call.to_vec();
+        let last = self.config.iterations - 1;
+        for i in 0..=last {
+            let decayed = self.config.population as f64 * icem.decay.powi(-(i as i32));
+            let size = (decayed.ceil() as usize).max(2 * icem.elites);
+            // ν is drawn [size, act_dim, H] and read as [size, H, act_dim] (mbrl-lib's transpose).
+            let nu = noise.sample(size * act_dim, rng);
+            let mut population: Vec<f32> = (0..size * width)
+                .map(|at| {
+                    let (c, j) = (at / width, at % width);
+                    let (t, a) = (j / act_dim, j % act_dim);
+                    let sample = mean[j] + variance[j].sqrt() * nu[(c * act_dim + a) * horizon + t];
+                    sample.clamp(low[j], high[j]) as f32
+                })
+                .collect();
+            let carried = elites.len() / width;
+            if i == 0 && carried > 0 {
+                for e in pick(carried, keep, rng) {
+                    let elite = &elites[e * width..(e + 1) * width];
+                    let fill: Vec<f32> = (width - act_dim..width)
+                        .map(|j| {
+                            let x: f64 = rng.sample(StandardNormal);
+                            (mean[j] + variance[j].sqrt() * x) as f32
+                        })
+                        .collect();
+                    population.extend(shifted(elite, act_dim, &fill));
+                }
+            } else if i == last && i > 0 {
+                population.extend(mean.iter().map(|&m| m as f32));
+            } else if carried > 0 {
+                for e in pick(carried, keep, rng) {
+                    population.extend_from_slice(&elites[e * width..(e + 1) * width]);
+                }
+            }
+            let values = self.objectives(&population, rng, cancel)?;
+            let best = best(&values, icem.elites);
+            elites = (best.iter())
+                .flat_map(|&e| population[e * width..(e + 1) * width].iter().copied())
+                .collect();
+            for j in 0..width {
+                let column: Vec<f64> = (0..best.len())
+                    .map(|e| f64::from(elites[e * width + j]))
+                    .collect();
+                let (m, v) = mean_and_biased_variance(&column);
+                mean[j] = icem.momentum * mean[j] + (1.0 - icem.momentum) * m;
+                variance[j] = icem.momentum * variance[j] + (1.0 - icem.momentum) * v;
+            }
+        }
+        Ok((mean.into_iter().map(|m| m as f32).collect(), elites))
     }
 
     /// mbrl-lib's MPPI: the mean (the warm plan shifted, its last row kept;
@@ -415,6 +552,27 @@ fn best(values: &[f64], count: usize) -> Vec<usize> {
     order
 }
 
+/// `count` of `0..n` drawn without replacement (all of them when `count` ≥ `n`).
+fn pick(n: usize, count: usize, rng: &mut ChaCha8Rng) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..n).collect();
+    let count = count.min(n);
+    for i in 0..count {
+        let j = rng.random_range(i..n);
+        order.swap(i, j);
+    }
+    order.truncate(count);
+    order
+}
+
+fn mean_and_biased_variance(values: &[f64]) -> (f64, f64) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    (
+        mean,
+        values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n,
+    )
+}
+
 fn mean_and_unbiased_variance(values: &[f64]) -> (f64, f64) {
     let n = values.len() as f64;
     let mean = values.iter().sum::<f64>() / n;
@@ -455,15 +613,21 @@ pub(super) fn check(
         ));
     }
     match config.optimizer {
-        Optimizer::Cem(cem) => {
-            if cem.elites == 0 || cem.elites > config.population {
+        Optimizer::Cem(CemConfig { elites, momentum })
+        | Optimizer::Icem(IcemConfig {
+            elites, momentum, ..
+        }) => {
+            if elites == 0 || elites > config.population {
                 return invalid(format!(
-                    "elites {} is not between 1 and the population {}",
-                    cem.elites, config.population
+                    "elites {elites} is not between 1 and the population {}",
+                    config.population
                 ));
             }
-            if !(0.0..1.0).contains(&cem.momentum) {
-                return invalid(format!("momentum {} is not in [0, 1)", cem.momentum));
+            if !(0.0..1.0).contains(&momentum) {
+                return invalid(format!("momentum {momentum} is not in [0, 1)"));
+            }
+            if let Optimizer::Icem(icem) = config.optimizer {
+                check_icem(&icem)?;
             }
         }
         Optimizer::Mppi(mppi) => {
@@ -477,6 +641,23 @@ pub(super) fn check(
                 return invalid(format!("smoothing {} is not in (0, 1]", mppi.smoothing));
             }
         }
+    }
+    Ok(())
+}
+
+fn check_icem(icem: &IcemConfig) -> Result<(), PlanningError> {
+    let invalid = |message: String| Err(PlanningError::Invalid(message));
+    if !(icem.decay.is_finite() && icem.decay >= 1.0) {
+        return invalid(format!("decay {} is not a number ≥ 1", icem.decay));
+    }
+    if !(icem.colored_noise.is_finite() && icem.colored_noise >= 0.0) {
+        return invalid(format!(
+            "colored_noise {} is not a number ≥ 0",
+            icem.colored_noise
+        ));
+    }
+    if !(0.0..=1.0).contains(&icem.keep_elites) {
+        return invalid(format!("keep_elites {} is not in [0, 1]", icem.keep_elites));
     }
     Ok(())
 }

@@ -2,14 +2,16 @@
 //! state through the model with `particles` samples (mbrl-lib's
 //! `evaluate_action_sequences`: particle p of candidate c is row c·P + p, a
 //! particle's rewards stop where its task says it fell), then reduced to one
-//! score per candidate. Every step goes through [`rollout_model_or_cancel`],
-//! the same rollout the policy loop and the server's `rollout` use.
+//! score per candidate. The rollout is the one the policy loop and the
+//! server's `rollout` run (`agent::rollout_model`), without its trace, in
+//! [`score_groups`](super::score_groups): several callers may share its steps.
 
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
 use super::PlanningError;
-use crate::agent::{RolloutActions, RolloutConfig, StepOutcome, rollout_model_or_cancel};
+use super::score_groups::{ScoreGroup, Tally, score_groups};
+use crate::agent::StepOutcome;
 use crate::envs::Rules;
 use crate::shared::{BatchDynamics, Cancel};
 
@@ -59,7 +61,7 @@ pub struct CostTerm {
 impl Cost {
     /// A kept step's reward: the model's `reward` less the costs at its next
     /// observation `next`.
-    fn reward(&self, reward: f32, next: &[f32]) -> f64 {
+    pub(super) fn reward(&self, reward: f32, next: &[f32]) -> f64 {
         let cost: f64 = (self.terms.iter())
             .map(|t| {
                 let miss = f64::from(next[t.dimension]) - f64::from(t.target);
@@ -117,94 +119,28 @@ pub fn score_sequences(
     rng: &mut ChaCha8Rng,
     cancel: &Cancel,
 ) -> Result<Vec<CandidateScore>, PlanningError> {
-    let (obs_dim, act_dim) = (dynamics.obs_dim(), dynamics.act_dim());
-    let Candidates {
-        starts,
-        sequences,
-        per_start: candidates,
-    } = *candidates;
-    check(starts, sequences, candidates, config, (obs_dim, act_dim))?;
-    // Each start once per candidate: the rollout's starts are the candidates.
-    let tiled: Vec<f32> = starts
-        .chunks_exact(obs_dim)
-        .flat_map(|start| std::iter::repeat_n(start, candidates).flatten().copied())
-        .collect();
-    let rollout = RolloutConfig {
-        horizon: config.horizon,
-        particles: config.particles,
-        penalty: config.penalty,
-        threshold: config.threshold,
-        noise_scale: config.noise_scale,
+    let group = ScoreGroup {
+        candidates: *candidates,
+        config,
+        rng,
+        cancel,
     };
-    let actions = RolloutActions::Sequence(sequences);
-    let out = rollout_model_or_cancel(dynamics, actions, rules, &tiled, &rollout, rng, cancel)?;
-    let trace = &out.trace;
-    let rewards: Vec<Vec<f64>> = (0..trace.rows)
-        .map(|r| {
-            let next = trace.observations[r][obs_dim..].chunks_exact(obs_dim);
-            let kept = trace.rewards[r][..trace.kept[r]].iter().zip(next);
-            kept.map(|(&reward, s)| config.cost.reward(reward, s))
-                .collect()
-        })
-        .collect();
-    let particle = |r: usize| Particle {
-        rewards: &rewards[r],
-        eta: &trace.eta[r][..trace.kept[r]],
-        seen_eta: &trace.eta[r],
-        outcome: trace.outcome[r],
-        kept: trace.kept[r],
-    };
-    let p = config.particles;
-    Ok((0..tiled.len() / obs_dim)
-        .map(|c| {
-            score_particles(
-                &(c * p..(c + 1) * p).map(particle).collect::<Vec<_>>(),
-                config,
-            )
-        })
-        .collect())
+    let mut scores = score_groups(dynamics, rules, vec![group]);
+    scores.pop().expect("one group, one answer")
 }
 
-/// One particle's record: the rewards and η of the steps it kept, and η of
-/// every step it took (a truncating step's included).
-struct Particle<'a> {
-    /// In f64: a caller's cost terms may be far outside f32's range.
-    rewards: &'a [f64],
-    eta: &'a [f32],
-    seen_eta: &'a [f32],
-    outcome: StepOutcome,
-    kept: usize,
-}
-
-fn score_particles(particles: &[Particle], config: &ScoreConfig) -> CandidateScore {
-    let discounted = |values: &mut dyn Iterator<Item = f64>| {
-        let mut weight = 1.0;
-        values.fold(0.0, |sum, v| {
-            let term = weight * v;
-            weight *= config.discount;
-            sum + term
-        })
-    };
-    let returns: Vec<f64> = (particles.iter())
-        .map(|p| discounted(&mut p.rewards.iter().copied()))
-        .collect();
-    let penalized = particles.iter().map(|p| {
-        let steps = p.rewards.iter().zip(p.eta);
-        discounted(&mut steps.map(|(&r, &e)| r - config.penalty * f64::from(e)))
-    });
+/// One candidate's score from its particles' tallies.
+pub(super) fn score_particles(particles: &[Tally], config: &ScoreConfig) -> CandidateScore {
     let n = particles.len() as f64;
+    let mean = |value: fn(&Tally) -> f64| particles.iter().map(value).sum::<f64>() / n;
     let share = |o: StepOutcome| particles.iter().filter(|p| p.outcome == o).count() as f64 / n;
+    let returns: Vec<f64> = particles.iter().map(|p| p.discounted_return).collect();
     CandidateScore {
-        mean_return: returns.iter().sum::<f64>() / n,
-        penalized_return: penalized.sum::<f64>() / n,
+        mean_return: mean(|p| p.discounted_return),
+        penalized_return: mean(|p| p.penalized_return),
         cvar_return: config.cvar_alpha.map(|alpha| lower_cvar(&returns, alpha)),
-        accumulated_eta: (particles.iter())
-            .map(|p| p.eta.iter().map(|&e| f64::from(e)).sum::<f64>())
-            .sum::<f64>()
-            / n,
-        max_eta: (particles.iter())
-            .flat_map(|p| p.seen_eta.iter().map(|&e| f64::from(e)))
-            .fold(0.0, f64::max),
+        accumulated_eta: mean(|p| p.eta_sum),
+        max_eta: particles.iter().map(|p| p.max_eta).fold(0.0, f64::max),
         truncated_at: (particles.iter())
             .filter(|p| p.outcome == StepOutcome::Truncated)
             .map(|p| p.kept)
@@ -222,7 +158,7 @@ fn lower_cvar(values: &[f64], alpha: f64) -> f64 {
     sorted[..k].iter().sum::<f64>() / k as f64
 }
 
-fn check(
+pub(super) fn check(
     starts: &[f32],
     sequences: &[f32],
     candidates: usize,

@@ -193,3 +193,37 @@ pub fn tensors_response(
         .map_err(|e| ApiError::Internal(e.to_string()))?;
     Ok(([(header::CONTENT_TYPE, BINARY)], bytes).into_response())
 }
+
+/// A binary request's metadata option, or its default.
+pub fn metadata_option<T: std::str::FromStr>(
+    metadata: &HashMap<String, String>,
+    key: &str,
+    default: T,
+) -> Result<T, ApiError> {
+    match metadata.get(key) {
+        None => Ok(default),
+        Some(text) => text.parse().map_err(|_| {
+            ApiError::Invalid(format!("metadata `{key}` = `{text}` is not a valid value"))
+        }),
+    }
+}
+
+/// A binary request's metadata holds only the options its route takes (as
+/// JSON bodies refuse unknown fields).
+pub fn refuse_unknown_metadata(
+    metadata: &HashMap<String, String>,
+    known: &[&str],
+) -> Result<(), ApiError> {
+    let mut unknown: Vec<&String> = metadata
+        .keys()
+        .filter(|k| !known.contains(&k.as_str()))
+        .collect();
+    unknown.sort();
+    match unknown.first() {
+        None => Ok(()),
+        Some(key) => Err(ApiError::Invalid(format!(
+            "metadata `{key}` is not an option of this route (its options: {})",
+            known.join(", ")
+        ))),
+    }
+}

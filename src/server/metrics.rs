@@ -49,9 +49,8 @@ struct Table {
     batch: BTreeMap<String, Histogram>,
     items: BTreeMap<String, u64>,
     cancelled: u64,
-    step_batches: u64,
-    batched_steps: u64,
-    step_queue: i64,
+    /// Per batched route: batches run, requests they served, requests queued.
+    batches: BTreeMap<&'static str, (u64, u64, i64)>,
 }
 
 /// The server's metrics.
@@ -95,17 +94,18 @@ impl Metrics {
         self.with(|t| t.cancelled += 1);
     }
 
-    /// One network call of the step batcher, for `requests` requests.
-    pub fn step_batch(&self, requests: usize) {
+    /// One batch of `route` requests run by the batcher, for `requests` requests.
+    pub fn batched(&self, route: &'static str, requests: usize) {
         self.with(|t| {
-            t.step_batches += 1;
-            t.batched_steps += requests as u64;
+            let entry = t.batches.entry(route).or_default();
+            entry.0 += 1;
+            entry.1 += requests as u64;
         });
     }
 
-    /// `change` more (or fewer) step requests waiting in the batcher's queue.
-    pub fn step_queue(&self, change: i64) {
-        self.with(|t| t.step_queue += change);
+    /// `change` more (or fewer) `route` requests waiting in the batcher's queue.
+    pub fn batch_queue(&self, route: &'static str, change: i64) {
+        self.with(|t| t.batches.entry(route).or_default().2 += change);
     }
 
     /// The text exposition format.
@@ -149,15 +149,21 @@ impl Metrics {
             );
             out.push_str("# TYPE nuno_computations_cancelled_total counter\n");
             let _ = writeln!(out, "nuno_computations_cancelled_total {}", t.cancelled);
-            out.push_str("# HELP nuno_step_batches_total Network calls of the step batcher (--batch-delay-us); nuno_step_batched_requests_total / this is the mean requests a call.\n");
-            out.push_str("# TYPE nuno_step_batches_total counter\n");
-            let _ = writeln!(out, "nuno_step_batches_total {}", t.step_batches);
-            out.push_str("# HELP nuno_step_batched_requests_total Step requests served by the batcher's calls.\n");
-            out.push_str("# TYPE nuno_step_batched_requests_total counter\n");
-            let _ = writeln!(out, "nuno_step_batched_requests_total {}", t.batched_steps);
-            out.push_str("# HELP nuno_step_queue_requests Step requests waiting for the batcher's next batch.\n");
-            out.push_str("# TYPE nuno_step_queue_requests gauge\n");
-            let _ = writeln!(out, "nuno_step_queue_requests {}", t.step_queue);
+            out.push_str("# HELP nuno_batches_total Computations of the batcher (--batch-delay-us) by route; nuno_batched_requests_total / this is the mean requests a computation.\n");
+            out.push_str("# TYPE nuno_batches_total counter\n");
+            for (route, (batches, _, _)) in &t.batches {
+                let _ = writeln!(out, "nuno_batches_total{{route=\"{route}\"}} {batches}");
+            }
+            out.push_str("# HELP nuno_batched_requests_total Requests served by the batcher's computations, by route.\n");
+            out.push_str("# TYPE nuno_batched_requests_total counter\n");
+            for (route, (_, requests, _)) in &t.batches {
+                let _ = writeln!(out, "nuno_batched_requests_total{{route=\"{route}\"}} {requests}");
+            }
+            out.push_str("# HELP nuno_batch_queue_requests Requests waiting for the batcher's next batch, by route.\n");
+            out.push_str("# TYPE nuno_batch_queue_requests gauge\n");
+            for (route, (_, _, queued)) in &t.batches {
+                let _ = writeln!(out, "nuno_batch_queue_requests{{route=\"{route}\"}} {queued}");
+            }
             out
         })
     }

@@ -10,6 +10,7 @@
 // A handler validates, calls the library and shapes: no function grows long.
 #![warn(clippy::too_many_lines)]
 
+mod batcher;
 mod body;
 mod error;
 mod metrics;
@@ -18,7 +19,6 @@ mod plan_sessions;
 mod registry;
 mod routes;
 mod rows;
-mod step_batcher;
 mod validate;
 
 use std::net::SocketAddr;
@@ -133,8 +133,8 @@ pub struct AppState {
     pub metrics: Arc<Metrics>,
     /// The `plan` route's sessions.
     pub plan_sessions: Arc<plan_sessions::PlanSessions>,
-    /// Where `step` requests meet others for one network call.
-    pub step_batcher: Arc<step_batcher::StepBatcher>,
+    /// Where `step` and `score` requests meet others for one computation.
+    pub batcher: Arc<batcher::Batcher>,
     compute: Arc<Semaphore>,
 }
 
@@ -145,7 +145,7 @@ impl AppState {
         let compute = Arc::new(Semaphore::new(config.limits.compute_slots.max(1)));
         let metrics = Arc::new(Metrics::default());
         let state = Self {
-            step_batcher: Arc::new(step_batcher::StepBatcher::new(
+            batcher: Arc::new(batcher::Batcher::new(
                 Duration::from_micros(config.limits.batch_delay_us),
                 config.limits.max_batch,
                 (compute.clone(), config.before_compute.clone()),

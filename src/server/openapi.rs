@@ -302,14 +302,20 @@ fn state_limits(spec: &mut Value, limits: &Limits) {
 /// other's (null is absent), a session continued and one opened, α and a threshold.
 fn plan_request_rules(schemas: &mut Value, one_rule: Value) {
     // Each planner's own settings, and none of the other's (null is absent).
-    let set = |fields: [&str; 2]| {
-        let one = |f: &str| json!({ "required": [f], "properties": { f: { "type": "number" } } });
-        json!({ "anyOf": [one(fields[0]), one(fields[1])] })
+    let set = |fields: &[&str]| {
+        let one = |f: &&str| json!({ "required": [f], "properties": { *f: { "type": "number" } } });
+        json!({ "anyOf": fields.iter().map(one).collect::<Vec<_>>() })
     };
     let planner_is = |name: &str| json!({ "properties": { "planner": { "const": name } } });
+    let (mppi, cem, icem) = (
+        ["temperature", "smoothing"],
+        ["elites", "momentum"],
+        ["decay", "colored_noise", "keep_elites"],
+    );
     schemas["PlanRequest"]["allOf"] = json!([
-        { "if": planner_is("cem"), "then": { "not": set(["temperature", "smoothing"]) } },
-        { "if": planner_is("mppi"), "then": { "not": set(["elites", "momentum"]) } },
+        { "if": planner_is("cem"), "then": { "not": set(&[&mppi[..], &icem[..]].concat()) } },
+        { "if": planner_is("icem"), "then": { "not": set(&mppi) } },
+        { "if": planner_is("mppi"), "then": { "not": set(&[&cem[..], &icem[..]].concat()) } },
     ]);
     schemas["PlanRequest"]["not"] = json!({ "anyOf": [one_rule, {
         "required": ["session", "open_session"],

@@ -10,13 +10,21 @@ use std::time::{Duration, Instant};
 
 use super::ApiError;
 
+/// What a session keeps of its last call.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KeptPlan {
+    /// `[horizon, act_dim]`, row-major.
+    pub actions: Vec<f32>,
+    /// iCEM's last elites, `[k, horizon, act_dim]` (empty for the other planners).
+    pub elites: Vec<f32>,
+}
+
 /// One session's last plan and what it was planned for.
 #[derive(Debug, Clone)]
 struct Session {
     model: String,
     horizon: usize,
-    /// `[horizon, act_dim]`, row-major.
-    plan: Vec<f32>,
+    plan: KeptPlan,
     used: Instant,
 }
 
@@ -50,7 +58,7 @@ impl PlanSessions {
         model: &str,
         horizon: usize,
         now: Instant,
-    ) -> Result<Vec<f32>, ApiError> {
+    ) -> Result<KeptPlan, ApiError> {
         let mut sessions = self.lock();
         let Some(session) = sessions.get(id) else {
             return Err(ApiError::UnknownSession(format!(
@@ -74,7 +82,7 @@ impl PlanSessions {
     }
 
     /// Keeps `plan` as session `id`'s last, used at `now`.
-    pub fn keep(&self, id: &str, model: &str, horizon: usize, plan: Vec<f32>, now: Instant) {
+    pub fn keep(&self, id: &str, model: &str, horizon: usize, plan: KeptPlan, now: Instant) {
         let mut sessions = self.lock();
         let session = Session {
             model: model.to_string(),
@@ -103,13 +111,23 @@ impl PlanSessions {
 mod tests {
     use super::*;
 
+    fn kept(actions: &[f32]) -> KeptPlan {
+        KeptPlan {
+            actions: actions.to_vec(),
+            elites: vec![-1.0; 2 * actions.len()],
+        }
+    }
+
     #[test]
     fn a_session_keeps_its_plan_until_it_expires() {
         let sessions = PlanSessions::new(4, Duration::from_secs(10));
         let t0 = Instant::now();
-        sessions.keep("a", "hopper", 2, vec![1.0, 2.0], t0);
+        sessions.keep("a", "hopper", 2, kept(&[1.0, 2.0]), t0);
         let later = t0 + Duration::from_secs(9);
-        assert_eq!(sessions.warm("a", "hopper", 2, later).unwrap(), [1.0, 2.0]);
+        assert_eq!(
+            sessions.warm("a", "hopper", 2, later).unwrap(),
+            kept(&[1.0, 2.0])
+        );
         let error = sessions.warm("a", "walker", 2, later).unwrap_err();
         assert!(error.to_string().contains("not `walker` at 2"), "{error}");
         let expired = sessions.warm("a", "hopper", 2, t0 + Duration::from_secs(10));
@@ -123,15 +141,15 @@ mod tests {
         let sessions = PlanSessions::new(2, Duration::from_secs(10));
         let t0 = Instant::now();
         let at = |s| t0 + Duration::from_secs(s);
-        sessions.keep("a", "m", 1, vec![1.0], at(0));
-        sessions.keep("b", "m", 1, vec![2.0], at(1));
-        sessions.keep("a", "m", 1, vec![3.0], at(2));
-        sessions.keep("c", "m", 1, vec![4.0], at(3));
+        sessions.keep("a", "m", 1, kept(&[1.0]), at(0));
+        sessions.keep("b", "m", 1, kept(&[2.0]), at(1));
+        sessions.keep("a", "m", 1, kept(&[3.0]), at(2));
+        sessions.keep("c", "m", 1, kept(&[4.0]), at(3));
         assert!(
             sessions.warm("b", "m", 1, at(3)).is_err(),
             "b was the oldest"
         );
-        assert_eq!(sessions.warm("a", "m", 1, at(3)).unwrap(), [3.0]);
-        assert_eq!(sessions.warm("c", "m", 1, at(3)).unwrap(), [4.0]);
+        assert_eq!(sessions.warm("a", "m", 1, at(3)).unwrap(), kept(&[3.0]));
+        assert_eq!(sessions.warm("c", "m", 1, at(3)).unwrap(), kept(&[4.0]));
     }
 }

@@ -12,8 +12,9 @@ Two things a JSON schema cannot state, and only these, are set aside:
   matching sizes (a plan's `state` too, cost terms an index the model has)
   before they are sent, so the server's other rules are what
   they meet; a 422 naming a width, such a relation, a CVaR level α the
-  model's threshold table lacks, or (asked with `clip: false`) an action
-  outside the model's action box is not counted.
+  model's threshold table lacks, (asked with `clip: false`) an action
+  outside the model's action box, or a plan session continued at another
+  horizon than it was opened with (a relation with an earlier answer) is not counted.
 Every other failure of `--checks all` fails the run.
 """
 
@@ -43,6 +44,9 @@ SCHEMA_CANNOT_STATE = [
     re.compile(r"the model has no ε\(h = \d+, α = [^)]*\); its table covers"),
     # The action box is the model's (`GET /v1/models/{id}`); `clip: false` asks for the 422.
     re.compile(r"is outside the action box \[[^\]]*\] \(send `clip: true`"),
+    # A plan session keeps the model and horizon of the call that opened it:
+    # a relation with an earlier answer, which a stateful link may break.
+    re.compile(r"session `\w+` plans for model `[^`]*` at horizon \d+, not `[^`]*` at \d+"),
 ]
 
 

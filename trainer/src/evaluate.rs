@@ -94,7 +94,7 @@ struct PlanningFlags {
     /// Planner: truncate candidates at the model's ε(H, α) for this α.
     #[arg(long, requires = "planner")]
     alpha: Option<f64>,
-    /// Planner: sampling spread, a share of each action's half-range (default: cem 0.5, mppi 1).
+    /// Planner: sampling spread, a share of each action's half-range (default: cem and icem 0.5, mppi 1).
     #[arg(long, requires = "planner")]
     noise: Option<f64>,
     /// MPPI: the temperature of its weights (default 1).
@@ -103,12 +103,21 @@ struct PlanningFlags {
     /// MPPI: β of its smoothed noise (default 0.9).
     #[arg(long, requires = "planner")]
     smoothing: Option<f64>,
-    /// CEM: candidates each iteration refits to (default ⌈population / 10⌉).
+    /// CEM and iCEM: candidates each iteration refits to (default ⌈population / 10⌉).
     #[arg(long, requires = "planner")]
     elites: Option<usize>,
-    /// CEM: share of the old distribution kept per refit (default 0.1).
+    /// CEM and iCEM: share of the old distribution kept per refit (default 0.1).
     #[arg(long, requires = "planner")]
     momentum: Option<f64>,
+    /// iCEM: iteration i samples ⌈population·decay^(−i)⌉ (default 1.3).
+    #[arg(long, requires = "planner")]
+    decay: Option<f64>,
+    /// iCEM: exponent β of the samples' power spectrum f^(−β) along time (default 2).
+    #[arg(long, requires = "planner")]
+    colored_noise: Option<f64>,
+    /// iCEM: share of elites carried to the next iteration and control step (default 0.3).
+    #[arg(long, requires = "planner")]
+    keep_elites: Option<f64>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -232,6 +241,9 @@ impl PlanningFlags {
             smoothing: self.smoothing,
             elites: self.elites,
             momentum: self.momentum,
+            decay: self.decay,
+            colored_noise: self.colored_noise,
+            keep_elites: self.keep_elites,
             noise: self.noise,
         };
         let (optimizer, noise) = planner.configure(&settings, population)?;

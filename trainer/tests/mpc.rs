@@ -40,8 +40,8 @@ fn mpc(planner: &str, extra: &[&str]) -> serde_json::Value {
 }
 
 #[test]
-fn mpc_reports_both_planners_beside_the_policy_and_repeats_itself() {
-    for planner in ["mppi", "cem"] {
+fn mpc_reports_every_planner_beside_the_policy_and_repeats_itself() {
+    for planner in ["mppi", "cem", "icem"] {
         let report = mpc(planner, &[]);
         let episodes = report["planner"]["lengths"].as_array().unwrap();
         assert_eq!(episodes.len(), 2, "{report}");
@@ -81,6 +81,13 @@ fn the_planners_bad_flags_are_named() {
     );
     let err = fails(&base(&["--planner", "cem", "--temperature", "2"]));
     assert!(err.contains("settings of mppi"), "{err}");
+    let err = fails(&base(&["--planner", "cem", "--keep-elites", "0.5"]));
+    assert!(
+        err.contains("`decay`, `colored_noise` and `keep_elites` are settings of icem"),
+        "{err}"
+    );
+    let err = fails(&base(&["--planner", "icem", "--decay", "0.5"]));
+    assert!(err.contains("decay 0.5 is not a number ≥ 1"), "{err}");
     let err = fails(&base(&["--planner", "mppi", "--temperature=-1"]));
     assert!(err.contains("temperature -1 is not a number > 0"), "{err}");
     let err = fails(&base(&["--planner", "mppi", "--alpha", "0.42"]));

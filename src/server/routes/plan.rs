@@ -1,5 +1,5 @@
-//! `POST /v1/models/{id}/plan`: one control step of a sampling planner (MPPI
-//! or CEM) run in the model from one state, η-aware through the scores it
+//! `POST /v1/models/{id}/plan`: one control step of a sampling planner (MPPI,
+//! CEM or iCEM) run in the model from one state, η-aware through the scores it
 //! maximises; an optional session keeps the plan so the next step
 //! warm-starts from it.
 
@@ -16,7 +16,7 @@ use super::fields::{integer, one, optional_integer, unit};
 use super::scoring::{CostRequest, ScoringFields};
 use crate::planning::{CandidateScore, PlanConfig, PlanStart, Planner, PlannerSettings, plan};
 use crate::server::body::{RawBody, json_response};
-use crate::server::plan_sessions::PlanSessions;
+use crate::server::plan_sessions::{KeptPlan, PlanSessions};
 use crate::server::validate::within;
 use crate::server::{ApiError, AppState};
 
@@ -50,16 +50,30 @@ pub struct PlanRequest {
     #[serde(default)]
     #[schema(exclusive_minimum = 0, maximum = 1)]
     pub smoothing: Option<f64>,
-    /// CEM: the candidates each iteration refits to (default ⌈population / 10⌉;
-    /// at most the population, which more elites mean).
+    /// CEM and iCEM: the candidates each iteration refits to (default
+    /// ⌈population / 10⌉; at most the population, which more elites mean).
     #[serde(default, deserialize_with = "optional_integer")]
     #[schema(minimum = 1)]
     pub elites: Option<usize>,
-    /// CEM: the share of the old distribution kept per refit (default 0.1).
+    /// CEM and iCEM: the share of the old distribution kept per refit (default 0.1).
     #[serde(default)]
     #[schema(minimum = 0, exclusive_maximum = 1)]
     pub momentum: Option<f64>,
-    /// Sampling spread as a share of each action's half-range (default: CEM 0.5, MPPI 1).
+    /// iCEM: iteration i samples ⌈population·decay^(−i)⌉, at least 2·elites (default 1.3).
+    #[serde(default)]
+    #[schema(minimum = 1)]
+    pub decay: Option<f64>,
+    /// iCEM: the exponent β of the samples' power spectrum f^(−β) along
+    /// time (default 2: smooth; 0: white, as CEM).
+    #[serde(default)]
+    #[schema(minimum = 0)]
+    pub colored_noise: Option<f64>,
+    /// iCEM: the share of elites carried to the next iteration and, with a
+    /// session, the next call (default 0.3).
+    #[serde(default)]
+    #[schema(minimum = 0, maximum = 1)]
+    pub keep_elites: Option<f64>,
+    /// Sampling spread as a share of each action's half-range (default: CEM and iCEM 0.5, MPPI 1).
     #[serde(default)]
     #[schema(exclusive_minimum = 0)]
     pub noise: Option<f64>,
@@ -120,11 +134,11 @@ pub struct PlanResponse {
     pub seconds: f64,
 }
 
-/// Plans `horizon` actions from `state` with MPPI or CEM over the model's
+/// Plans `horizon` actions from `state` with MPPI, CEM or iCEM over the model's
 /// η-penalised (or CVaR) returns, mbrl-lib's planners (docs/paper-map.md).
 /// With `open_session` the plan is kept under a new session id; with
 /// `session` the search starts from that session's last plan shifted one
-/// step, and the new plan replaces it. An unknown or expired session is a 404.
+/// step (iCEM also from its last elites), and the new plan replaces it. An unknown or expired session is a 404.
 #[utoipa::path(post, path = "/v1/models/{id}/plan", tag = "models",
     params(("id" = String, Path, description = "Model id")),
     request_body = PlanRequest,
@@ -171,7 +185,8 @@ pub async fn plan_route(
             let from = PlanStart {
                 state: &start,
                 action_box: &model.action_space,
-                warm: warm.as_deref(),
+                warm: warm.as_ref().map(|w| w.actions.as_slice()),
+                elites: warm.as_ref().map_or(&[], |w| w.elites.as_slice()),
             };
             let found = plan(
                 model.batch_dynamics(),
@@ -182,7 +197,11 @@ pub async fn plan_route(
                 cancel,
             )?;
             if let Some(name) = &session {
-                sessions.keep(name, &id, r.horizon, found.actions.clone(), Instant::now());
+                let kept = KeptPlan {
+                    actions: found.actions.clone(),
+                    elites: found.elites,
+                };
+                sessions.keep(name, &id, r.horizon, kept, Instant::now());
             }
             let act_dim = model.act_dim();
             json_response(&PlanResponse {
@@ -222,6 +241,9 @@ fn plan_config(
         smoothing: r.smoothing,
         elites: r.elites,
         momentum: r.momentum,
+        decay: r.decay,
+        colored_noise: r.colored_noise,
+        keep_elites: r.keep_elites,
         noise: r.noise,
     };
     let (optimizer, noise) = r.planner.configure(&settings, r.population)?;

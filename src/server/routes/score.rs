@@ -2,6 +2,8 @@
 //! model from a batch of start states, one answer per candidate (what a
 //! sampling planner needs: MPPI's and CEM's population, not trajectories).
 
+use std::collections::HashMap;
+
 use axum::extract::{Path, State};
 use axum::http::HeaderMap;
 use axum::response::Response;
@@ -13,13 +15,16 @@ use utoipa::ToSchema;
 use super::fields::{integer, one, unit, yes};
 use super::scoring::{CostRequest, ScoringFields};
 use crate::artifact::NamedTensors;
-use crate::planning::{CandidateScore, Candidates, score_sequences};
+use crate::planning::{CandidateScore, Candidates, PlanningError, ScoreConfig, score_sequences};
+use crate::server::batcher::{ScoreWork, Work};
 use crate::server::body::{
-    Format, RawBody, TensorBytes, answer_format, json_response, tensors_response,
+    Format, RawBody, TensorBytes, answer_format, json_response, metadata_option,
+    refuse_unknown_metadata, tensors_response,
 };
 use crate::server::rows::Rows;
-use crate::server::validate::{answer_within, clip_actions, within};
-use crate::server::{ApiError, AppState, LoadedModel};
+use crate::server::validate::{answer_within, clip_actions, flat, within};
+use crate::server::{ApiError, AppState, Limits, LoadedModel};
+use crate::shared::Cancel;
 
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -102,17 +107,26 @@ pub struct ScoreResponse {
 /// Scores every candidate sequence from its start state: per candidate the
 /// mean and penalised returns over `particles` samples, their CVaR, η along
 /// the way, where ε(H, α) truncated and the shares that terminated or
-/// diverged. With `Accept: application/octet-stream` the answer is a
-/// safetensors file of `[batch, candidates]` tensors named as the JSON
-/// fields (`cvar_return` NaN when not asked for, `truncated_at` −1 where
-/// nothing truncated); `noise_scale` and `clipped_rows` in its metadata.
+/// diverged. Binary bodies: a safetensors file with `states` `[batch,
+/// obs_dim]` and `actions` `[batch, candidates, horizon, act_dim]` or
+/// `shared_actions` `[candidates, horizon, act_dim]` (f32), the other fields
+/// as string metadata (`cost` as its JSON). With `Accept:
+/// application/octet-stream` the answer is a safetensors file of `[batch,
+/// candidates]` tensors named as the JSON fields (`cvar_return` NaN when not
+/// asked for, `truncated_at` −1 where nothing truncated); `noise_scale` and
+/// `clipped_rows` in its metadata. Concurrent requests for the same model
+/// share their rollout's model calls (`--batch-delay-us`), each answered as alone.
 #[utoipa::path(post, path = "/v1/models/{id}/score", tag = "models",
     params(("id" = String, Path, description = "Model id")),
-    request_body = ScoreRequest,
+    request_body(content(
+        (ScoreRequest = "application/json"),
+        (TensorBytes = "application/octet-stream"),
+    )),
     responses(
         (status = 200, description = "Success", content((ScoreResponse = "application/json"), (TensorBytes = "application/octet-stream"))),
         (status = 400, description = "Malformed body", body = crate::server::ErrorBody),
         (status = 404, description = "Unknown model", body = crate::server::ErrorBody),
+        (status = 413, body = crate::server::ErrorBody, description = "Body too large"),
         (status = 422, description = "Wrong dimensions, non-finite values, an empty batch, or over a limit", body = crate::server::ErrorBody),
         (status = 503, description = "Timed out or cancelled", body = crate::server::ErrorBody),
     ))]
@@ -122,29 +136,241 @@ pub async fn score(
     headers: HeaderMap,
     body: RawBody,
 ) -> Result<Response, ApiError> {
-    let answer = answer_format(&headers);
-    let mut r: ScoreRequest = body.json().await?;
     let model = state.model(&id)?;
-    let limits = &state.config.limits;
-    let batch = r.states.len();
+    // Said before the body is parsed, so a batch waits for this request.
+    let arrival = (state.batcher.enabled()).then(|| state.batcher.arrival());
+    let answer = answer_format(&headers);
+    let given = match body.format {
+        Format::Json => json_request(&body, &model).await?,
+        Format::Binary => binary_request(&body, &model)?,
+    };
+    let (given, config, shape) = checked(given, &model, answer, &state.config.limits)?;
+    state
+        .metrics
+        .batch("score", &id, shape.rows * config.horizon);
+    let cancel = Cancel::default();
+    // Dropped with this future: on completion (harmless), timeout or hang-up.
+    let _cancel_if_abandoned = cancel.on_drop();
+    let work = ScoreWork {
+        finish: Box::new(answer_scores(id, shape, config.clone(), answer)),
+        starts: given.starts,
+        sequences: given.sequences,
+        per_start: given.per_start,
+        config,
+        seed: given.request.seed,
+        cancel,
+    };
+    if let Some(arrival) = arrival {
+        return state.batcher.run(arrival, model, Work::Score(work)).await;
+    }
+    state
+        .compute(move |cancel| {
+            let mut rng = ChaCha8Rng::seed_from_u64(work.seed);
+            let candidates = Candidates {
+                starts: &work.starts,
+                sequences: &work.sequences,
+                per_start: work.per_start,
+            };
+            let dynamics = model.batch_dynamics();
+            let scores = score_sequences(
+                dynamics,
+                &model.rules,
+                &candidates,
+                &work.config,
+                &mut rng,
+                cancel,
+            );
+            (work.finish)(scores)
+        })
+        .await
+}
+
+/// A request as read: its start states and candidates, flat, and the rest.
+struct Given {
+    starts: Vec<f32>,
+    sequences: Vec<f32>,
+    per_start: usize,
+    request: ScoreRequest,
+}
+
+/// The sizes an answer reports.
+#[derive(Debug, Clone, Copy)]
+struct Shape {
+    batch: usize,
+    candidates: usize,
+    /// batch × candidates × particles: the rollout's rows.
+    rows: usize,
+    clipped_rows: usize,
+}
+
+async fn json_request(body: &RawBody, model: &LoadedModel) -> Result<Given, ApiError> {
+    let mut request: ScoreRequest = body.json().await?;
+    let batch = request.states.len();
+    let starts = std::mem::take(&mut request.states).into_matrix("states", model.obs_dim())?;
+    let (sequences, per_start) = candidate_actions(&mut request, model, batch)?;
+    Ok(Given {
+        starts,
+        sequences,
+        per_start,
+        request,
+    })
+}
+
+/// The metadata a binary request may carry: the JSON fields but the tensors.
+const BINARY_OPTIONS: &[&str] = &[
+    "horizon",
+    "particles",
+    "discount",
+    "penalty",
+    "cvar_alpha",
+    "alpha",
+    "threshold",
+    "seed",
+    "noise_scale",
+    "clip",
+    "cost",
+];
+
+/// A safetensors request: `states`, and `actions` or `shared_actions`
+/// (their shape gives the horizon and the candidates), the rest as metadata.
+fn binary_request(body: &RawBody, model: &LoadedModel) -> Result<Given, ApiError> {
+    let (mut tensors, metadata) = body.tensors()?;
+    refuse_unknown_metadata(&metadata, BINARY_OPTIONS)?;
+    let obs_dim = model.obs_dim();
+    let (shape, starts) = tensors
+        .remove("states")
+        .ok_or_else(|| ApiError::Invalid("the safetensors body has no `states` tensor".into()))?;
+    if shape.len() != 2 || shape[1] != obs_dim {
+        return Err(ApiError::Invalid(format!(
+            "`states` has shape {shape:?}, this model expects [batch, {obs_dim}]"
+        )));
+    }
+    let batch = flat("states", &starts, obs_dim)?;
+    let (sequences, per_start, horizon) = binary_candidates(tensors, batch, model.act_dim())?;
+    let given_horizon: usize = metadata_option(&metadata, "horizon", horizon)?;
+    if given_horizon != horizon {
+        return Err(ApiError::Invalid(format!(
+            "metadata `horizon` is {given_horizon} but `actions` has {horizon} steps"
+        )));
+    }
+    Ok(Given {
+        starts,
+        sequences,
+        per_start,
+        request: binary_options(&metadata, horizon)?,
+    })
+}
+
+/// The candidates of a safetensors request, each start's (`actions`) or
+/// shared (`shared_actions`, repeated per start), flat; their count per
+/// start and their steps.
+fn binary_candidates(
+    mut tensors: NamedTensors,
+    batch: usize,
+    act_dim: usize,
+) -> Result<(Vec<f32>, usize, usize), ApiError> {
+    let (field, (shape, sequences)) =
+        match (tensors.remove("actions"), tensors.remove("shared_actions")) {
+            (Some(actions), None) => ("actions", actions),
+            (None, Some(shared)) => ("shared_actions", shared),
+            _ => {
+                return Err(ApiError::Invalid(
+                    "give an `actions` tensor (per start) or `shared_actions`, exactly one".into(),
+                ));
+            }
+        };
+    if let Some(name) = tensors.keys().next() {
+        return Err(ApiError::Invalid(format!(
+            "the safetensors body has a tensor `{name}`; a score takes `states` and `actions` or `shared_actions`"
+        )));
+    }
+    let (per_start, horizon) = match (field, shape.as_slice()) {
+        ("actions", &[b, n, h, a]) if b == batch && a == act_dim => (n, h),
+        ("shared_actions", &[n, h, a]) if a == act_dim => (n, h),
+        _ => {
+            let expected = match field {
+                "actions" => format!("[{batch}, candidates, horizon, {act_dim}]"),
+                _ => format!("[candidates, horizon, {act_dim}]"),
+            };
+            return Err(ApiError::Invalid(format!(
+                "`{field}` has shape {shape:?}, this model and these states expect {expected}"
+            )));
+        }
+    };
+    flat(field, &sequences, act_dim)?;
+    let sequences = match field {
+        "actions" => sequences,
+        _ => sequences.repeat(batch),
+    };
+    Ok((sequences, per_start, horizon))
+}
+
+/// A safetensors request's options, from its metadata (`cost` as its JSON).
+fn binary_options(
+    metadata: &HashMap<String, String>,
+    horizon: usize,
+) -> Result<ScoreRequest, ApiError> {
+    let optional = |key: &str| -> Result<Option<f64>, ApiError> {
+        (metadata.contains_key(key))
+            .then(|| metadata_option(metadata, key, 0.0))
+            .transpose()
+    };
+    let cost = match metadata.get("cost") {
+        None => None,
+        Some(text) => Some(serde_json::from_str(text).map_err(|e| {
+            ApiError::Invalid(format!("metadata `cost` is not a cost's JSON: {e}"))
+        })?),
+    };
+    Ok(ScoreRequest {
+        states: Rows::default(),
+        actions: None,
+        shared_actions: None,
+        horizon,
+        particles: metadata_option(metadata, "particles", 1)?,
+        discount: metadata_option(metadata, "discount", 1.0)?,
+        penalty: metadata_option(metadata, "penalty", 1.0)?,
+        cvar_alpha: optional("cvar_alpha")?,
+        alpha: optional("alpha")?,
+        threshold: optional("threshold")?.map(|t| t as f32),
+        seed: metadata_option(metadata, "seed", 0)?,
+        noise_scale: optional("noise_scale")?.map(|n| n as f32),
+        clip: metadata_option(metadata, "clip", true)?,
+        cost,
+    })
+}
+
+/// The request's settings checked against the model and the server's limits
+/// as the library's scoring; its actions clipped into the action box.
+fn checked(
+    mut given: Given,
+    model: &LoadedModel,
+    answer: Format,
+    limits: &Limits,
+) -> Result<(Given, ScoreConfig, Shape), ApiError> {
+    let r = &given.request;
+    let batch = given.starts.len() / model.obs_dim();
     within("batch (rows of states)", batch, limits.max_batch)?;
     within("horizon", r.horizon, limits.max_horizon)?;
     within("particles", r.particles, limits.max_particles)?;
-    let starts = std::mem::take(&mut r.states).into_matrix("states", model.obs_dim())?;
-    let (mut sequences, candidates) = candidate_actions(&mut r, &model, batch)?;
-    within("candidates", candidates, limits.max_batch)?;
-    let clipped_rows = clip_actions("actions", &mut sequences, &model.action_space, r.clip)?;
-    let rows = batch * candidates * r.particles;
+    within("candidates", given.per_start, limits.max_batch)?;
+    let clipped_rows = clip_actions("actions", &mut given.sequences, &model.action_space, r.clip)?;
+    let rows = batch * given.per_start * r.particles;
     within(
         "batch × candidates × particles × horizon",
         rows * r.horizon,
         limits.max_rollout_steps,
     )?;
-    // The rollout behind the scores holds every step of every particle.
+    // The rollout holds each row's state and running sums, not its trajectory.
     answer_within(
-        "batch × candidates × particles × ((horizon + 1)·obs_dim + horizon·(act_dim + 4))",
-        rows * ((r.horizon + 1) * model.obs_dim() + r.horizon * (model.act_dim() + 4)),
+        "batch × candidates × particles × (obs_dim + 8)",
+        rows * (model.obs_dim() + 8),
         Format::Binary,
+        limits.max_answer_bytes,
+    )?;
+    answer_within(
+        "batch × candidates × 8",
+        batch * given.per_start * 8,
+        answer,
         limits.max_answer_bytes,
     )?;
     let config = ScoringFields {
@@ -158,43 +384,44 @@ pub async fn score(
         noise_scale: r.noise_scale,
         cost: r.cost.as_ref(),
     }
-    .config(&model)?;
-    let noise_scale = config.noise_scale;
-    state.metrics.batch("score", &id, rows * r.horizon);
-    let worker = model.clone();
-    state
-        .compute(move |cancel| {
-            let mut rng = ChaCha8Rng::seed_from_u64(r.seed);
-            let given = Candidates {
-                starts: &starts,
-                sequences: &sequences,
-                per_start: candidates,
-            };
-            let scores = score_sequences(
-                worker.batch_dynamics(),
-                &worker.rules,
-                &given,
-                &config,
-                &mut rng,
-                cancel,
-            )?;
-            if answer == Format::Binary {
-                let tensors = binary_scores(&scores, [batch, candidates]);
-                return tensors_response(&tensors, noise_scale, clipped_rows);
-            }
-            json_response(&ScoreResponse {
-                model: id,
-                batch,
-                candidates,
-                horizon: config.horizon,
-                particles: config.particles,
-                threshold: config.threshold,
-                noise_scale,
-                clipped_rows,
-                scores: scores.chunks(candidates).map(<[_]>::to_vec).collect(),
-            })
+    .config(model)?;
+    let shape = Shape {
+        batch,
+        candidates: given.per_start,
+        rows,
+        clipped_rows,
+    };
+    Ok((given, config, shape))
+}
+
+/// How a request's scores become its answer (run in the compute work: a
+/// large population's JSON takes milliseconds).
+fn answer_scores(
+    id: String,
+    shape: Shape,
+    config: ScoreConfig,
+    answer: Format,
+) -> impl FnOnce(Result<Vec<CandidateScore>, PlanningError>) -> Result<Response, ApiError> + Send + 'static
+{
+    move |scores| {
+        let scores = scores?;
+        let (noise_scale, clipped_rows) = (config.noise_scale, shape.clipped_rows);
+        if answer == Format::Binary {
+            let tensors = binary_scores(&scores, [shape.batch, shape.candidates]);
+            return tensors_response(&tensors, noise_scale, clipped_rows);
+        }
+        json_response(&ScoreResponse {
+            model: id,
+            batch: shape.batch,
+            candidates: shape.candidates,
+            horizon: config.horizon,
+            particles: config.particles,
+            threshold: config.threshold,
+            noise_scale,
+            clipped_rows,
+            scores: scores.chunks(shape.candidates).map(<[_]>::to_vec).collect(),
         })
-        .await
+    }
 }
 
 /// The candidates, flat `[batch, candidates, horizon, act_dim]`, and their

@@ -2,8 +2,6 @@
 //! (state, action) pairs, `particles` samples each. JSON, or safetensors bytes
 //! both ways (`application/octet-stream`).
 
-use std::collections::HashMap;
-
 use axum::extract::{Path, State};
 use axum::response::Response;
 use rand::SeedableRng;
@@ -14,7 +12,11 @@ use utoipa::ToSchema;
 use super::fields::{integer, one, unit, yes};
 use crate::agent::{ParticleConfig, ParticleStep, particle_terms, sample_particles};
 use crate::artifact::NamedTensors;
-use crate::server::body::{Format, RawBody, TensorBytes, json_response, tensors_response};
+use crate::server::batcher::{StepWork, Work};
+use crate::server::body::{
+    Format, RawBody, TensorBytes, json_response, metadata_option, refuse_unknown_metadata,
+    tensors_response,
+};
 use crate::server::rows::{Rows, split_rows as rows};
 use crate::server::validate::{answer_within, clip_actions, flat, non_negative, within};
 use crate::server::{ApiError, AppState};
@@ -111,7 +113,7 @@ pub async fn step(
 ) -> Result<Response, ApiError> {
     let model = state.model(&id)?;
     // Said before the body is parsed, so a batch waits for this request.
-    let arrival = (state.step_batcher.enabled()).then(|| state.step_batcher.arrival());
+    let arrival = (state.batcher.enabled()).then(|| state.batcher.arrival());
     let (obs_dim, act_dim) = (model.obs_dim(), model.act_dim());
     let (observations, mut actions, request) = match body.format {
         Format::Json => {
@@ -167,10 +169,12 @@ pub async fn step(
         }
     };
     if let Some(arrival) = arrival {
-        let items = (observations, actions);
-        return (state.step_batcher)
-            .run(arrival, model, items, Box::new(finish))
-            .await;
+        let work = Work::Step(StepWork {
+            observations,
+            actions,
+            finish: Box::new(finish),
+        });
+        return state.batcher.run(arrival, model, work).await;
     }
     state
         .compute(move |_| {
@@ -186,6 +190,10 @@ fn binary_request(
     act_dim: usize,
 ) -> Result<(Vec<f32>, Vec<f32>, StepRequest), ApiError> {
     let (mut tensors, metadata) = body.tensors()?;
+    refuse_unknown_metadata(
+        &metadata,
+        &["particles", "seed", "penalty", "noise_scale", "clip"],
+    )?;
     let mut take = |name: &str, width: usize| -> Result<Vec<f32>, ApiError> {
         let (shape, values) = tensors.remove(name).ok_or_else(|| {
             ApiError::Invalid(format!("the safetensors body has no `{name}` tensor"))
@@ -203,30 +211,16 @@ fn binary_request(
     let request = StepRequest {
         states: Rows::default(),
         actions: Rows::default(),
-        particles: option(&metadata, "particles", 1)?,
-        seed: option(&metadata, "seed", 0)?,
-        penalty: option(&metadata, "penalty", 1.0)?,
+        particles: metadata_option(&metadata, "particles", 1)?,
+        seed: metadata_option(&metadata, "seed", 0)?,
+        penalty: metadata_option(&metadata, "penalty", 1.0)?,
         noise_scale: metadata
             .contains_key("noise_scale")
-            .then(|| option(&metadata, "noise_scale", 1.0))
+            .then(|| metadata_option(&metadata, "noise_scale", 1.0))
             .transpose()?,
-        clip: option(&metadata, "clip", true)?,
+        clip: metadata_option(&metadata, "clip", true)?,
     };
     Ok((states, actions, request))
-}
-
-/// A safetensors metadata option, or its default.
-fn option<T: std::str::FromStr>(
-    metadata: &HashMap<String, String>,
-    key: &str,
-    default: T,
-) -> Result<T, ApiError> {
-    match metadata.get(key) {
-        None => Ok(default),
-        Some(text) => text.parse().map_err(|_| {
-            ApiError::Invalid(format!("metadata `{key}` = `{text}` is not a valid value"))
-        }),
-    }
 }
 
 fn step_response(
