@@ -1,7 +1,7 @@
 //! An online SAC run on disk, growing one checkpoint interval at a time:
 //!
 //! ```text
-//! run.json                                      what the run is (config, task)
+//! run.json                                      what the run is (config, task or system file)
 //! transitions/steps-00000000-00010000.safetensors every step of one interval, as D4RL records it
 //! policies/step-00010000.{safetensors,json}     the actor at each checkpoint, with its evaluation
 //! checkpoints/LATEST, checkpoints/step-00010000/ networks, Adam, generator, counters, history
@@ -28,7 +28,7 @@ use super::tensors::NamedTensors;
 use super::{ArtifactError, sha256_hex};
 use crate::agent::{OnlineRecord, OnlineSac, OnlineSacConfig};
 use crate::data::{Dataset, DatasetMetadata, Recording};
-use crate::envs::TaskConfig;
+use crate::envs::{System, TaskConfig};
 
 pub const ONLINE_RUN_SCHEMA_VERSION: u32 = 1;
 const RUN: &str = "run.json";
@@ -42,7 +42,29 @@ const STATE: &str = "state.json";
 pub struct OnlineRunInfo {
     pub schema_version: u32,
     pub config: OnlineSacConfig,
-    pub task: TaskConfig,
+    /// The built-in task it trains in; none for a system file's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub task: Option<TaskConfig>,
+    /// The system file's text (its MJCF inlined), for a run in a file's
+    /// `[mujoco]` table: a resumed run checks it, and its policies evaluate
+    /// with it where the file is not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub system: Option<String>,
+}
+
+impl OnlineRunInfo {
+    /// The system the run in `dir` trains in.
+    pub fn system(&self, dir: &Path) -> Result<System, ArtifactError> {
+        let path = dir.join(RUN);
+        System::recorded(self.task.clone(), self.system.as_deref(), &path)
+            .map_err(|e| ArtifactError::Invalid(e.to_string()))?
+            .ok_or_else(|| {
+                ArtifactError::Invalid(format!(
+                    "{}: names neither a task nor a system",
+                    path.display()
+                ))
+            })
+    }
 }
 
 /// One recorded interval: steps `from..to` in `file`.
@@ -83,9 +105,11 @@ pub fn read_online_run(dir: &Path) -> Result<OnlineRunInfo, ArtifactError> {
     read_versioned_json(&dir.join(RUN), ONLINE_RUN_SCHEMA_VERSION)
 }
 
-/// Starts a run in `dir`, or checks that the run already there is `run`'s
-/// (the same knobs; a resumed run may take more steps).
-pub fn start_online_run(dir: &Path, run: &OnlineSac) -> Result<(), ArtifactError> {
+/// Starts a run of `run` in `system` (a built-in task, or a system file
+/// whose `[mujoco]` table `run` simulates) in `dir`, or checks that the run
+/// already there is this one (the same knobs and system; a resumed run may
+/// take more steps).
+pub fn start_online_run(dir: &Path, run: &OnlineSac, system: &System) -> Result<(), ArtifactError> {
     let path = dir.join(RUN);
     if path.exists() {
         let saved = read_online_run(dir)?;
@@ -93,7 +117,7 @@ pub fn start_online_run(dir: &Path, run: &OnlineSac) -> Result<(), ArtifactError
             steps: run.config.steps,
             ..saved.config.clone()
         };
-        if comparable != run.config || saved.task != run.task {
+        if comparable != run.config || saved.system(dir)? != *system {
             return Err(ArtifactError::Invalid(format!(
                 "{}: the run there was started with other settings; resume it with the same flags or choose another directory",
                 path.display()
@@ -106,14 +130,19 @@ pub fn start_online_run(dir: &Path, run: &OnlineSac) -> Result<(), ArtifactError
         &OnlineRunInfo {
             schema_version: ONLINE_RUN_SCHEMA_VERSION,
             config: run.config.clone(),
-            task: run.task.clone(),
+            task: system.task(),
+            system: system.file_text(),
         },
     )
 }
 
-/// Saves the interval `run` just finished: its transitions, its policy, then
-/// the checkpoint naming them.
-pub fn save_online_checkpoint(dir: &Path, run: &OnlineSac) -> Result<PathBuf, ArtifactError> {
+/// Saves the interval `run` (in `system`, as started) just finished: its
+/// transitions, its policy, then the checkpoint naming them.
+pub fn save_online_checkpoint(
+    dir: &Path,
+    run: &OnlineSac,
+    system: &System,
+) -> Result<PathBuf, ArtifactError> {
     let mut intervals = match latest_checkpoint(&dir.join(CHECKPOINTS))? {
         Some(checkpoint) => read_state(&checkpoint)?.intervals,
         None => Vec::new(),
@@ -143,7 +172,7 @@ pub fn save_online_checkpoint(dir: &Path, run: &OnlineSac) -> Result<PathBuf, Ar
         &dir.join(POLICIES),
         &policy_stem(to),
         &run.sac.actor,
-        &crate::envs::System::Task(run.task.clone()),
+        system,
         PolicyProvenance {
             step: to,
             normalized_score: record.map(|r| r.eval.normalized_score),
@@ -213,17 +242,23 @@ pub fn read_run_transitions(dir: &Path, to: usize) -> Result<Dataset, ArtifactEr
             dir.display()
         )));
     };
-    let probe = crate::envs::MujocoTask::new(&info.task)
-        .map_err(|e| ArtifactError::Invalid(e.to_string()))?;
+    let task = info.system(dir)?.simulator().ok_or_else(|| {
+        ArtifactError::Invalid(format!(
+            "{}: the run's system has no simulator",
+            dir.display()
+        ))
+    })?;
+    let probe =
+        crate::envs::MujocoTask::new(&task).map_err(|e| ArtifactError::Invalid(e.to_string()))?;
     let mut all = Recording::for_task(&probe);
     for interval in &state.intervals[..=last] {
         all.append(read_interval(dir, interval, &all)?);
     }
     let mut metadata = DatasetMetadata::new();
-    metadata.insert("task".into(), info.task.task.to_string());
+    metadata.insert("task".into(), task.task.to_string());
     metadata.insert(
         "observation_layout".into(),
-        format!("{:?}", info.task.layout).to_lowercase(),
+        format!("{:?}", task.layout).to_lowercase(),
     );
     all.into_dataset(metadata, dir)
         .map_err(|e| ArtifactError::Invalid(e.to_string()))

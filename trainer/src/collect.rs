@@ -9,20 +9,22 @@ use clap::Subcommand;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{OnlineRecord, OnlineSac, OnlineSacConfig, SacConfig};
 use nuno::artifact::{
-    load_online_checkpoint, run_policies, save_behaviour, save_online_checkpoint, start_online_run,
+    load_online_checkpoint, read_online_run, run_policies, save_behaviour, save_online_checkpoint,
+    start_online_run,
 };
 use nuno::data::{BehaviourLevel, LEVEL_TOLERANCE, select_behaviour};
 use nuno::envs::TaskName;
 use nuno::sde::ComputeDevice;
 use nuno::shared::{Metric, MetricsTable};
 
-use crate::data_source::task_config;
+use crate::data_source::{simulation_of, system_of};
 use crate::output::{with_sac_losses, write_text};
 use crate::plot::{Series, line_chart};
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Train SAC online in a MuJoCo task, saving the policy at every checkpoint.
+    /// Train SAC online in a MuJoCo task (built in, or a system file's
+    /// `[mujoco]` table), saving the policy at every checkpoint.
     OnlineSac(OnlineArgs),
     /// Pick a run's checkpoints for each behaviour level and write them to a
     /// behaviour directory (`models/behaviour`), with their evaluations.
@@ -36,8 +38,12 @@ fn online_defaults() -> OnlineSacConfig {
 
 #[derive(Debug, clap::Args)]
 pub struct OnlineArgs {
+    /// A built-in task.
+    #[arg(long, required_unless_present = "system", conflicts_with = "system")]
+    task: Option<TaskName>,
+    /// A system file with a `[mujoco]` table, to train in its simulator.
     #[arg(long)]
-    task: TaskName,
+    system: Option<PathBuf>,
     /// Environment steps in all (a resumed run may be given more).
     #[arg(long, default_value_t = online_defaults().steps)]
     steps: usize,
@@ -98,7 +104,8 @@ fn online_sac(args: OnlineArgs) -> anyhow::Result<()> {
         !args.hidden.is_empty() && args.hidden.iter().all(|&h| h > 0),
         "--hidden needs positive layer sizes"
     );
-    let task = task_config(args.task, args.neorl);
+    let system = system_of(args.task, args.system.as_deref(), args.neorl)?;
+    let task = simulation_of(&system)?;
     let sac = SacConfig::new()
         .with_batch_size(args.batch_size)
         .with_actor_hidden(args.hidden.clone())
@@ -117,7 +124,7 @@ fn online_sac(args: OnlineArgs) -> anyhow::Result<()> {
         "{} already holds a run; pass --resume to continue it or choose another --out",
         args.out.display()
     );
-    start_online_run(&args.out, &run)?;
+    start_online_run(&args.out, &run, &system)?;
     if args.resume && load_online_checkpoint(&args.out, &mut run)? {
         println!("resumed at step {}", run.step);
     }
@@ -128,7 +135,7 @@ fn online_sac(args: OnlineArgs) -> anyhow::Result<()> {
     bar.set_position(run.step as u64);
     while !run.is_finished() {
         let record = run.run_interval()?;
-        save_online_checkpoint(&args.out, &run)?;
+        save_online_checkpoint(&args.out, &run, &system)?;
         write_metrics(&args.out, &run.history)?;
         bar.set_position(run.step as u64);
         bar.set_message(format!(
@@ -159,6 +166,16 @@ fn select(args: SelectArgs) -> anyhow::Result<()> {
         args.tolerance > 0.0 && args.tolerance.is_finite(),
         "--tolerance must be a positive fraction, got {}",
         args.tolerance
+    );
+    let info = read_online_run(&args.run)
+        .with_context(|| format!("reading the run in {}", args.run.display()))?;
+    // Checked before any level: the recipes' levels are the built-in tasks'.
+    anyhow::ensure!(
+        info.task.is_some(),
+        "behaviour policies are picked for the built-in tasks, not for `{}` (D4RL's and NeoRL's \
+         recipes are theirs); the run's policies are in {}",
+        info.system(&args.run)?.name(),
+        args.run.join("policies").display()
     );
     let policies = run_policies(&args.run)
         .with_context(|| format!("reading the run in {}", args.run.display()))?;

@@ -396,7 +396,7 @@ fn medium_replay(run: &Path, medium: &Behaviour, accept_rerun: bool) -> anyhow::
             } == info.config
         });
     anyhow::ensure!(
-        same_run && Some(info.task) == medium.metadata.task,
+        same_run && info.task.is_some() && info.task == medium.metadata.task,
         "{} is not the run the medium policy came from ({})",
         run.display(),
         medium.entry.run

@@ -153,3 +153,86 @@ fn the_cartpole_generates_fits_trains_and_evaluates_in_its_simulator() {
     let message = fails(&["evaluate", "--policy", &path(&policies), "--episodes", "2"]);
     assert!(message.contains("give the file (--system)"), "{message}");
 }
+
+/// `collect online-sac --system`: SAC trains online in the file's simulator,
+/// its run records the system file (MJCF inlined, no built-in task), its
+/// checkpoint policies name the system, a resumed run checks it is the same
+/// file, and `collect select` (D4RL's recipes are the built-in tasks') says why
+/// it will not pick levels.
+#[test]
+fn online_sac_trains_in_a_system_files_simulator_and_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = |p: &Path| p.display().to_string();
+    let run = tmp.path().join("online");
+    let online = |system: &Path, steps: &str, extra: &[&str]| {
+        let mut args = vec![
+            "collect".to_string(),
+            "online-sac".into(),
+            "--system".into(),
+            path(system),
+            "--steps".into(),
+            steps.into(),
+            "--checkpoint-every".into(),
+            "100".into(),
+            "--start-steps".into(),
+            "50".into(),
+            "--eval-episodes".into(),
+            "1".into(),
+            "--batch-size".into(),
+            "16".into(),
+            "--hidden".into(),
+            "16,16".into(),
+            "--out".into(),
+            path(&run),
+        ];
+        args.extend(extra.iter().map(|s| s.to_string()));
+        args
+    };
+    let args = online(&system(), "200", &[]);
+    ok(&args);
+    let info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("run.json")).unwrap()).unwrap();
+    assert!(info.get("task").is_none(), "{info}");
+    let recorded = info["system"].as_str().unwrap();
+    assert!(
+        recorded.contains("model_xml") && recorded.contains("<mujoco"),
+        "the MJCF is inlined: {recorded}"
+    );
+    let policy: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(run.join("policies/step-00000200.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(policy["system"], "cartpole", "{policy}");
+    assert!(policy.get("task").is_none(), "{policy}");
+
+    let args = online(&system(), "300", &["--resume"]);
+    let resumed = ok(&args);
+    assert!(resumed.contains("resumed at step 200"), "{resumed}");
+    assert!(run.join("policies/step-00000300.json").is_file());
+
+    // The same run with another system file: refused, nothing overwritten.
+    let other = tmp.path().join("system.toml");
+    let text = std::fs::read_to_string(system()).unwrap();
+    std::fs::write(
+        &other,
+        text.replace(
+            "cartpole.xml",
+            &path(&system().with_file_name("cartpole.xml")),
+        )
+        .replace("name = \"cartpole\"", "name = \"cartpole-2\""),
+    )
+    .unwrap();
+    let args = online(&other, "400", &["--resume"]);
+    let err = fails(&args);
+    assert!(err.contains("started with other settings"), "{err}");
+
+    let err = fails(&[
+        "collect".to_string(),
+        "select".into(),
+        "--run".into(),
+        path(&run),
+        "--out".into(),
+        path(&tmp.path().join("behaviour")),
+    ]);
+    assert!(err.contains("built-in tasks, not for `cartpole`"), "{err}");
+}
