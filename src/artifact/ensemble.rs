@@ -97,13 +97,17 @@ pub fn save_ensemble(
     Ok(metadata)
 }
 
+/// `ensemble.json` in `dir`, without its weights.
+pub fn read_ensemble_metadata(dir: &Path) -> Result<EnsembleMetadata, ArtifactError> {
+    read_versioned_json(&dir.join(ENSEMBLE_METADATA), ENSEMBLE_SCHEMA_VERSION)
+}
+
 /// Loads the ensemble in `dir`, validated, as an [`EnsembleFit`] (without its history).
 pub fn load_ensemble(
     dir: &Path,
     device: &Device,
 ) -> Result<(EnsembleFit, EnsembleMetadata), ArtifactError> {
-    let metadata: EnsembleMetadata =
-        read_versioned_json(&dir.join(ENSEMBLE_METADATA), ENSEMBLE_SCHEMA_VERSION)?;
+    let metadata = read_ensemble_metadata(dir)?;
     let m = &metadata;
     let d_in = m.obs_dim + m.act_dim;
     let members = m.config.members;

@@ -8,13 +8,23 @@ use std::path::Path;
 use burn::tensor::Device;
 
 use super::ArtifactError;
-use super::dynamics::{DYNAMICS_METADATA, DynamicsMetadata, load_dynamics};
-use super::ensemble::{ENSEMBLE_METADATA, EnsembleMetadata, load_ensemble};
+use super::dynamics::{DYNAMICS_METADATA, DynamicsMetadata, load_dynamics, read_dynamics_metadata};
+use super::ensemble::{ENSEMBLE_METADATA, EnsembleMetadata, load_ensemble, read_ensemble_metadata};
 use crate::ensemble::{EnsembleDynamics, EnsembleUncertainty};
 use crate::envs::{Rules, System};
 use crate::infer::Kernel;
 use crate::sde::{FusedSde, NeuralSde, ThresholdTable};
 use crate::shared::BatchDynamics;
+
+/// The system a model's metadata `record` names: its file's text, else its task.
+fn recorded(
+    task: Option<crate::envs::TaskConfig>,
+    file: Option<&str>,
+    record: &str,
+) -> Result<Option<System>, ArtifactError> {
+    System::recorded(task, file, Path::new(record))
+        .map_err(|e| ArtifactError::Invalid(e.to_string()))
+}
 
 /// A model folder's dynamics, by kind.
 pub enum ModelFolder {
@@ -59,20 +69,37 @@ impl ModelFolder {
     /// The system the folder was fitted on, where its metadata records one:
     /// a system file's text (checked again here) or a built-in task.
     pub fn system(&self) -> Result<Option<System>, ArtifactError> {
-        let (task, file, record) = match self {
-            Self::NeuralSde { metadata, .. } => (
+        match self {
+            Self::NeuralSde { metadata, .. } => recorded(
                 metadata.provenance.task.clone(),
                 metadata.provenance.system.as_deref(),
                 DYNAMICS_METADATA,
             ),
-            Self::GaussianEnsemble { metadata, .. } => (
+            Self::GaussianEnsemble { metadata, .. } => recorded(
                 metadata.task.clone(),
                 metadata.system.as_deref(),
                 ENSEMBLE_METADATA,
             ),
-        };
-        System::recorded(task, file, Path::new(record))
-            .map_err(|e| ArtifactError::Invalid(e.to_string()))
+        }
+    }
+
+    /// [`system`](Self::system) of the folder in `dir`, from its metadata
+    /// alone (no weights read): what a policy saved there acts in.
+    pub fn recorded_system(dir: &Path) -> Result<Option<System>, ArtifactError> {
+        if dir.join(DYNAMICS_METADATA).is_file() {
+            let metadata = read_dynamics_metadata(dir)?;
+            let provenance = metadata.provenance;
+            return recorded(
+                provenance.task,
+                provenance.system.as_deref(),
+                DYNAMICS_METADATA,
+            );
+        }
+        if dir.join(ENSEMBLE_METADATA).is_file() {
+            let metadata = read_ensemble_metadata(dir)?;
+            return recorded(metadata.task, metadata.system.as_deref(), ENSEMBLE_METADATA);
+        }
+        Err(ArtifactError::NotAModel(dir.to_path_buf()))
     }
 
     /// `system`'s reward and termination rules on this model's state; refused

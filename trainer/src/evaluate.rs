@@ -8,6 +8,7 @@ use anyhow::Context;
 use nuno::agent::{ActionMode, ActorPolicy, RandomPolicy};
 use nuno::artifact::{
     ArtifactError, BEST_POLICY, ModelFolder, PolicyMetadata, has_policy, load_policy,
+    read_online_run,
 };
 use nuno::envs::{
     EvaluationConfig, EvaluationReport, MujocoTask, System, TaskConfig, TaskName, evaluate,
@@ -293,11 +294,20 @@ fn policy_task(dir: &Path, metadata: &PolicyMetadata) -> anyhow::Result<TaskConf
     if recorded.is_ok() {
         return Ok(recorded?);
     }
-    let folder = match ModelFolder::load(dir, &burn::tensor::Device::flex()) {
-        Err(ArtifactError::NotAModel(_)) => return Ok(recorded?),
-        folder => folder?,
+    // A system file's policy: the file the model folder or online run it
+    // sits in recorded (their metadata alone, no weights).
+    let system = match ModelFolder::recorded_system(dir) {
+        Err(ArtifactError::NotAModel(_)) => online_run_system(dir)?,
+        system => system?,
     };
-    let system = folder.system()?;
     let simulator = system.as_ref().and_then(System::simulator);
     simulator.with_context(|| format!("{}: {}", dir.display(), recorded.unwrap_err()))
+}
+
+/// The system of the online run whose `policies/` folder is `dir`, if it is one.
+fn online_run_system(dir: &Path) -> anyhow::Result<Option<System>> {
+    let Some(run) = dir.parent().filter(|run| run.join("run.json").is_file()) else {
+        return Ok(None);
+    };
+    Ok(Some(read_online_run(run)?.system(run)?))
 }

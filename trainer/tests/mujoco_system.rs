@@ -156,8 +156,8 @@ fn the_cartpole_generates_fits_trains_and_evaluates_in_its_simulator() {
 
 /// `collect online-sac --system`: SAC trains online in the file's simulator,
 /// its run records the system file (MJCF inlined, no built-in task), its
-/// checkpoint policies name the system, a resumed run checks it is the same
-/// file, and `collect select` (D4RL's recipes are the built-in tasks') says why
+/// checkpoint policies name the system and evaluate in the run's copy of it,
+/// a resumed run checks it is the same file, and `collect select` (D4RL's recipes are the built-in tasks') says why
 /// it will not pick levels.
 #[test]
 fn online_sac_trains_in_a_system_files_simulator_and_resumes() {
@@ -209,6 +209,24 @@ fn online_sac_trains_in_a_system_files_simulator_and_resumes() {
     let resumed = ok(&args);
     assert!(resumed.contains("resumed at step 200"), "{resumed}");
     assert!(run.join("policies/step-00000300.json").is_file());
+    // A checkpoint's policy evaluates in the system its run recorded.
+    let policies = path(&run.join("policies"));
+    let report = ok(&[
+        "evaluate",
+        "--policy",
+        &policies,
+        "--policy-name",
+        "step-00000300",
+        "--episodes",
+        "1",
+        "--json",
+    ]);
+    let report: serde_json::Value = serde_json::from_str(&report).unwrap();
+    assert_eq!(
+        report["returns"].as_array().map(Vec::len),
+        Some(1),
+        "{report}"
+    );
 
     // The same run with another system file: refused, nothing overwritten.
     let other = tmp.path().join("system.toml");
