@@ -27,8 +27,8 @@ pub use fused_actor::FusedActor;
 pub use fused_sac::{FusedGradients, FusedSac};
 pub use method::{Method, Truncation};
 pub use model_rollout::{
-    ModelRollout, RolloutActions, RolloutConfig, RolloutStats, RolloutTrace, StepOutcome,
-    rollout_model, rollout_model_or_cancel,
+    JudgedRow, ModelRollout, RolloutActions, RolloutConfig, RolloutStats, RolloutTrace,
+    StepOutcome, judge_row, rollout_model, rollout_model_or_cancel,
 };
 pub use model_step::{
     ParticleConfig, ParticleStep, particle_terms, penalized_reward, sample_particles,

@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use super::model_step::penalized_reward;
 use crate::envs::Rules;
 use crate::shared::cancel::{Cancel, Cancelled};
-use crate::shared::{BatchDynamics, BatchPolicy, TransitionBatch, scaled_noise};
+use crate::shared::{BatchDynamics, BatchPolicy, ModelStep, TransitionBatch, scaled_noise};
 
 /// How model rollouts run.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -130,8 +130,6 @@ pub fn rollout_model_or_cancel(
     cancel: &Cancel,
 ) -> Result<ModelRollout, Cancelled> {
     let (obs_dim, act_dim) = (dynamics.obs_dim(), dynamics.act_dim());
-    let state_dim = dynamics.state_dim();
-    let learned_reward = dynamics.learns_reward();
     let rows = starts.len() / obs_dim * config.particles;
     let mut observations: Vec<f32> = starts
         .chunks_exact(obs_dim)
@@ -186,53 +184,44 @@ pub fn rollout_model_or_cancel(
 
         let mut still_active = Vec::with_capacity(active.len());
         for (i, &r) in active.iter().enumerate() {
-            let next_state = &step.next_states[i * state_dim..(i + 1) * state_dim];
-            let next_obs = &next_state[..obs_dim];
+            let from = &obs[i * obs_dim..(i + 1) * obs_dim];
             let action = &actions[i * act_dim..(i + 1) * act_dim];
-            let reward = if learned_reward {
-                next_state[obs_dim]
-            } else {
-                rules.reward(&obs[i * obs_dim..(i + 1) * obs_dim], action, next_obs)
-            };
-            let eta = step.eta[i];
-            let signal = step.truncation_at(i);
-            if !(eta.is_finite()
-                && signal.is_finite()
-                && reward.is_finite()
-                && next_state.iter().all(|x| x.is_finite()))
-            {
-                trace.actions[r].extend_from_slice(action);
-                trace.outcome[r] = StepOutcome::Diverged;
-                continue;
-            }
-            // TATU+MOPO accumulates the ensemble's disagreement, the others η.
-            accumulated[r] += signal;
+            let threshold = config.threshold;
+            let row = judge_row(
+                dynamics,
+                rules,
+                &step,
+                i,
+                (from, action),
+                &mut accumulated[r],
+                threshold,
+            );
             trace.actions[r].extend_from_slice(action);
-            trace.eta[r].push(eta);
-            trace.accumulated_eta[r].push(accumulated[r]);
-            trace.rewards[r].push(reward);
-            // Truncation: Σ_k η(s_k, a_k) > ε(h, α) drops this step and ends the rollout.
-            if config.threshold.is_some_and(|e| accumulated[r] > e) {
-                trace.outcome[r] = StepOutcome::Truncated;
+            trace.outcome[r] = row.fate;
+            if row.fate == StepOutcome::Diverged {
                 continue;
             }
-            let terminal = rules.terminal(next_obs);
-            transitions
-                .observations
-                .extend_from_slice(&obs[i * obs_dim..(i + 1) * obs_dim]);
+            trace.eta[r].push(row.eta);
+            trace.accumulated_eta[r].push(accumulated[r]);
+            trace.rewards[r].push(row.reward);
+            if row.fate == StepOutcome::Truncated {
+                continue;
+            }
+            let terminal = row.fate == StepOutcome::Terminal;
+            transitions.observations.extend_from_slice(from);
             transitions.actions.extend_from_slice(action);
             // Penalised reward r − λ_pen·η(s, a).
             transitions
                 .rewards
-                .push(penalized_reward(reward, config.penalty, eta));
-            transitions.next_observations.extend_from_slice(next_obs);
+                .push(penalized_reward(row.reward, config.penalty, row.eta));
+            transitions
+                .next_observations
+                .extend_from_slice(row.next_obs);
             transitions.terminals.push(if terminal { 1.0 } else { 0.0 });
             trace.kept[r] += 1;
-            trace.observations[r].extend_from_slice(next_obs);
-            observations[r * obs_dim..(r + 1) * obs_dim].copy_from_slice(next_obs);
-            if terminal {
-                trace.outcome[r] = StepOutcome::Terminal;
-            } else {
+            trace.observations[r].extend_from_slice(row.next_obs);
+            observations[r * obs_dim..(r + 1) * obs_dim].copy_from_slice(row.next_obs);
+            if !terminal {
                 still_active.push(r);
             }
         }
@@ -245,6 +234,67 @@ pub fn rollout_model_or_cancel(
         trace,
         stats,
     })
+}
+
+/// One row of a model step as NUNO's rollouts take it (Section 4.3).
+#[derive(Debug, Clone, Copy)]
+pub struct JudgedRow<'a> {
+    pub next_obs: &'a [f32],
+    /// The model's own reward (NUNO^R), else the rules'.
+    pub reward: f32,
+    pub eta: f32,
+    /// `Continued` or `Terminal` keep the step; `Truncated` (the accumulated
+    /// signal passed ε(h, α)) and `Diverged` (a non-finite next state, reward,
+    /// η or signal: the drift left the data) drop it and end the row.
+    pub fate: StepOutcome,
+}
+
+/// Row `i` of `step`, taken from `(observation, action)`: its reward, η and
+/// fate, its truncation signal added to `accumulated` unless it diverged. The
+/// one rule for every model rollout (the policy loop's, the server's, the
+/// planners' scores).
+pub fn judge_row<'a>(
+    dynamics: &dyn BatchDynamics,
+    rules: &Rules,
+    step: &'a ModelStep,
+    i: usize,
+    (observation, action): (&[f32], &[f32]),
+    accumulated: &mut f32,
+    threshold: Option<f32>,
+) -> JudgedRow<'a> {
+    let (obs_dim, state_dim) = (dynamics.obs_dim(), dynamics.state_dim());
+    let next_state = &step.next_states[i * state_dim..(i + 1) * state_dim];
+    let next_obs = &next_state[..obs_dim];
+    let reward = if dynamics.learns_reward() {
+        next_state[obs_dim]
+    } else {
+        rules.reward(observation, action, next_obs)
+    };
+    let (eta, signal) = (step.eta[i], step.truncation_at(i));
+    let finite = eta.is_finite()
+        && signal.is_finite()
+        && reward.is_finite()
+        && next_state.iter().all(|x| x.is_finite());
+    let fate = if !finite {
+        StepOutcome::Diverged
+    } else {
+        // TATU+MOPO accumulates the ensemble's disagreement, the others η.
+        *accumulated += signal;
+        // Truncation: Σ_k η(s_k, a_k) > ε(h, α) drops this step and ends the rollout.
+        if threshold.is_some_and(|e| *accumulated > e) {
+            StepOutcome::Truncated
+        } else if rules.terminal(next_obs) {
+            StepOutcome::Terminal
+        } else {
+            StepOutcome::Continued
+        }
+    };
+    JudgedRow {
+        next_obs,
+        reward,
+        eta,
+        fate,
+    }
 }
 
 fn summarize(trace: &RolloutTrace, transitions: &TransitionBatch) -> RolloutStats {

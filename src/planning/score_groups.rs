@@ -12,7 +12,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::PlanningError;
 use super::score::{CandidateScore, Candidates, ScoreConfig, check, score_particles};
-use crate::agent::StepOutcome;
+use crate::agent::{StepOutcome, judge_row};
 use crate::envs::Rules;
 use crate::shared::{BatchDynamics, Cancel, Cancelled, scaled_noise};
 
@@ -186,7 +186,6 @@ impl Step<'_> {
     ) -> Vec<usize> {
         let dynamics = self.dynamics;
         let (obs_dim, act_dim) = (dynamics.obs_dim(), dynamics.act_dim());
-        let state_dim = dynamics.state_dim();
         let obs: Vec<f32> = (active.iter())
             .flat_map(|&r| &observations[r * obs_dim..(r + 1) * obs_dim])
             .copied()
@@ -204,37 +203,36 @@ impl Step<'_> {
         let mut going_on = Vec::with_capacity(active.len());
         for (i, &r) in active.iter().enumerate() {
             let config = groups[self.rows[r].group].config;
-            let next_state = &step.next_states[i * state_dim..(i + 1) * state_dim];
-            let next_obs = &next_state[..obs_dim];
-            let reward = if dynamics.learns_reward() {
-                next_state[obs_dim]
-            } else {
-                let action = &actions[i * act_dim..(i + 1) * act_dim];
-                self.rules
-                    .reward(&obs[i * obs_dim..(i + 1) * obs_dim], action, next_obs)
-            };
-            let (eta, signal) = (step.eta[i], step.truncation_at(i));
+            let from = (
+                &obs[i * obs_dim..(i + 1) * obs_dim],
+                &actions[i * act_dim..(i + 1) * act_dim],
+            );
+            let threshold = config.threshold;
+            let row = judge_row(
+                dynamics,
+                self.rules,
+                &step,
+                i,
+                from,
+                &mut accumulated[r],
+                threshold,
+            );
             let tally = &mut tallies[r];
-            if !(eta.is_finite()
-                && signal.is_finite()
-                && reward.is_finite()
-                && next_state.iter().all(|x| x.is_finite()))
-            {
-                tally.outcome = StepOutcome::Diverged;
+            tally.outcome = row.fate;
+            if row.fate == StepOutcome::Diverged {
                 continue;
             }
-            // TATU+MOPO accumulates the ensemble's disagreement, the others η.
-            accumulated[r] += signal;
-            tally.max_eta = tally.max_eta.max(f64::from(eta));
-            if config.threshold.is_some_and(|e| accumulated[r] > e) {
-                tally.outcome = StepOutcome::Truncated;
+            tally.max_eta = tally.max_eta.max(f64::from(row.eta));
+            if row.fate == StepOutcome::Truncated {
                 continue;
             }
-            tally.keep(config.cost.reward(reward, next_obs), eta, config);
-            observations[r * obs_dim..(r + 1) * obs_dim].copy_from_slice(next_obs);
-            if self.rules.terminal(next_obs) {
-                tally.outcome = StepOutcome::Terminal;
-            } else if self.k + 1 < config.horizon {
+            tally.keep(
+                config.cost.reward(row.reward, row.next_obs),
+                row.eta,
+                config,
+            );
+            observations[r * obs_dim..(r + 1) * obs_dim].copy_from_slice(row.next_obs);
+            if row.fate == StepOutcome::Continued && self.k + 1 < config.horizon {
                 going_on.push(r);
             }
         }
