@@ -30,7 +30,7 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
             "nuno",
             &model,
             &dataset,
-            "hopper-random",
+            Some("hopper-random"),
             steps,
             &run,
             extra,
@@ -168,7 +168,7 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
         "mopo",
         &model,
         &dataset,
-        "hopper-medium",
+        Some("hopper-medium"),
         20,
         &run,
         &[],
@@ -215,7 +215,7 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
             "tatu-mopo",
             &model,
             &dataset,
-            "hopper-medium",
+            Some("hopper-medium"),
             steps,
             out,
             extra,
@@ -350,7 +350,7 @@ fn nuno_al_penalises_and_truncates_on_the_aleatoric_sigma() {
     let s = |p: &Path| p.to_str().unwrap().to_string();
     generate_hopper(&s(&dataset), 2000, 0);
     let args = |algo: &str, out: &Path| -> Vec<String> {
-        tiny_fit_policy(algo, &model, &dataset, "hopper-medium", 10, out, &[])
+        tiny_fit_policy(algo, &model, &dataset, Some("hopper-medium"), 10, out, &[])
     };
     ok(&args("nuno-al", &run));
     let saved: serde_json::Value =

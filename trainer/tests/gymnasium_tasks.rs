@@ -10,7 +10,7 @@ mod common;
 
 use std::path::Path;
 
-use common::ok;
+use common::{ok, tiny_fit_policy};
 use nuno::data::{Dataset, DatasetFormat, read_dataset};
 
 fn generate(task: &str, transitions: usize, out: &Path) -> Dataset {
@@ -97,35 +97,7 @@ fn the_ant_fits_trains_and_evaluates_in_its_simulator() {
     );
 
     let run = tmp.path().join("policy-run");
-    let log = ok(&[
-        "fit-policy",
-        "--model",
-        &path(&model),
-        "--dataset",
-        &path(&data),
-        "--horizon",
-        "5",
-        "--cvar-alpha",
-        "1",
-        "--penalty",
-        "1",
-        "--steps",
-        "20",
-        "--steps-per-epoch",
-        "10",
-        "--rollout-freq",
-        "10",
-        "--rollout-batch",
-        "32",
-        "--batch-size",
-        "32",
-        "--hidden",
-        "16,16",
-        "--eval-episodes",
-        "1",
-        "--out",
-        &path(&run),
-    ]);
+    let log = ok(&tiny_fit_policy("nuno", &model, &data, None, 20, &run, &[]));
     let metrics = std::fs::read_to_string(run.join("metrics.jsonl")).unwrap();
     let last: serde_json::Value = serde_json::from_str(metrics.lines().last().unwrap()).unwrap();
     // Evaluated in the simulator, not in the model: a normalised score exists.

@@ -10,7 +10,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{fails, ok};
+use common::{fails, ok, tiny_fit_policy};
 use nuno::artifact::ModelFolder;
 use nuno::data::{DatasetFormat, read_dataset};
 
@@ -72,35 +72,7 @@ fn the_cartpole_generates_fits_trains_and_evaluates_in_its_simulator() {
     assert!(recorded.simulator().is_some(), "{}", recorded.name());
 
     let run = tmp.path().join("policy-run");
-    ok(&[
-        "fit-policy",
-        "--model",
-        &path(&model),
-        "--dataset",
-        &path(&data),
-        "--horizon",
-        "5",
-        "--cvar-alpha",
-        "1",
-        "--penalty",
-        "1",
-        "--steps",
-        "20",
-        "--steps-per-epoch",
-        "10",
-        "--rollout-freq",
-        "10",
-        "--rollout-batch",
-        "32",
-        "--batch-size",
-        "32",
-        "--hidden",
-        "16,16",
-        "--eval-episodes",
-        "1",
-        "--out",
-        &path(&run),
-    ]);
+    ok(&tiny_fit_policy("nuno", &model, &data, None, 20, &run, &[]));
     let metrics = std::fs::read_to_string(run.join("metrics.jsonl")).unwrap();
     let last: serde_json::Value = serde_json::from_str(metrics.lines().last().unwrap()).unwrap();
     // Evaluated in the simulator: a normalised score (return / 10 by the file's references).

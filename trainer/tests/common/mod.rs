@@ -63,19 +63,24 @@ pub fn generate_hopper(out: &str, transitions: usize, seed: u64) {
 }
 
 /// `fit-policy` arguments for a tiny run: `algo` in the model in `model` on
-/// `dataset` under `preset`, `steps` gradient steps in epochs of 10 (a model
+/// `dataset` under the Table 3 row `preset` (none: a system of one's own,
+/// h 5, α 1, λ_pen 1), `steps` gradient steps in epochs of 10 (a model
 /// rollout of 32 starts each, 16×16 networks, one evaluation episode), into
 /// `out`, then `extra`.
 pub fn tiny_fit_policy(
     algo: &str,
     model: &Path,
     dataset: &Path,
-    preset: &str,
+    preset: Option<&str>,
     steps: usize,
     out: &Path,
     extra: &[&str],
 ) -> Vec<String> {
     let path = |p: &Path| p.display().to_string();
+    let settings = match preset {
+        Some(row) => vec!["--preset", row],
+        None => vec!["--horizon", "5", "--cvar-alpha", "1", "--penalty", "1"],
+    };
     let mut args: Vec<String> = [
         "fit-policy",
         "--algo",
@@ -84,27 +89,32 @@ pub fn tiny_fit_policy(
         &path(model),
         "--dataset",
         &path(dataset),
-        "--preset",
-        preset,
-        "--steps",
-        &steps.to_string(),
-        "--steps-per-epoch",
-        "10",
-        "--rollout-freq",
-        "10",
-        "--rollout-batch",
-        "32",
-        "--batch-size",
-        "32",
-        "--hidden",
-        "16,16",
-        "--eval-episodes",
-        "1",
-        "--out",
-        &path(out),
     ]
-    .map(String::from)
-    .to_vec();
+    .iter()
+    .chain(&settings)
+    .map(|s| s.to_string())
+    .collect();
+    args.extend(
+        [
+            "--steps",
+            &steps.to_string(),
+            "--steps-per-epoch",
+            "10",
+            "--rollout-freq",
+            "10",
+            "--rollout-batch",
+            "32",
+            "--batch-size",
+            "32",
+            "--hidden",
+            "16,16",
+            "--eval-episodes",
+            "1",
+            "--out",
+            &path(out),
+        ]
+        .map(String::from),
+    );
     args.extend(extra.iter().map(|e| e.to_string()));
     args
 }
