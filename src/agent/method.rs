@@ -1,6 +1,6 @@
 //! The offline methods nuno trains a policy with, one list for every caller
 //! (`fit-policy --algo`, grid files, the experiment runner): the model kind
-//! each trains in and where its rollouts truncate.
+//! each trains in (none for the model-free ones) and where its rollouts truncate.
 
 use std::fmt;
 use std::str::FromStr;
@@ -24,15 +24,22 @@ pub enum Method {
     /// TATU+MOPO: MOPO, truncated once the accumulated ensemble disagreement
     /// passes its largest value on the dataset divided by the pessimism coefficient.
     TatuMopo,
+    /// Behaviour cloning (OfflineRL-Kit's `run_bc.py`): no model.
+    Bc,
+    /// TD3+BC (Fujimoto & Gu, 2021, the authors' code): no model.
+    #[serde(rename = "td3-bc")]
+    Td3Bc,
 }
 
 impl Method {
-    pub const ALL: [Method; 5] = [
+    pub const ALL: [Method; 7] = [
         Method::Nuno,
         Method::NunoR,
         Method::NunoAl,
         Method::Mopo,
         Method::TatuMopo,
+        Method::Bc,
+        Method::Td3Bc,
     ];
 
     /// The name in grid files, and `fit-policy --algo`'s.
@@ -43,6 +50,8 @@ impl Method {
             Method::NunoAl => "nuno-al",
             Method::Mopo => "mopo",
             Method::TatuMopo => "tatu-mopo",
+            Method::Bc => "bc",
+            Method::Td3Bc => "td3-bc",
         }
     }
 
@@ -51,15 +60,22 @@ impl Method {
         matches!(self, Method::Mopo | Method::TatuMopo)
     }
 
-    /// The model the method trains in; methods naming the same one share its
-    /// fit per dataset and seed (NUNO and NUNO^al one SDE, MOPO and TATU+MOPO
-    /// one ensemble), so their comparison is of the policy step alone.
-    pub fn model_kind(self) -> &'static str {
+    /// The model the method trains in (`None`: it learns from the dataset
+    /// alone); methods naming the same one share its fit per dataset and seed
+    /// (NUNO and NUNO^al one SDE, MOPO and TATU+MOPO one ensemble), so their
+    /// comparison is of the policy step alone.
+    pub fn model_kind(self) -> Option<&'static str> {
         match self {
-            Method::Nuno | Method::NunoAl => "sde",
-            Method::NunoR => "sde-reward",
-            Method::Mopo | Method::TatuMopo => "ensemble",
+            Method::Nuno | Method::NunoAl => Some("sde"),
+            Method::NunoR => Some("sde-reward"),
+            Method::Mopo | Method::TatuMopo => Some("ensemble"),
+            Method::Bc | Method::Td3Bc => None,
         }
+    }
+
+    /// Whether the method learns from the dataset alone, with no model.
+    pub fn is_model_free(self) -> bool {
+        self.model_kind().is_none()
     }
 }
 
@@ -73,7 +89,7 @@ pub enum Truncation {
     /// At the ensemble's largest disagreement over the dataset over the
     /// pessimism coefficient (TATU's `compute_max_disc`).
     DatasetDisagreement,
-    /// Never (MOPO).
+    /// Never (MOPO; the model-free methods, which roll nothing out).
     Never,
 }
 
@@ -84,7 +100,7 @@ impl Method {
             Method::Nuno | Method::NunoR => Truncation::ModelTable,
             Method::NunoAl => Truncation::AleatoricCvar,
             Method::TatuMopo => Truncation::DatasetDisagreement,
-            Method::Mopo => Truncation::Never,
+            Method::Mopo | Method::Bc | Method::Td3Bc => Truncation::Never,
         }
     }
 }

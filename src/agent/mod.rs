@@ -4,11 +4,13 @@
 //! model rollouts step the dynamics through [`crate::shared::BatchDynamics`].
 
 mod actor;
+mod bc;
 mod buffer;
 mod critic;
 mod fused_actor;
 mod fused_sac;
 mod method;
+mod model_free_loop;
 mod model_rollout;
 mod model_step;
 mod online_sac;
@@ -17,15 +19,21 @@ mod policy_loop;
 mod portable_actor;
 mod presets;
 mod sac;
+mod td3_bc;
 mod uncertainty;
 
 pub(crate) use actor::action_noise;
 pub use actor::{ActionMode, Actor, ActorConfig, ActorPolicy, ActorSample};
+pub use bc::{Bc, BcConfig};
 pub use buffer::ReplayBuffer;
 pub use critic::{Temperature, TwinCritic};
 pub use fused_actor::FusedActor;
 pub use fused_sac::{FusedGradients, FusedSac};
 pub use method::{Method, Truncation};
+pub use model_free_loop::{
+    Learner, LearnerConfig, ModelFreeConfig, ModelFreeTraining, fold_input_normalization,
+    state_stats,
+};
 pub use model_rollout::{
     JudgedRow, ModelRollout, RolloutActions, RolloutConfig, RolloutStats, RolloutTrace,
     StepOutcome, judge_row, rollout_model, rollout_model_or_cancel,
@@ -46,6 +54,7 @@ pub use presets::{
     tatu_pessimism,
 };
 pub use sac::{Sac, SacAdam, SacConfig, SacLosses};
+pub use td3_bc::{Td3Bc, Td3BcAdam, Td3BcConfig};
 pub use uncertainty::{
     AleatoricAsEta, RunThreshold, dataset_max_threshold, rollout_threshold, run_threshold,
 };

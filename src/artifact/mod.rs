@@ -10,6 +10,7 @@ mod ensemble_checkpoint;
 mod fit_checkpoint;
 mod json_file;
 mod model_folder;
+mod model_free_checkpoint;
 mod online_run;
 mod policy;
 mod sac_state;
@@ -41,6 +42,9 @@ pub use json_file::{
     read_checked_weights, read_versioned_json, read_versioned_json_filled, write_json,
 };
 pub use model_folder::ModelFolder;
+pub use model_free_checkpoint::{
+    MODEL_FREE_CHECKPOINT_SCHEMA_VERSION, load_model_free_checkpoint, save_model_free_checkpoint,
+};
 pub use online_run::{
     ONLINE_RUN_SCHEMA_VERSION, OnlineRunInfo, RunPolicy, load_online_checkpoint, read_online_run,
     read_run_transitions, run_policies, save_online_checkpoint, start_online_run,

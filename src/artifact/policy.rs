@@ -15,7 +15,7 @@ use super::json_file::{read_checked_weights, read_versioned_json_filled, write_j
 use super::safetensors_file::{safetensors_bytes, write_bytes};
 use super::tensors::{collect_tensors, load_tensors};
 use super::{ArtifactError, sha256_hex};
-use crate::agent::{Actor, ActorConfig, OnlineSacConfig, PolicyLoopConfig};
+use crate::agent::{Actor, ActorConfig, ModelFreeConfig, OnlineSacConfig, PolicyLoopConfig};
 use crate::envs::{System, TaskConfig};
 use crate::nn::seeded_init;
 
@@ -43,7 +43,10 @@ pub struct PolicyProvenance {
     /// The online SAC run that trained it (a behaviour policy), if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub online_training: Option<OnlineSacConfig>,
-    /// The offline method (`fit-policy --algo`: nuno, nuno-r, nuno-al, mopo, tatu-mopo).
+    /// A model-free method's settings (bc, td3-bc), in place of `training`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_free_training: Option<ModelFreeConfig>,
+    /// The offline method (`fit-policy --algo`: nuno, nuno-r, nuno-al, mopo, tatu-mopo, bc, td3-bc).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub algorithm: Option<String>,
     /// The threshold its model rollouts truncated at, if they did.

@@ -139,13 +139,47 @@ impl Budget {
         Ok(())
     }
 
+    /// The budget's model and rollout settings at their defaults and none set:
+    /// what a model-free method's cells record.
+    fn model_free_base() -> Budget {
+        Budget {
+            model_steps: 0,
+            model_likelihood: default_likelihood(),
+            recipe: Recipe::default(),
+            model_sample_noise: None,
+            model_step_discount: None,
+            model_eta_losses: None,
+            model_drift_inputs: None,
+            threshold_max_margin: None,
+            model_buffer_factor: None,
+            forward_velocity: None,
+            ensemble_max_epochs: None,
+            policy_steps: 0,
+            steps_per_epoch: default_steps_per_epoch(),
+            eval_episodes: default_eval_episodes(),
+            rollout_batch: None,
+            mopo_settings: None,
+            hidden: default_hidden(),
+        }
+    }
+
     /// This budget as `method` runs it: the settings of the other kind of method
     /// at their defaults (an ensemble method fits no SDE and runs no NUNO loop;
-    /// NUNO's methods run no MOPO), so a grid may change those without touching
+    /// NUNO's methods run no MOPO; a model-free method neither), so a grid may change those without touching
     /// this method's finished cells; and the MOPO settings and rollout batch a
     /// grid leaves to the method resolved to what the method runs, so naming a
     /// default and leaving it out are the same budget.
     pub fn for_method(&self, method: Method) -> Budget {
+        if method.is_model_free() {
+            // No model and no rollouts: only the policy's budget is the method's.
+            return Budget {
+                policy_steps: self.policy_steps,
+                steps_per_epoch: self.steps_per_epoch,
+                eval_episodes: self.eval_episodes,
+                hidden: self.hidden.clone(),
+                ..Budget::model_free_base()
+            };
+        }
         let mut budget = self.clone();
         let mut policy_loop = PolicyLoopConfig::new(SacConfig::new(), 0, 0.0, 0.0);
         if method.uses_ensemble() {
@@ -491,14 +525,11 @@ impl Cell {
     }
 
     /// `models/dataset/kind/seed-N`: the model's folder under the experiment,
-    /// shared by the cells whose methods train in the same kind of model.
-    pub fn model_id(&self) -> String {
-        format!(
-            "models/{}/{}/seed-{}",
-            self.dataset,
-            self.method.model_kind(),
-            self.seed
-        )
+    /// shared by the cells whose methods train in the same kind of model
+    /// (`None` for a model-free method's cell).
+    pub fn model_id(&self) -> Option<String> {
+        let kind = self.method.model_kind()?;
+        Some(format!("models/{}/{kind}/seed-{}", self.dataset, self.seed))
     }
 }
 

@@ -330,8 +330,11 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     let dir = cell_dir(root, cell);
-    let (model, policy) = (root.join(cell.model_id()), dir.join("policy"));
-    fit_cell_model(cell, budget, &model)?;
+    let policy = dir.join("policy");
+    let model = cell.model_id().map(|id| root.join(id));
+    if let Some(model) = &model {
+        fit_cell_model(cell, budget, model)?;
+    }
     fit_policy::train(&policy_args(cell, budget, model, dir).plan()?)?;
     let result = summarize_run(cell, budget, &policy.join("metrics.jsonl"))?;
     write_result(root, &result)?;
@@ -398,21 +401,27 @@ fn model_args(cell: &Cell, b: &Budget, data: DataSource, out: PathBuf) -> fit_mo
 /// fit-policy's flags for the cell: the budget's over the defaults, the
 /// policies in the cell's folder, resuming a killed run. The recipe and the
 /// reward's velocity are NUNO's loop (an ensemble learns its rewards), the
-/// MOPO settings MOPO's.
-fn policy_args(cell: &Cell, b: &Budget, model: PathBuf, dir: PathBuf) -> fit_policy::Args {
+/// MOPO settings MOPO's; a model-free method takes the budget and the data's system.
+fn policy_args(cell: &Cell, b: &Budget, model: Option<PathBuf>, dir: PathBuf) -> fit_policy::Args {
     let out = dir.join("policy");
     let mut args = fit_policy::Args::defaults(model, cell.file.clone(), cell.preset.clone(), out);
     (args.seed, args.resume, args.algo) = (cell.seed, true, cell.method);
-    if let Some(policy) = cell.policy {
-        args.horizon = Some(policy.horizon);
-        args.cvar_alpha = Some(policy.cvar_alpha);
-        args.penalty = Some(policy.penalty);
-    }
     args.policies = Some(dir);
     args.steps = b.policy_steps;
     args.steps_per_epoch = b.steps_per_epoch;
     args.eval_episodes = b.eval_episodes;
     args.hidden = b.hidden.clone();
+    if cell.method.is_model_free() {
+        args.task = cell.task;
+        args.neorl = cell.layout == ObservationLayout::Neorl;
+        args.system = cell.system.clone();
+        return args;
+    }
+    if let Some(policy) = cell.policy {
+        args.horizon = Some(policy.horizon);
+        args.cvar_alpha = Some(policy.cvar_alpha);
+        args.penalty = Some(policy.penalty);
+    }
     args.rollout_batch = b.rollout_batch;
     args.model_buffer_factor = b.model_buffer_factor;
     if cell.method.uses_ensemble() {
@@ -643,7 +652,7 @@ mod tests {
         ] {
             let (grid, cell) = cell_of(dir.path(), method, budget);
             let file = cell.file.display().to_string();
-            let runner = policy_args(&cell, &grid.budget, "m".into(), "c".into());
+            let runner = policy_args(&cell, &grid.budget, Some("m".into()), "c".into());
             let mut typed = vec![
                 "t",
                 "fit-policy",
@@ -682,7 +691,10 @@ mod tests {
             let plan = runner.plan().unwrap();
             assert_eq!(json(&plan), json(&typed.plan().unwrap()), "{method}");
             // Not a tautology of two defaults: the budget reached the plan.
-            assert_eq!(plan.config.rollout_batch, 700, "{method}");
+            let fit_policy::Training::InModel(run) = &plan.training else {
+                panic!("{method} trains in a model");
+            };
+            assert_eq!(run.config.rollout_batch, 700, "{method}");
         }
     }
 }

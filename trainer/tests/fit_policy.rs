@@ -425,3 +425,96 @@ fn model_sigma_norm(dir: &Path, dataset: &Path) -> f64 {
         .sum::<f64>()
         / n as f64
 }
+
+/// bc and td3-bc learn from the dataset alone: no --model, the policies in
+/// --out with their method and settings, evaluable; the model-based flags and
+/// a missing model are named.
+#[test]
+fn model_free_methods_train_on_the_dataset_alone() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dataset = tmp.path().join("hopper.hdf5");
+    let dataset_s = dataset.to_str().unwrap();
+    generate_hopper(dataset_s, 2000, 0);
+    let fit = |algo: &str, out: &str, extra: &[&str]| -> Vec<String> {
+        let run = tmp.path().join(out);
+        let mut args: Vec<String> = [
+            "fit-policy",
+            "--algo",
+            algo,
+            "--dataset",
+            dataset_s,
+            "--preset",
+            "hopper-random",
+            "--steps",
+            "20",
+            "--steps-per-epoch",
+            "10",
+            "--batch-size",
+            "32",
+            "--hidden",
+            "16,16",
+            "--eval-episodes",
+            "1",
+            "--out",
+            run.to_str().unwrap(),
+        ]
+        .map(String::from)
+        .to_vec();
+        args.extend(extra.iter().map(|e| e.to_string()));
+        args
+    };
+    for algo in ["bc", "td3-bc"] {
+        ok(&fit(algo, algo, &[]));
+        let run = tmp.path().join(algo);
+        let policy: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(run.join("policy.json")).unwrap()).unwrap();
+        assert_eq!(policy["algorithm"], algo, "{policy}");
+        assert_eq!(policy["model_free_training"]["epochs"], 2, "{policy}");
+        assert!(policy["training"].is_null(), "{policy}");
+        let record: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(run.join("run.json")).unwrap()).unwrap();
+        assert_eq!(record["plan"]["task"], "hopper", "{record}");
+        let rows = std::fs::read_to_string(run.join("metrics.csv")).unwrap();
+        assert_eq!(rows.lines().count(), 3, "{rows}");
+        let report = ok(&[
+            "evaluate",
+            "--policy",
+            run.to_str().unwrap(),
+            "--episodes",
+            "1",
+            "--json",
+        ]);
+        let report: serde_json::Value = serde_json::from_str(&report).unwrap();
+        assert_eq!(report["returns"].as_array().unwrap().len(), 1);
+    }
+    let td3: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("td3-bc/policy.json")).unwrap())
+            .unwrap();
+    let learner = &td3["model_free_training"]["learner"];
+    assert_eq!(
+        (&learner["alpha"], &learner["policy_freq"]),
+        (&2.5.into(), &2.into()),
+        "{learner}"
+    );
+
+    let err = fails(&fit("bc", "bad", &["--model", dataset_s]));
+    assert!(
+        err.contains("--algo bc learns from the dataset alone: --model"),
+        "{err}"
+    );
+    let err = fails(&fit("td3-bc", "bad", &["--horizon", "5"]));
+    assert!(
+        err.contains("--horizon is for the model-based methods"),
+        "{err}"
+    );
+    let err = fails(&fit("td3-bc", "bad", &["--task", "walker2d"]));
+    assert!(
+        err.contains("--task walker2d and the preset hopper-random"),
+        "{err}"
+    );
+    let err = fails(&fit("mopo", "bad", &[]));
+    assert!(
+        err.contains("--algo mopo trains in a model: give --model"),
+        "{err}"
+    );
+}

@@ -1,6 +1,9 @@
-//! `nuno-trainer fit-policy`: NUNO's policy optimisation on a fitted model,
-//! with checkpoints every epoch, `--resume`, metrics, plots, and the best and
-//! last policy saved next to the dynamics artifact.
+//! `nuno-trainer fit-policy`: NUNO's policy optimisation on a fitted model
+//! (and the baselines', in their models or on the dataset alone:
+//! [`model_free`]), with checkpoints every epoch, `--resume`, metrics, plots,
+//! and the best and last policy saved next to the dynamics artifact.
+
+mod model_free;
 
 use std::path::{Path, PathBuf};
 
@@ -18,7 +21,7 @@ use nuno::artifact::{
 };
 use nuno::data::{DatasetFormat, read_system_dataset};
 use nuno::ensemble::EnsembleUncertainty;
-use nuno::envs::{ForwardVelocity, System, TaskConfig};
+use nuno::envs::{ForwardVelocity, System, TaskConfig, TaskName};
 use nuno::infer::Kernel;
 use nuno::sde::{ComputeDevice, Recipe};
 use nuno::shared::{BatchDynamics, Metric, MetricsTable};
@@ -37,9 +40,10 @@ fn loop_defaults() -> PolicyLoopConfig {
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Model directory written by `fit-model` (the policies are saved there too).
+    /// Model directory written by `fit-model` or `fit-ensemble` (the policies
+    /// are saved there too); not for bc and td3-bc, which learn from the dataset alone.
     #[arg(long)]
-    pub model: PathBuf,
+    pub model: Option<PathBuf>,
     /// The dataset the model was fitted on (start states and real transitions).
     #[arg(long)]
     pub dataset: PathBuf,
@@ -52,9 +56,19 @@ pub struct Args {
     #[arg(long)]
     pub preset: Option<String>,
     /// The method: nuno, nuno-r and nuno-al train in the neural SDE of fit-model,
-    /// mopo and tatu-mopo in the Gaussian ensemble of fit-ensemble.
+    /// mopo and tatu-mopo in the Gaussian ensemble of fit-ensemble; bc and
+    /// td3-bc on the dataset alone (no --model).
     #[arg(long, default_value_t = Method::Nuno)]
     pub algo: Method,
+    /// bc and td3-bc: the built-in task the data is of (default: the preset's).
+    #[arg(long, conflicts_with = "system")]
+    pub task: Option<TaskName>,
+    /// bc and td3-bc: a system file (with a [mujoco] table to evaluate in) in place of --task.
+    #[arg(long)]
+    pub system: Option<PathBuf>,
+    /// bc and td3-bc with --task: NeoRL's observation layout (root x included).
+    #[arg(long, conflicts_with = "system")]
+    pub neorl: bool,
     /// TATU's pessimism coefficient (tatu-mopo; default: TATU's for the dataset, else 2).
     #[arg(long)]
     pub pessimism: Option<f64>,
@@ -121,7 +135,7 @@ pub struct Args {
     #[arg(long)]
     pub out: PathBuf,
     /// Where the best and last policies are written (default: --model, next to
-    /// the dynamics, where the server finds them).
+    /// the dynamics, where the server finds them; --out for bc and td3-bc).
     #[arg(long)]
     pub policies: Option<PathBuf>,
     /// Continue from the last checkpoint in --out.
@@ -142,15 +156,15 @@ pub struct Args {
 /// the recipe's, single flags over them), written to `run.json` at start.
 #[derive(Debug, Serialize)]
 pub struct Plan {
-    pub model: PathBuf,
     pub dataset: PathBuf,
     pub format: Option<DatasetFormat>,
     #[serde(skip)]
     pub preset: Option<&'static Preset>,
     pub method: Method,
-    pub config: PolicyLoopConfig,
-    /// TATU's pessimism coefficient (tatu-mopo only).
-    pub pessimism: Option<f64>,
+    /// The model and loop, or the model-free run's system and settings, at
+    /// the plan's top level in `run.json`.
+    #[serde(flatten)]
+    pub training: Training,
     pub device: ComputeDevice,
     pub kernel: Kernel,
     pub out: PathBuf,
@@ -158,20 +172,35 @@ pub struct Plan {
     pub resume: bool,
 }
 
+/// How the method trains: SAC in a model's rollouts, or on the dataset alone.
+#[derive(Debug, Serialize)]
+#[serde(untagged)]
+pub enum Training {
+    InModel(InModel),
+    ModelFree(model_free::ModelFreePlan),
+}
+
+/// A model-based method's run: the model folder and the policy loop.
+#[derive(Debug, Serialize)]
+pub struct InModel {
+    pub model: PathBuf,
+    pub config: PolicyLoopConfig,
+    /// TATU's pessimism coefficient (tatu-mopo only).
+    pub pessimism: Option<f64>,
+}
+
 impl Args {
     /// The flags' defaults for training in `model` on `dataset` under the
     /// Table 3 row `preset` (none for a system file's data) into `out`: what fit-policy with only those flags
     /// runs (the experiment runner sets its budget's fields over them).
     pub fn defaults(
-        model: PathBuf,
+        model: Option<PathBuf>,
         dataset: PathBuf,
         preset: Option<String>,
         out: PathBuf,
     ) -> Self {
         let mut args: Args = with_defaults(&[
             "fit-policy",
-            "--model",
-            "-",
             "--dataset",
             "-",
             "--preset",
@@ -189,6 +218,47 @@ impl Args {
     pub fn plan(self) -> anyhow::Result<Plan> {
         self.check()?;
         let preset = self.preset.as_deref().map(preset).transpose()?;
+        let training = if self.algo.is_model_free() {
+            Training::ModelFree(self.model_free_plan(preset)?)
+        } else {
+            Training::InModel(self.in_model(preset)?)
+        };
+        let kernel = self.kernel.unwrap_or(match self.device {
+            ComputeDevice::Cpu => Kernel::Fused,
+            ComputeDevice::Wgpu => Kernel::Burn,
+        });
+        let policies = self.policies.unwrap_or_else(|| match &training {
+            Training::InModel(run) => run.model.clone(),
+            Training::ModelFree(_) => self.out.clone(),
+        });
+        Ok(Plan {
+            policies,
+            dataset: self.dataset,
+            format: self.format,
+            preset,
+            method: self.algo,
+            training,
+            device: self.device,
+            kernel,
+            out: self.out,
+            resume: self.resume,
+        })
+    }
+
+    /// A model-based method's model folder and policy loop: the preset's h, α
+    /// and λ_pen (MOPO's row for MOPO's methods), the recipe's, single flags over them.
+    fn in_model(&self, preset: Option<&'static Preset>) -> anyhow::Result<InModel> {
+        let model = self.model.clone().with_context(|| {
+            format!(
+                "--algo {} trains in a model: give --model (a fit-model or fit-ensemble folder)",
+                self.algo
+            )
+        })?;
+        anyhow::ensure!(
+            self.task.is_none() && self.system.is_none() && !self.neorl,
+            "--task, --system and --neorl name bc's and td3-bc's system; --algo {} reads its model's",
+            self.algo
+        );
         let sac = SacConfig::new()
             .with_batch_size(self.batch_size)
             .with_actor_hidden(self.hidden.clone())
@@ -232,23 +302,10 @@ impl Args {
             self.pessimism
                 .unwrap_or_else(|| tatu_pessimism(self.preset.as_deref().unwrap_or_default()))
         });
-        let kernel = self.kernel.unwrap_or(match self.device {
-            ComputeDevice::Cpu => Kernel::Fused,
-            ComputeDevice::Wgpu => Kernel::Burn,
-        });
-        Ok(Plan {
-            policies: self.policies.unwrap_or_else(|| self.model.clone()),
-            model: self.model,
-            dataset: self.dataset,
-            format: self.format,
-            preset,
-            method: self.algo,
+        Ok(InModel {
+            model,
             config,
             pessimism,
-            device: self.device,
-            kernel,
-            out: self.out,
-            resume: self.resume,
         })
     }
 
@@ -304,11 +361,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     train(&args.plan()?)
 }
 
+/// Trains as the plan says: in its model, or on the dataset alone.
+pub fn train(plan: &Plan) -> anyhow::Result<()> {
+    match &plan.training {
+        Training::InModel(run) => train_in_model(plan, run),
+        Training::ModelFree(run) => model_free::train(plan, run),
+    }
+}
+
 /// Loads the model and the dataset, then trains epoch by epoch from the start
 /// or from the last checkpoint, saving the best and last policies.
-pub fn train(plan: &Plan) -> anyhow::Result<()> {
+fn train_in_model(plan: &Plan, run: &InModel) -> anyhow::Result<()> {
     let device = plan.device.device().map_err(anyhow::Error::msg)?;
-    let (model, system) = load_model(plan, &device)?;
+    let (model, system) = load_model(plan, run, &device)?;
     let dataset = read_system_dataset(&plan.dataset, plan.format, &system)?;
     let base = model.dynamics(plan.kernel);
     let aleatoric;
@@ -325,7 +390,7 @@ pub fn train(plan: &Plan) -> anyhow::Result<()> {
         system,
         kernel: plan.kernel,
     };
-    let mut training = start(plan, &model, &ctx, &device)?;
+    let mut training = start(plan, run, &model, &ctx, &device)?;
     write_run_record(&plan.out, "fit-policy", plan, &[&plan.dataset])?;
     let bar = ProgressBar::new((training.config.epochs * training.config.steps_per_epoch) as u64)
         .with_style(ProgressStyle::with_template(
@@ -368,14 +433,15 @@ pub fn train(plan: &Plan) -> anyhow::Result<()> {
 /// from the last checkpoint under `--resume`.
 fn start(
     plan: &Plan,
+    run: &InModel,
     model: &ModelFolder,
     ctx: &LoopContext,
     device: &Device,
 ) -> anyhow::Result<PolicyTraining> {
     let checkpoints = plan.out.join("checkpoints");
     let resuming = plan.resume && latest_checkpoint(&checkpoints)?.is_some();
-    let threshold = truncation_threshold(plan, model, ctx, resuming)?;
-    let mut training = PolicyTraining::new(plan.config.clone(), ctx, threshold, device)?;
+    let threshold = truncation_threshold(plan, run, model, ctx, resuming)?;
+    let mut training = PolicyTraining::new(run.config.clone(), ctx, threshold, device)?;
     if let Some(checkpoint) = checkpoint_to_resume(&checkpoints, plan.resume, &plan.out, "a run")? {
         load_checkpoint(&checkpoint, &mut training)
             .with_context(|| format!("resuming from {}", checkpoint.display()))?;
@@ -419,6 +485,7 @@ fn save_policies(
         normalized_score: Some(record.eval.normalized_score),
         mean_return: Some(record.eval.mean_return),
         online_training: None,
+        model_free_training: None,
         algorithm: Some(plan.method.to_string()),
         truncation_threshold: training.threshold,
     };
@@ -482,8 +549,12 @@ fn write_metrics(out: &Path, history: &[EpochRecord]) -> anyhow::Result<()> {
 /// neural SDE for NUNO's methods, a Gaussian ensemble for MOPO's), with its
 /// task (a model.json from before tasks were recorded: the preset's), checked
 /// against the preset's.
-fn load_model(plan: &Plan, device: &Device) -> anyhow::Result<(ModelFolder, System)> {
-    let dir = &plan.model;
+fn load_model(
+    plan: &Plan,
+    run: &InModel,
+    device: &Device,
+) -> anyhow::Result<(ModelFolder, System)> {
+    let dir = &run.model;
     let folder = ModelFolder::load(dir, device)
         .with_context(|| format!("loading the model in {}", dir.display()))?;
     let algo = plan.method;
@@ -547,12 +618,13 @@ fn load_model(plan: &Plan, device: &Device) -> anyhow::Result<(ModelFolder, Syst
 /// which a resumed run reads instead of computing it again.
 fn truncation_threshold(
     plan: &Plan,
+    run: &InModel,
     model: &ModelFolder,
     ctx: &LoopContext,
     resuming: bool,
 ) -> anyhow::Result<Option<f32>> {
     let method = plan.method;
-    let computed = plan.config.truncate && method.truncation().computed_per_run();
+    let computed = run.config.truncate && method.truncation().computed_per_run();
     let path = plan.out.join("threshold.json");
     if computed && resuming && path.is_file() {
         let saved: SavedThreshold = serde_json::from_str(&std::fs::read_to_string(&path)?)
@@ -565,13 +637,7 @@ fn truncation_threshold(
         );
         return Ok(Some(saved.threshold));
     }
-    let threshold = run_threshold(
-        method,
-        &plan.config,
-        model.thresholds(),
-        ctx,
-        plan.pessimism,
-    )?;
+    let threshold = run_threshold(method, &run.config, model.thresholds(), ctx, run.pessimism)?;
     if let (true, Some(t)) = (computed, &threshold) {
         std::fs::create_dir_all(&plan.out)?;
         let saved = SavedThreshold {
