@@ -29,10 +29,12 @@ pub enum Method {
     /// TD3+BC (Fujimoto & Gu, 2021, the authors' code): no model.
     #[serde(rename = "td3-bc")]
     Td3Bc,
+    /// CQL (Kumar et al., 2020, OfflineRL-Kit's `run_cql.py`): no model.
+    Cql,
 }
 
 impl Method {
-    pub const ALL: [Method; 7] = [
+    pub const ALL: [Method; 8] = [
         Method::Nuno,
         Method::NunoR,
         Method::NunoAl,
@@ -40,6 +42,7 @@ impl Method {
         Method::TatuMopo,
         Method::Bc,
         Method::Td3Bc,
+        Method::Cql,
     ];
 
     /// The name in grid files, and `fit-policy --algo`'s.
@@ -52,6 +55,7 @@ impl Method {
             Method::TatuMopo => "tatu-mopo",
             Method::Bc => "bc",
             Method::Td3Bc => "td3-bc",
+            Method::Cql => "cql",
         }
     }
 
@@ -69,7 +73,17 @@ impl Method {
             Method::Nuno | Method::NunoAl => Some("sde"),
             Method::NunoR => Some("sde-reward"),
             Method::Mopo | Method::TatuMopo => Some("ensemble"),
-            Method::Bc | Method::Td3Bc => None,
+            Method::Bc | Method::Td3Bc | Method::Cql => None,
+        }
+    }
+
+    /// The hidden sizes of the method's networks in its reference
+    /// implementation: SAC's 2×256 for the model-based methods (NUNO's code,
+    /// OfflineRL-Kit's MOPO), the model-free ones' own (CQL's 3×256).
+    pub fn default_hidden(self) -> Vec<usize> {
+        match super::LearnerConfig::for_method(self) {
+            Ok(learner) => learner.hidden(),
+            Err(_) => super::SacConfig::new().actor_hidden,
         }
     }
 
@@ -100,7 +114,7 @@ impl Method {
             Method::Nuno | Method::NunoR => Truncation::ModelTable,
             Method::NunoAl => Truncation::AleatoricCvar,
             Method::TatuMopo => Truncation::DatasetDisagreement,
-            Method::Mopo | Method::Bc | Method::Td3Bc => Truncation::Never,
+            Method::Mopo | Method::Bc | Method::Td3Bc | Method::Cql => Truncation::Never,
         }
     }
 }

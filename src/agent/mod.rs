@@ -6,6 +6,7 @@
 mod actor;
 mod bc;
 mod buffer;
+mod cql;
 mod critic;
 mod fused_actor;
 mod fused_sac;
@@ -26,6 +27,7 @@ pub(crate) use actor::action_noise;
 pub use actor::{ActionMode, Actor, ActorConfig, ActorPolicy, ActorSample};
 pub use bc::{Bc, BcConfig};
 pub use buffer::ReplayBuffer;
+pub use cql::{Cql, CqlConfig, CqlSamples};
 pub use critic::{Temperature, TwinCritic};
 pub use fused_actor::FusedActor;
 pub use fused_sac::{FusedGradients, FusedSac};

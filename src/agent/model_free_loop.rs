@@ -1,4 +1,4 @@
-//! The model-free offline methods' loop (BC, TD3+BC), one epoch at a time so
+//! The model-free offline methods' loop (BC, TD3+BC, CQL), one epoch at a time so
 //! a caller can checkpoint between epochs, as the model-based loop
 //! ([`super::PolicyTraining`]) runs but with no model and no rollouts:
 //!
@@ -23,6 +23,7 @@ use serde::{Deserialize, Serialize};
 use super::AgentError;
 use super::actor::{ActionMode, Actor, ActorConfig, ActorPolicy};
 use super::bc::{Bc, BcConfig};
+use super::cql::{Cql, CqlConfig};
 use super::method::Method;
 use super::policy_loop::{EpochRecord, EvalSummary, PhaseSeconds};
 use super::sac::SacLosses;
@@ -41,6 +42,7 @@ const STATE_STD_EPSILON: f32 = 1e-3;
 pub enum LearnerConfig {
     Bc(BcConfig),
     Td3Bc(Td3BcConfig),
+    Cql(CqlConfig),
 }
 
 impl LearnerConfig {
@@ -49,6 +51,7 @@ impl LearnerConfig {
         match method {
             Method::Bc => Ok(Self::Bc(BcConfig::new())),
             Method::Td3Bc => Ok(Self::Td3Bc(Td3BcConfig::new())),
+            Method::Cql => Ok(Self::Cql(CqlConfig::new())),
             other => Err(AgentError::Mismatch(format!(
                 "{other} trains in a model, not on the dataset alone"
             ))),
@@ -59,6 +62,7 @@ impl LearnerConfig {
         match self {
             Self::Bc(_) => Method::Bc,
             Self::Td3Bc(_) => Method::Td3Bc,
+            Self::Cql(_) => Method::Cql,
         }
     }
 
@@ -67,10 +71,43 @@ impl LearnerConfig {
         match self {
             Self::Bc(c) => c.batch_size,
             Self::Td3Bc(c) => c.batch_size,
+            Self::Cql(c) => c.sac.batch_size,
         }
     }
 
-    /// Whether the method trains on normalised states (TD3+BC does, BC does not).
+    /// The hidden sizes of its networks (actor and critics alike).
+    pub fn hidden(&self) -> Vec<usize> {
+        match self {
+            Self::Bc(c) => c.hidden.clone(),
+            Self::Td3Bc(c) => c.actor_hidden.clone(),
+            Self::Cql(c) => c.sac.actor_hidden.clone(),
+        }
+    }
+
+    /// Sets every network's hidden sizes.
+    pub fn set_hidden(&mut self, hidden: &[usize]) {
+        match self {
+            Self::Bc(c) => c.hidden = hidden.to_vec(),
+            Self::Td3Bc(c) => {
+                (c.actor_hidden, c.critic_hidden) = (hidden.to_vec(), hidden.to_vec());
+            }
+            Self::Cql(c) => {
+                (c.sac.actor_hidden, c.sac.critic_hidden) = (hidden.to_vec(), hidden.to_vec());
+            }
+        }
+    }
+
+    /// Sets the transitions per update.
+    pub fn set_batch_size(&mut self, batch_size: usize) {
+        match self {
+            Self::Bc(c) => c.batch_size = batch_size,
+            Self::Td3Bc(c) => c.batch_size = batch_size,
+            Self::Cql(c) => c.sac.batch_size = batch_size,
+        }
+    }
+
+    /// Whether the method trains on normalised states (TD3+BC does; BC and
+    /// CQL do not, as OfflineRL-Kit runs them).
     pub fn normalizes_states(&self) -> bool {
         matches!(self, Self::Td3Bc(_))
     }
@@ -92,6 +129,7 @@ pub struct ModelFreeConfig {
 pub enum Learner {
     Bc(Box<Bc>),
     Td3Bc(Box<Td3Bc>),
+    Cql(Box<Cql>),
 }
 
 impl crate::nn::Initialised for Learner {
@@ -99,6 +137,7 @@ impl crate::nn::Initialised for Learner {
         match self {
             Self::Bc(bc) => bc.draw_parameters(),
             Self::Td3Bc(td3) => td3.draw_parameters(),
+            Self::Cql(cql) => cql.draw_parameters(),
         }
     }
 }
@@ -109,6 +148,7 @@ impl Learner {
         match self {
             Self::Bc(bc) => &bc.actor,
             Self::Td3Bc(td3) => &td3.actor,
+            Self::Cql(cql) => &cql.sac.actor,
         }
     }
 
@@ -120,6 +160,7 @@ impl Learner {
         match self {
             Self::Bc(bc) => bc.update(batch),
             Self::Td3Bc(td3) => td3.update(batch, rng),
+            Self::Cql(cql) => cql.update(batch, rng),
         }
     }
 }
@@ -176,6 +217,7 @@ impl ModelFreeTraining {
             LearnerConfig::Td3Bc(c) => {
                 Learner::Td3Bc(Box::new(Td3Bc::new(actor, c.clone(), device)))
             }
+            LearnerConfig::Cql(c) => Learner::Cql(Box::new(Cql::new(actor, c.clone(), device))),
         });
         let state_stats = config
             .learner

@@ -1,4 +1,4 @@
-//! Checkpoints of a model-free run (BC, TD3+BC), one per finished epoch, laid
+//! Checkpoints of a model-free run (BC, TD3+BC, CQL), one per finished epoch, laid
 //! out as policy optimisation's (`checkpoints/epoch-NNNNNN/` named by
 //! `LATEST`, written under a temporary name, fsynced, renamed): the learner's
 //! networks and Adam moments by module path, the generator's position, the
@@ -52,6 +52,12 @@ fn networks(learner: &Learner) -> Vec<(&'static str, NamedTensors)> {
             ("critic", collect_tensors(&td3.critic)),
             ("target_critic", collect_tensors(&td3.target_critic)),
         ],
+        Learner::Cql(cql) => vec![
+            ("actor", collect_tensors(&cql.sac.actor)),
+            ("critic", collect_tensors(&cql.sac.critic)),
+            ("target_critic", collect_tensors(&cql.sac.target_critic)),
+            ("temperature", collect_tensors(&cql.sac.temperature)),
+        ],
     }
 }
 
@@ -59,6 +65,11 @@ fn optimizers(learner: &Learner) -> Vec<(&'static str, &AdamState)> {
     match learner {
         Learner::Bc(bc) => vec![("actor", &bc.adam)],
         Learner::Td3Bc(td3) => vec![("actor", &td3.adam.actor), ("critic", &td3.adam.critic)],
+        Learner::Cql(cql) => vec![
+            ("actor", &cql.sac.adam.actor),
+            ("critic", &cql.sac.adam.critic),
+            ("temperature", &cql.sac.adam.alpha),
+        ],
     }
 }
 
@@ -89,7 +100,7 @@ fn write_contents(dir: &Path, training: &ModelFreeTraining) -> Result<(), Artifa
     let adam = safetensors_bytes(&adam, None)?;
     write_synced(&dir.join(ADAM), &adam)?;
     let (learner_updates, last_actor_loss) = match &training.learner {
-        Learner::Bc(_) => (0, 0.0),
+        Learner::Bc(_) | Learner::Cql(_) => (0, 0.0),
         Learner::Td3Bc(td3) => (td3.updates, td3.last_actor_loss),
     };
     let state = ModelFreeState {
@@ -169,6 +180,19 @@ pub fn load_model_free_checkpoint(
             td3.adam.critic = moments("critic")?;
             td3.updates = state.learner_updates;
             td3.last_actor_loss = state.last_actor_loss;
+        }
+        Learner::Cql(cql) => {
+            let sac = &mut cql.sac;
+            let device = sac.device().clone();
+            let plain = device.clone().inner();
+            sac.actor = load_tensors(sac.actor.clone(), &part("actor"), &device)?;
+            sac.critic = load_tensors(sac.critic.clone(), &part("critic"), &device)?;
+            sac.target_critic =
+                load_tensors(sac.target_critic.clone(), &part("target_critic"), &plain)?;
+            sac.temperature = load_tensors(sac.temperature.clone(), &part("temperature"), &device)?;
+            sac.adam.actor = moments("actor")?;
+            sac.adam.critic = moments("critic")?;
+            sac.adam.alpha = moments("temperature")?;
         }
     }
     if let Some(extra) = adam.keys().next() {

@@ -101,9 +101,10 @@ pub struct Budget {
     /// OfflineRL-Kit's). The grids run before it existed name "nuno".
     #[serde(default)]
     pub mopo_settings: Option<MopoSettings>,
-    /// Hidden sizes of SAC's networks.
-    #[serde(default = "default_hidden")]
-    pub hidden: Vec<usize>,
+    /// Hidden sizes of every method's networks (default: each method's own,
+    /// `Method::default_hidden`).
+    #[serde(default)]
+    pub hidden: Option<Vec<usize>>,
 }
 
 impl Budget {
@@ -116,7 +117,9 @@ impl Budget {
         {
             return Err("budget: model_steps, policy_steps, steps_per_epoch and rollout_batch must be at least 1".into());
         }
-        if self.hidden.is_empty() || self.hidden.contains(&0) {
+        if let Some(hidden) = &self.hidden
+            && (hidden.is_empty() || hidden.contains(&0))
+        {
             return Err("budget: hidden needs positive layer sizes".into());
         }
         if let Some(d) = self.model_step_discount
@@ -139,6 +142,13 @@ impl Budget {
         Ok(())
     }
 
+    /// The networks' hidden sizes `method` trains with: the budget's, else the method's own.
+    pub fn hidden_for(&self, method: Method) -> Vec<usize> {
+        self.hidden
+            .clone()
+            .unwrap_or_else(|| method.default_hidden())
+    }
+
     /// The budget's model and rollout settings at their defaults and none set:
     /// what a model-free method's cells record.
     fn model_free_base() -> Budget {
@@ -159,7 +169,7 @@ impl Budget {
             eval_episodes: default_eval_episodes(),
             rollout_batch: None,
             mopo_settings: None,
-            hidden: default_hidden(),
+            hidden: None,
         }
     }
 
@@ -176,11 +186,12 @@ impl Budget {
                 policy_steps: self.policy_steps,
                 steps_per_epoch: self.steps_per_epoch,
                 eval_episodes: self.eval_episodes,
-                hidden: self.hidden.clone(),
+                hidden: Some(self.hidden_for(method)),
                 ..Budget::model_free_base()
             };
         }
         let mut budget = self.clone();
+        budget.hidden = Some(self.hidden_for(method));
         let mut policy_loop = PolicyLoopConfig::new(SacConfig::new(), 0, 0.0, 0.0);
         if method.uses_ensemble() {
             let settings = self.mopo_settings.unwrap_or_default();
@@ -268,9 +279,6 @@ fn default_steps_per_epoch() -> usize {
 }
 fn default_eval_episodes() -> usize {
     10
-}
-fn default_hidden() -> Vec<usize> {
-    vec![256, 256]
 }
 
 /// One dataset row of the grid, as written: a built-in task's data with its

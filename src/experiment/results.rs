@@ -455,10 +455,13 @@ mod tests {
             budget_changes(&then, &with("model_steps = 20\npolicy_steps = 50")),
             ["policy_steps: 100 then, 50 now"]
         );
+        // As the runner compares them: resolved for the method (the hidden
+        // sizes left out are the method's own).
+        let now = with("model_steps = 30\npolicy_steps = 100\nhidden = [8]");
         assert_eq!(
             budget_changes(
-                &then,
-                &with("model_steps = 30\npolicy_steps = 100\nhidden = [8]")
+                &then.for_method(Method::Nuno),
+                &now.for_method(Method::Nuno)
             ),
             [
                 "hidden: [256,256] then, [8] now",

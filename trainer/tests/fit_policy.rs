@@ -463,7 +463,7 @@ fn model_free_methods_train_on_the_dataset_alone() {
         args.extend(extra.iter().map(|e| e.to_string()));
         args
     };
-    for algo in ["bc", "td3-bc"] {
+    for algo in ["bc", "td3-bc", "cql"] {
         ok(&fit(algo, algo, &[]));
         let run = tmp.path().join(algo);
         let policy: serde_json::Value =

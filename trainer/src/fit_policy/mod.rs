@@ -111,9 +111,9 @@ pub struct Args {
     /// SAC batch size.
     #[arg(long, default_value_t = loop_defaults().sac.batch_size)]
     pub batch_size: usize,
-    /// Hidden sizes of the actor and critics.
-    #[arg(long, value_delimiter = ',', default_values_t = loop_defaults().sac.actor_hidden)]
-    pub hidden: Vec<usize>,
+    /// Hidden sizes of the actor and critics (default: the method's own: 256,256; cql 256,256,256).
+    #[arg(long, value_delimiter = ',')]
+    pub hidden: Option<Vec<usize>>,
     /// MuJoCo evaluation episodes per epoch.
     #[arg(long, default_value_t = loop_defaults().eval_episodes)]
     pub eval_episodes: usize,
@@ -259,10 +259,11 @@ impl Args {
             "--task, --system and --neorl name bc's and td3-bc's system; --algo {} reads its model's",
             self.algo
         );
+        let hidden = (self.hidden.clone()).unwrap_or_else(|| self.algo.default_hidden());
         let sac = SacConfig::new()
             .with_batch_size(self.batch_size)
-            .with_actor_hidden(self.hidden.clone())
-            .with_critic_hidden(self.hidden.clone());
+            .with_actor_hidden(hidden.clone())
+            .with_critic_hidden(hidden);
         let mut config = match preset {
             Some(preset) => PolicyLoopConfig::from_preset(preset, sac),
             None => match (self.horizon, self.cvar_alpha, self.penalty) {
@@ -331,7 +332,7 @@ impl Args {
             self.real_ratio
         );
         anyhow::ensure!(
-            !self.hidden.is_empty() && self.hidden.iter().all(|&h| h > 0),
+            (self.hidden.as_ref()).is_none_or(|h| !h.is_empty() && h.iter().all(|&h| h > 0)),
             "--hidden needs positive layer sizes"
         );
         anyhow::ensure!(

@@ -78,16 +78,9 @@ impl Args {
             "--algo {algo} needs the data's system: --task, --system or a --preset naming a task"
         );
         let mut learner = LearnerConfig::for_method(algo)?;
-        match &mut learner {
-            LearnerConfig::Bc(c) => {
-                c.batch_size = self.batch_size;
-                c.hidden = self.hidden.clone();
-            }
-            LearnerConfig::Td3Bc(c) => {
-                c.batch_size = self.batch_size;
-                c.actor_hidden = self.hidden.clone();
-                c.critic_hidden = self.hidden.clone();
-            }
+        learner.set_batch_size(self.batch_size);
+        if let Some(hidden) = &self.hidden {
+            learner.set_hidden(hidden);
         }
         Ok(ModelFreePlan {
             task,

@@ -1,0 +1,241 @@
+//! CQL (Kumar et al., 2020) as OfflineRL-Kit's `cql.py` runs it: SAC (actor
+//! first, then α, then the critics) with a deterministic backup and a
+//! conservative term added to each critic's loss,
+//!
+//! ```text
+//! β·T·mean_rows LSE_T(X) − β·mean Q_i(s, a),   X per repeated row of N = 10:
+//!   Q_i(s, ã) − log π(ã|s),     ã ~ π(·|s)
+//!   Q_i(s, ã') − log π(ã'|s'),  ã' ~ π(·|s')   (Q at s, as the reference)
+//!   Q_i(s, u) − log 0.5^|A|,    u ~ U[−1, 1]^|A|  (log π's detached)
+//! ```
+//!
+//! The log-sum-exp runs over the three sources of each of the B·N repeated
+//! rows, then a mean over them (OfflineRL-Kit concatenates three `(B·N, 1)`
+//! tensors on dim 1), not over all 3N samples of a state as the paper's form.
+//! The Lagrange variant (off in OfflineRL-Kit's defaults) is not here.
+
+use burn::config::Config;
+use burn::module::Module;
+use burn::optim::GradientsParams;
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+use super::actor::ActorConfig;
+use super::sac::{Sac, SacConfig, SacLosses};
+use crate::nn::{Initialised, normal, polyak_update};
+use crate::shared::TransitionBatch;
+
+/// CQL's hyperparameters (OfflineRL-Kit's `run_cql.py`).
+#[derive(Config, Debug, PartialEq)]
+pub struct CqlConfig {
+    /// SAC's settings: [256, 256, 256] networks, actor lr 1e-4, critic 3e-4, α lr 1e-4.
+    #[config(default = "CqlConfig::kit_sac()")]
+    pub sac: SacConfig,
+    /// β, the conservative term's weight (5 for every D4RL task).
+    #[config(default = 5.0)]
+    pub cql_weight: f64,
+    /// T, the log-sum-exp's temperature.
+    #[config(default = 1.0)]
+    pub temperature: f64,
+    /// N, sampled actions per source and state.
+    #[config(default = 10)]
+    pub num_repeat_actions: usize,
+}
+
+impl CqlConfig {
+    /// OfflineRL-Kit's `run_cql.py` SAC settings.
+    pub fn kit_sac() -> SacConfig {
+        SacConfig::new()
+            .with_actor_hidden(vec![256, 256, 256])
+            .with_critic_hidden(vec![256, 256, 256])
+            .with_actor_lr(1e-4)
+            .with_alpha_lr(1e-4)
+    }
+}
+
+/// The agent: SAC's networks with CQL's update.
+pub struct Cql {
+    pub config: CqlConfig,
+    pub sac: Sac,
+}
+
+impl Initialised for Cql {
+    fn draw_parameters(&self) {
+        self.sac.draw_parameters();
+    }
+}
+
+/// The conservative term's samples for a batch: ε for π at s and at s', and
+/// the uniform actions, each `[B·N, act_dim]`.
+pub struct CqlSamples {
+    pub noise_at_state: Tensor<2>,
+    pub noise_at_next: Tensor<2>,
+    pub uniform: Tensor<2>,
+}
+
+impl Cql {
+    pub fn new(actor: ActorConfig, config: CqlConfig, device: &Device) -> Self {
+        Self {
+            sac: Sac::new(actor, config.sac.clone(), device),
+            config,
+        }
+    }
+
+    pub fn device(&self) -> &Device {
+        self.sac.device()
+    }
+
+    /// Draws the term's samples for `rows` states on `device`.
+    pub fn draw_samples(&self, rows: usize, rng: &mut ChaCha8Rng, device: &Device) -> CqlSamples {
+        let act_dim = self.sac.actor.config.act_dim;
+        let n = rows * self.config.num_repeat_actions;
+        let uniform: Vec<f32> = (0..n * act_dim)
+            .map(|_| rng.random_range(-1.0f32..1.0))
+            .collect();
+        CqlSamples {
+            noise_at_state: normal([n, act_dim], rng, device),
+            noise_at_next: normal([n, act_dim], rng, device),
+            uniform: Tensor::from_data(TensorData::new(uniform, [n, act_dim]), device),
+        }
+    }
+
+    /// Each critic's conservative term, β·(T·mean LSE_T(X) − mean Q_i(s, a)),
+    /// as the module doc says.
+    ///
+    /// # Shapes
+    /// - `obs`, `next_obs`: `[B, obs_dim]`, `actions`: `[B, act_dim]`; samples `[B·N, act_dim]`
+    pub fn conservative_terms(
+        &self,
+        obs: Tensor<2>,
+        next_obs: Tensor<2>,
+        actions: Tensor<2>,
+        samples: CqlSamples,
+    ) -> (Tensor<1>, Tensor<1>) {
+        let repeat = self.config.num_repeat_actions;
+        let repeated = |x: Tensor<2>| {
+            let [b, w] = x.dims();
+            x.unsqueeze_dim::<3>(1)
+                .repeat_dim(1, repeat)
+                .reshape([b * repeat, w])
+        };
+        let (obs_n, next_n) = (repeated(obs.clone()), repeated(next_obs));
+        let actor = &self.sac.actor;
+        let at_state = actor.sample(obs_n.clone(), samples.noise_at_state);
+        let at_next = actor.sample(next_n, samples.noise_at_next);
+        let act_dim = actor.config.act_dim as f32;
+        let uniform_log_density = act_dim * 0.5f32.ln();
+        let critic = &self.sac.critic;
+        let (pi1, pi2) = critic.forward(obs_n.clone(), at_state.action);
+        let (next1, next2) = critic.forward(obs_n.clone(), at_next.action);
+        let (rand1, rand2) = critic.forward(obs_n, samples.uniform);
+        let (log_pi, log_pi_next) = (at_state.log_prob.detach(), at_next.log_prob.detach());
+        let (data1, data2) = critic.forward(obs, actions);
+        let temperature = self.config.temperature;
+        let term = |pi: Tensor<2>, next: Tensor<2>, random: Tensor<2>, data: Tensor<2>| {
+            let x = Tensor::cat(
+                vec![
+                    pi - log_pi.clone(),
+                    next - log_pi_next.clone(),
+                    random - uniform_log_density,
+                ],
+                1,
+            );
+            let lse = log_sum_exp_rows(x / temperature) * temperature;
+            (lse.mean() - data.mean()) * self.config.cql_weight
+        };
+        (
+            term(pi1, next1, rand1, data1),
+            term(pi2, next2, rand2, data2),
+        )
+    }
+
+    /// One update on `batch`: actor, α, then the critics with the
+    /// conservative term, then the Polyak targets.
+    pub fn update(&mut self, batch: &TransitionBatch, rng: &mut ChaCha8Rng) -> SacLosses {
+        let c = &self.sac.actor.config;
+        let (obs_dim, act_dim) = (c.obs_dim, c.act_dim);
+        let b = batch.rewards.len();
+        let device = self.sac.device().clone();
+        let plain = device.clone().inner();
+        let tensor = |values: &[f32], width: usize, device: &Device| {
+            Tensor::<2>::from_data(TensorData::new(values.to_vec(), [b, width]), device)
+        };
+        let obs = tensor(&batch.observations, obs_dim, &device);
+        let actions = tensor(&batch.actions, act_dim, &device);
+        let next_obs = tensor(&batch.next_observations, obs_dim, &device);
+        let adam = self.sac.optimizer();
+        let sac_config = self.sac.config.clone();
+
+        // Actor, then α (OfflineRL-Kit's order).
+        let alpha = self.sac.temperature.alpha().inner();
+        let (actor_loss, log_prob) = self.sac.actor_loss(
+            obs.clone(),
+            normal([b, act_dim], rng, &device),
+            alpha.clone(),
+        );
+        let grads = GradientsParams::from_grads(actor_loss.backward(), &self.sac.actor);
+        self.sac.actor = adam.step_module(
+            sac_config.actor_lr,
+            self.sac.actor.clone(),
+            grads,
+            &mut self.sac.adam.actor,
+        );
+        let log_prob = log_prob.inner();
+        let entropy = -log_prob.clone().mean().into_scalar::<f32>();
+        let alpha_loss = self.sac.alpha_loss(log_prob);
+        let grads = GradientsParams::from_grads(alpha_loss.backward(), &self.sac.temperature);
+        self.sac.temperature = adam.step_module(
+            sac_config.alpha_lr,
+            self.sac.temperature.clone(),
+            grads,
+            &mut self.sac.adam.alpha,
+        );
+
+        // Critics: deterministic backup y = r + γ(1 − d)·min Q̄(s', ã'), then the term.
+        let next = self
+            .sac
+            .actor
+            .valid()
+            .sample(next_obs.clone().inner(), normal([b, act_dim], rng, &plain));
+        let next_value = self
+            .sac
+            .target_critic
+            .min_q(next_obs.clone().inner(), next.action);
+        let terminals = tensor(&batch.terminals, 1, &plain);
+        let y = tensor(&batch.rewards, 1, &plain)
+            + (terminals.neg() + 1.0) * next_value * sac_config.gamma;
+        let (_, qf1_loss, qf2_loss, qf1_values) =
+            self.sac.critic_loss(obs.clone(), actions.clone(), y);
+        let samples = self.draw_samples(b, rng, &device);
+        let (cql1, cql2) = self.conservative_terms(obs, next_obs, actions, samples);
+        let total = qf1_loss.clone() + qf2_loss.clone() + cql1 + cql2;
+        let grads = GradientsParams::from_grads(total.backward(), &self.sac.critic);
+        self.sac.critic = adam.step_module(
+            sac_config.critic_lr,
+            self.sac.critic.clone(),
+            grads,
+            &mut self.sac.adam.critic,
+        );
+        self.sac.target_critic = polyak_update(
+            self.sac.target_critic.clone(),
+            &self.sac.critic,
+            sac_config.tau,
+        );
+        SacLosses {
+            qf1_values,
+            qf1_loss: qf1_loss.into_scalar(),
+            qf2_loss: qf2_loss.into_scalar(),
+            actor_loss: actor_loss.into_scalar(),
+            alpha: alpha.into_scalar(),
+            alpha_loss: alpha_loss.into_scalar(),
+            entropy,
+        }
+    }
+}
+
+/// log Σ_j exp(x_ij) per row, stable: `[rows, k]` → `[rows, 1]`.
+fn log_sum_exp_rows(x: Tensor<2>) -> Tensor<2> {
+    let max = x.clone().max_dim(1).detach();
+    (x - max.clone()).exp().sum_dim(1).log() + max
+}
