@@ -1,11 +1,13 @@
 //! Experiments: a grid of datasets × methods × seeds under one budget
 //! ([`grid`]), each cell's result and the Table 1/2-style aggregate
-//! ([`results`]), and the paper's model analyses ([`analysis`]). Running cells (locally or as a Slurm array) is the
+//! ([`results`]), the paper's published tables and nuno's cells laid out as
+//! them ([`paper_tables`]), and the paper's model analyses ([`analysis`]). Running cells (locally or as a Slurm array) is the
 //! trainer's `experiment` subcommand; it calls the other subcommands per cell.
 
 pub mod analysis;
 pub mod grid;
 mod linear_model;
+pub mod paper_tables;
 pub mod results;
 
 use std::path::PathBuf;
@@ -16,9 +18,11 @@ pub use analysis::{
 };
 pub use grid::{Budget, Cell, CellSelection, Grid, GridDataset};
 pub use linear_model::LinearModel;
+pub use paper_tables::{PaperScore, paper_layout_table, paper_score};
 pub use results::{
-    CellResult, CellStatus, MeanCurve, Summary, cell_dir, cell_status, markdown_table, mean_curves,
-    policy_time_left, results_csv, summarize, summarize_run, write_result,
+    CellResult, CellStatus, MeanCurve, Summary, cell_dir, cell_status, collect_results,
+    markdown_table, mean_curves, policy_time_left, read_result, results_csv, summarize,
+    summarize_run, write_result,
 };
 
 /// Everything that can be wrong with an experiment.

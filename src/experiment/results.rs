@@ -112,6 +112,38 @@ pub fn write_result(root: &Path, result: &CellResult) -> Result<(), ExperimentEr
     )?)
 }
 
+/// A cell's `result.json`.
+pub fn read_result(path: &Path) -> Result<CellResult, ExperimentError> {
+    Ok(read_versioned_json_filled(
+        path,
+        RESULT_SCHEMA_VERSION,
+        fill_older_budget,
+    )?)
+}
+
+/// Every `result.json` under each of `dirs` (at any depth), in path order:
+/// finished cells of any number of experiments, kept or running.
+pub fn collect_results(dirs: &[PathBuf]) -> Result<Vec<CellResult>, ExperimentError> {
+    let mut files = Vec::new();
+    let mut pending: Vec<PathBuf> = dirs.to_vec();
+    while let Some(dir) = pending.pop() {
+        let io = |e| ExperimentError::Io {
+            file: dir.clone(),
+            source: e,
+        };
+        for entry in std::fs::read_dir(&dir).map_err(io)? {
+            let path = entry.map_err(io)?.path();
+            if path.is_dir() {
+                pending.push(path);
+            } else if path.file_name().is_some_and(|n| n == RESULT) {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    files.iter().map(|f| read_result(f)).collect()
+}
+
 /// A budget recorded before `mopo_settings` existed ran MOPO on NUNO's SAC settings.
 fn fill_older_budget(value: &mut serde_json::Value) {
     if let Some(budget) = value.get_mut("budget").and_then(|b| b.as_object_mut()) {
@@ -133,8 +165,7 @@ pub fn cell_status(
     let dir = cell_dir(root, cell);
     let result = dir.join(RESULT);
     if result.is_file() {
-        let mut result: CellResult =
-            read_versioned_json_filled(&result, RESULT_SCHEMA_VERSION, fill_older_budget)?;
+        let mut result = read_result(&result)?;
         if !result.cell.is_same_cell_as(cell) {
             let old = &result.cell;
             return Err(ExperimentError::Invalid(format!(
@@ -373,37 +404,50 @@ pub fn markdown_table(summaries: &[Summary]) -> String {
     out
 }
 
+/// A finished hopper cell of 1000 steps for tests: `dataset` under Table 3's row `preset`.
+#[cfg(test)]
+pub(super) fn test_result(
+    index: usize,
+    dataset: &str,
+    preset: &str,
+    method: Method,
+    seed: u64,
+    best: f64,
+) -> CellResult {
+    use crate::envs::{ObservationLayout, TaskName};
+    CellResult {
+        schema_version: RESULT_SCHEMA_VERSION,
+        cell: Cell {
+            index,
+            dataset: dataset.into(),
+            file_in_grid: PathBuf::from(format!("{dataset}.hdf5")),
+            file: PathBuf::from(format!("{dataset}.hdf5")),
+            task: Some(TaskName::Hopper),
+            layout: ObservationLayout::D4rl,
+            preset: Some(preset.into()),
+            system_in_grid: None,
+            system: None,
+            policy: None,
+            method,
+            seed,
+        },
+        best_score: best,
+        best_step: 0,
+        final_score: 0.0,
+        steps: 1000,
+        curve: vec![(1000, 0.0)],
+        policy_seconds: None,
+        budget: None,
+        dataset_sha256: None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::envs::{ObservationLayout, TaskName};
 
     fn result(index: usize, dataset: &str, method: Method, seed: u64, best: f64) -> CellResult {
-        CellResult {
-            schema_version: RESULT_SCHEMA_VERSION,
-            cell: Cell {
-                index,
-                dataset: dataset.into(),
-                file_in_grid: PathBuf::from(format!("{dataset}.hdf5")),
-                file: PathBuf::from(format!("{dataset}.hdf5")),
-                task: Some(TaskName::Hopper),
-                layout: ObservationLayout::D4rl,
-                preset: Some("hopper-random".into()),
-                system_in_grid: None,
-                system: None,
-                policy: None,
-                method,
-                seed,
-            },
-            best_score: best,
-            best_step: 0,
-            final_score: 0.0,
-            steps: 1000,
-            curve: vec![(1000, 0.0)],
-            policy_seconds: None,
-            budget: None,
-            dataset_sha256: None,
-        }
+        test_result(index, dataset, "hopper-random", method, seed, best)
     }
 
     fn done(epochs: usize, policy_seconds: Option<f64>) -> CellStatus {

@@ -1,6 +1,7 @@
 //! `nuno-trainer experiment`: run a grid of datasets × methods × seeds
 //! (`run`, locally over a bounded pool of processes or as one Slurm job
-//! array), see where it stands (`status`) and aggregate it (`report`). Each
+//! array), see where it stands (`status`) and aggregate it (`report`; `table`
+//! lays several experiments out as the paper's Tables 1 and 2). Each
 //! cell is `fit-model`, then `fit-policy --resume`, then its `result.json`: a
 //! finished cell is never rerun and a killed one resumes at its last epoch.
 
@@ -17,8 +18,8 @@ use nuno::data::read_system_dataset;
 use nuno::envs::{ObservationLayout, System};
 use nuno::experiment::{
     Budget, Cell, CellResult, CellSelection, CellStatus, Grid, MeanCurve, cell_dir, cell_status,
-    markdown_table, mean_curves, policy_time_left, results_csv, summarize, summarize_run,
-    write_result,
+    collect_results, markdown_table, mean_curves, paper_layout_table, policy_time_left,
+    results_csv, summarize, summarize_run, write_result,
 };
 
 use crate::data_source::{DataSource, system_of};
@@ -37,6 +38,20 @@ pub enum Command {
     Status(StatusArgs),
     /// Aggregate the finished cells: results.csv, results.md, a learning-curve plot per dataset.
     Report(GridArgs),
+    /// The paper's Tables 1 and 2 laid out over the finished cells of any
+    /// number of experiment folders (kept results included), the paper's
+    /// figure beside each of nuno's.
+    Table(TableArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub struct TableArgs {
+    /// A folder holding finished cells' result.json at any depth (repeat it).
+    #[arg(long = "results", required = true)]
+    results: Vec<PathBuf>,
+    /// Where to write the table (markdown); printed either way.
+    #[arg(long)]
+    out: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -122,7 +137,27 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::RunCell(args) => run_cell(args),
         Command::Status(args) => status(args),
         Command::Report(args) => report(args),
+        Command::Table(args) => table(args),
     }
+}
+
+fn table(args: TableArgs) -> anyhow::Result<()> {
+    let results = collect_results(&args.results)?;
+    anyhow::ensure!(
+        !results.is_empty(),
+        "no result.json under {}",
+        args.results
+            .iter()
+            .map(|d| d.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let table = paper_layout_table(&results)?;
+    if let Some(out) = &args.out {
+        write_text(out, &table)?;
+    }
+    print!("{table}");
+    Ok(())
 }
 
 /// The selected cells of the grid, every name checked, and each of their
