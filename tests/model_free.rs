@@ -5,8 +5,9 @@
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData};
 use nuno::agent::{
-    ActorConfig, Bc, BcConfig, Cql, CqlConfig, CqlSamples, LearnerConfig, Method, ModelFreeConfig,
-    ModelFreeTraining, PortableActor, SacConfig, Td3Bc, Td3BcConfig, fold_input_normalization,
+    ActorConfig, Bc, BcConfig, Cql, CqlConfig, CqlSamples, Edac, EdacConfig, LearnerConfig, Method,
+    ModelFreeConfig, ModelFreeTraining, PortableActor, SacConfig, Td3Bc, Td3BcConfig,
+    fold_input_normalization,
 };
 use nuno::artifact::{
     collect_tensors, latest_checkpoint, load_model_free_checkpoint, save_model_free_checkpoint,
@@ -322,6 +323,105 @@ fn cql_pushes_down_the_values_of_unseen_actions() {
         conservative > plain + 1.0,
         "Q(data) − Q(uniform): {conservative:.3} with β = 5, {plain:.3} with β = 0"
     );
+}
+
+fn edac(critics: usize) -> Edac {
+    let device = Device::flex();
+    let sac = SacConfig::new()
+        .with_actor_hidden(vec![8, 8])
+        .with_critic_hidden(vec![8, 8]);
+    let config = EdacConfig::new().with_sac(sac).with_num_critics(critics);
+    seeded_init(&device, 12, || {
+        Edac::new(small_actor(3, 2), config, &device)
+    })
+}
+
+/// EDAC's diversity term against finite differences: each critic's action
+/// gradient by central differences, normalised, the pairwise products over
+/// i ≠ j summed per row, the mean over rows over N − 1.
+#[test]
+fn edac_diversity_term_matches_finite_differences() {
+    let agent = edac(4);
+    let device = Device::flex();
+    let (obs, actions) = (rows(5, 3, 0.1), rows(5, 2, 0.8));
+    let got = agent
+        .diversity_loss(
+            tensor(obs.clone(), [5, 3], agent.device()),
+            tensor(actions.clone(), [5, 2], agent.device()),
+        )
+        .into_scalar::<f32>();
+    let critics = agent.critics.valid();
+    let q = |j: usize, a: &[f32]| -> Vec<f64> {
+        let qs = critics.forward(
+            tensor(obs.clone(), [5, 3], &device),
+            tensor(a.to_vec(), [5, 2], &device),
+        );
+        to_f32_vec(qs[j].clone())
+            .into_iter()
+            .map(f64::from)
+            .collect()
+    };
+    let h = 1e-3f32;
+    // gradients[j][row][k]
+    let gradients: Vec<Vec<[f64; 2]>> = (0..4)
+        .map(|j| {
+            let mut g = vec![[0.0; 2]; 5];
+            for k in 0..2 {
+                let shifted = |sign: f32| -> Vec<f32> {
+                    (actions.iter().enumerate())
+                        .map(|(i, &a)| if i % 2 == k { a + sign * h } else { a })
+                        .collect()
+                };
+                let (up, down) = (q(j, &shifted(1.0)), q(j, &shifted(-1.0)));
+                for (row, (u, d)) in g.iter_mut().zip(up.iter().zip(&down)) {
+                    row[k] = (u - d) / (2.0 * f64::from(h));
+                }
+            }
+            for row in &mut g {
+                let norm = (row[0] * row[0] + row[1] * row[1]).sqrt() + 1e-10;
+                *row = [row[0] / norm, row[1] / norm];
+            }
+            g
+        })
+        .collect();
+    let mut total = 0.0;
+    for (i, gi) in gradients.iter().enumerate() {
+        for (j, gj) in gradients.iter().enumerate() {
+            if i != j {
+                total += (gi.iter().zip(gj))
+                    .map(|(a, b)| a[0] * b[0] + a[1] * b[1])
+                    .sum::<f64>();
+            }
+        }
+    }
+    let expected = total / 5.0 / 3.0;
+    assert!(
+        (f64::from(got) - expected).abs() < 2e-3,
+        "{got} vs {expected}"
+    );
+}
+
+/// EDAC's critics start as the reference's: every bias 0.1 but the last
+/// layer's, whose weights and bias lie within ±3e-3.
+#[test]
+fn edac_critics_start_as_the_reference() {
+    let agent = edac(3);
+    for member in &agent.critics.valid().members {
+        let last = member.layers.len() - 1;
+        for (i, layer) in member.layers.iter().enumerate() {
+            let bias = to_f32_vec(layer.bias.as_ref().unwrap().val().unsqueeze::<2>());
+            if i < last {
+                assert!(bias.iter().all(|&b| b == 0.1), "{bias:?}");
+            } else {
+                let weight = to_f32_vec(layer.weight.val());
+                assert!(
+                    weight.iter().chain(&bias).all(|w| w.abs() <= 3e-3),
+                    "{weight:?}"
+                );
+                assert!(weight.iter().any(|&w| w != 0.0));
+            }
+        }
+    }
 }
 
 fn small_dataset() -> Dataset {

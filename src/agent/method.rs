@@ -31,10 +31,12 @@ pub enum Method {
     Td3Bc,
     /// CQL (Kumar et al., 2020, OfflineRL-Kit's `run_cql.py`): no model.
     Cql,
+    /// EDAC (An et al., 2021, OfflineRL-Kit's `run_edac.py`): no model.
+    Edac,
 }
 
 impl Method {
-    pub const ALL: [Method; 8] = [
+    pub const ALL: [Method; 9] = [
         Method::Nuno,
         Method::NunoR,
         Method::NunoAl,
@@ -43,6 +45,7 @@ impl Method {
         Method::Bc,
         Method::Td3Bc,
         Method::Cql,
+        Method::Edac,
     ];
 
     /// The name in grid files, and `fit-policy --algo`'s.
@@ -56,6 +59,7 @@ impl Method {
             Method::Bc => "bc",
             Method::Td3Bc => "td3-bc",
             Method::Cql => "cql",
+            Method::Edac => "edac",
         }
     }
 
@@ -73,7 +77,7 @@ impl Method {
             Method::Nuno | Method::NunoAl => Some("sde"),
             Method::NunoR => Some("sde-reward"),
             Method::Mopo | Method::TatuMopo => Some("ensemble"),
-            Method::Bc | Method::Td3Bc | Method::Cql => None,
+            Method::Bc | Method::Td3Bc | Method::Cql | Method::Edac => None,
         }
     }
 
@@ -114,7 +118,9 @@ impl Method {
             Method::Nuno | Method::NunoR => Truncation::ModelTable,
             Method::NunoAl => Truncation::AleatoricCvar,
             Method::TatuMopo => Truncation::DatasetDisagreement,
-            Method::Mopo | Method::Bc | Method::Td3Bc | Method::Cql => Truncation::Never,
+            Method::Mopo | Method::Bc | Method::Td3Bc | Method::Cql | Method::Edac => {
+                Truncation::Never
+            }
         }
     }
 }

@@ -8,6 +8,7 @@ mod bc;
 mod buffer;
 mod cql;
 mod critic;
+mod edac;
 mod fused_actor;
 mod fused_sac;
 mod method;
@@ -29,6 +30,7 @@ pub use bc::{Bc, BcConfig};
 pub use buffer::ReplayBuffer;
 pub use cql::{Cql, CqlConfig, CqlSamples};
 pub use critic::{Temperature, TwinCritic};
+pub use edac::{CriticEnsemble, Edac, EdacConfig};
 pub use fused_actor::FusedActor;
 pub use fused_sac::{FusedGradients, FusedSac};
 pub use method::{Method, Truncation};
@@ -52,8 +54,8 @@ pub use policy_loop::{
 };
 pub use portable_actor::PortableActor;
 pub use presets::{
-    MOPO_PRESETS, PRESETS, Preset, TATU_DEFAULT_PESSIMISM, TATU_PESSIMISM, mopo_preset, preset,
-    tatu_pessimism,
+    EDAC_PRESETS, MOPO_PRESETS, PRESETS, Preset, TATU_DEFAULT_PESSIMISM, TATU_PESSIMISM,
+    edac_preset, mopo_preset, preset, tatu_pessimism,
 };
 pub use sac::{Sac, SacAdam, SacConfig, SacLosses};
 pub use td3_bc::{Td3Bc, Td3BcAdam, Td3BcConfig};

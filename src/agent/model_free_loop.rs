@@ -1,4 +1,4 @@
-//! The model-free offline methods' loop (BC, TD3+BC, CQL), one epoch at a time so
+//! The model-free offline methods' loop (BC, TD3+BC, CQL, EDAC), one epoch at a time so
 //! a caller can checkpoint between epochs, as the model-based loop
 //! ([`super::PolicyTraining`]) runs but with no model and no rollouts:
 //!
@@ -24,8 +24,10 @@ use super::AgentError;
 use super::actor::{ActionMode, Actor, ActorConfig, ActorPolicy};
 use super::bc::{Bc, BcConfig};
 use super::cql::{Cql, CqlConfig};
+use super::edac::{Edac, EdacConfig};
 use super::method::Method;
 use super::policy_loop::{EpochRecord, EvalSummary, PhaseSeconds};
+use super::presets::edac_preset;
 use super::sac::SacLosses;
 use super::td3_bc::{Td3Bc, Td3BcConfig};
 use crate::data::{Dataset, NormalizerConfig, Stats, TransitionSampler};
@@ -43,19 +45,34 @@ pub enum LearnerConfig {
     Bc(BcConfig),
     Td3Bc(Td3BcConfig),
     Cql(CqlConfig),
+    Edac(EdacConfig),
 }
 
 impl LearnerConfig {
-    /// The reference implementation's settings for a model-free `method`.
+    /// The reference implementation's settings for a model-free `method`
+    /// (EDAC's N and η at its defaults: [`LearnerConfig::for_dataset`] reads
+    /// its per-task table).
     pub fn for_method(method: Method) -> Result<Self, AgentError> {
         match method {
             Method::Bc => Ok(Self::Bc(BcConfig::new())),
             Method::Td3Bc => Ok(Self::Td3Bc(Td3BcConfig::new())),
             Method::Cql => Ok(Self::Cql(CqlConfig::new())),
+            Method::Edac => Ok(Self::Edac(EdacConfig::new())),
             other => Err(AgentError::Mismatch(format!(
                 "{other} trains in a model, not on the dataset alone"
             ))),
         }
+    }
+
+    /// The reference's settings for `method` on the dataset of Table 3's row
+    /// `preset`: EDAC's N and η from its per-task table (an error for a
+    /// dataset it has none for).
+    pub fn for_dataset(method: Method, preset: &str) -> Result<Self, AgentError> {
+        let mut config = Self::for_method(method)?;
+        if let Self::Edac(c) = &mut config {
+            (c.num_critics, c.eta) = edac_preset(preset)?;
+        }
+        Ok(config)
     }
 
     pub fn method(&self) -> Method {
@@ -63,6 +80,7 @@ impl LearnerConfig {
             Self::Bc(_) => Method::Bc,
             Self::Td3Bc(_) => Method::Td3Bc,
             Self::Cql(_) => Method::Cql,
+            Self::Edac(_) => Method::Edac,
         }
     }
 
@@ -72,6 +90,7 @@ impl LearnerConfig {
             Self::Bc(c) => c.batch_size,
             Self::Td3Bc(c) => c.batch_size,
             Self::Cql(c) => c.sac.batch_size,
+            Self::Edac(c) => c.sac.batch_size,
         }
     }
 
@@ -81,6 +100,7 @@ impl LearnerConfig {
             Self::Bc(c) => c.hidden.clone(),
             Self::Td3Bc(c) => c.actor_hidden.clone(),
             Self::Cql(c) => c.sac.actor_hidden.clone(),
+            Self::Edac(c) => c.sac.actor_hidden.clone(),
         }
     }
 
@@ -91,8 +111,8 @@ impl LearnerConfig {
             Self::Td3Bc(c) => {
                 (c.actor_hidden, c.critic_hidden) = (hidden.to_vec(), hidden.to_vec());
             }
-            Self::Cql(c) => {
-                (c.sac.actor_hidden, c.sac.critic_hidden) = (hidden.to_vec(), hidden.to_vec());
+            Self::Cql(CqlConfig { sac, .. }) | Self::Edac(EdacConfig { sac, .. }) => {
+                (sac.actor_hidden, sac.critic_hidden) = (hidden.to_vec(), hidden.to_vec());
             }
         }
     }
@@ -102,12 +122,14 @@ impl LearnerConfig {
         match self {
             Self::Bc(c) => c.batch_size = batch_size,
             Self::Td3Bc(c) => c.batch_size = batch_size,
-            Self::Cql(c) => c.sac.batch_size = batch_size,
+            Self::Cql(CqlConfig { sac, .. }) | Self::Edac(EdacConfig { sac, .. }) => {
+                sac.batch_size = batch_size;
+            }
         }
     }
 
-    /// Whether the method trains on normalised states (TD3+BC does; BC and
-    /// CQL do not, as OfflineRL-Kit runs them).
+    /// Whether the method trains on normalised states (TD3+BC does; BC, CQL
+    /// and EDAC do not, as OfflineRL-Kit runs them).
     pub fn normalizes_states(&self) -> bool {
         matches!(self, Self::Td3Bc(_))
     }
@@ -130,6 +152,7 @@ pub enum Learner {
     Bc(Box<Bc>),
     Td3Bc(Box<Td3Bc>),
     Cql(Box<Cql>),
+    Edac(Box<Edac>),
 }
 
 impl crate::nn::Initialised for Learner {
@@ -138,6 +161,7 @@ impl crate::nn::Initialised for Learner {
             Self::Bc(bc) => bc.draw_parameters(),
             Self::Td3Bc(td3) => td3.draw_parameters(),
             Self::Cql(cql) => cql.draw_parameters(),
+            Self::Edac(edac) => edac.draw_parameters(),
         }
     }
 }
@@ -149,6 +173,7 @@ impl Learner {
             Self::Bc(bc) => &bc.actor,
             Self::Td3Bc(td3) => &td3.actor,
             Self::Cql(cql) => &cql.sac.actor,
+            Self::Edac(edac) => &edac.actor,
         }
     }
 
@@ -161,6 +186,7 @@ impl Learner {
             Self::Bc(bc) => bc.update(batch),
             Self::Td3Bc(td3) => td3.update(batch, rng),
             Self::Cql(cql) => cql.update(batch, rng),
+            Self::Edac(edac) => edac.update(batch, rng),
         }
     }
 }
@@ -218,6 +244,7 @@ impl ModelFreeTraining {
                 Learner::Td3Bc(Box::new(Td3Bc::new(actor, c.clone(), device)))
             }
             LearnerConfig::Cql(c) => Learner::Cql(Box::new(Cql::new(actor, c.clone(), device))),
+            LearnerConfig::Edac(c) => Learner::Edac(Box::new(Edac::new(actor, c.clone(), device))),
         });
         let state_stats = config
             .learner

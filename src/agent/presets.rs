@@ -148,3 +148,34 @@ pub fn tatu_pessimism(name: &str) -> f64 {
         .find(|(n, _)| *n == name)
         .map_or(TATU_DEFAULT_PESSIMISM, |&(_, p)| p)
 }
+
+/// EDAC's critics N and diversity weight η for a D4RL dataset (OfflineRL-Kit's
+/// `run_edac.py` "suggested hypers"), by Table 3's names; none for the random
+/// datasets or NeoRL.
+pub const EDAC_PRESETS: [(&str, usize, f64); 9] = [
+    ("halfcheetah-medium", 10, 1.0),
+    ("hopper-medium", 50, 1.0),
+    ("walker2d-medium", 10, 1.0),
+    ("halfcheetah-medium-replay", 10, 1.0),
+    ("hopper-medium-replay", 50, 1.0),
+    ("walker2d-medium-replay", 10, 1.0),
+    ("halfcheetah-medium-expert", 10, 5.0),
+    ("hopper-medium-expert", 50, 1.0),
+    ("walker2d-medium-expert", 10, 5.0),
+];
+
+/// EDAC's (N, η) for the dataset `name` names.
+pub fn edac_preset(name: &str) -> Result<(usize, f64), AgentError> {
+    EDAC_PRESETS
+        .iter()
+        .find(|(n, _, _)| *n == name)
+        .map(|&(_, n, eta)| (n, eta))
+        .ok_or_else(|| AgentError::UnknownPreset {
+            name: format!("{name} (for EDAC's critics and η)"),
+            known: EDAC_PRESETS
+                .iter()
+                .map(|(n, _, _)| *n)
+                .collect::<Vec<_>>()
+                .join(", "),
+        })
+}

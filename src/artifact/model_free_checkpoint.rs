@@ -1,4 +1,4 @@
-//! Checkpoints of a model-free run (BC, TD3+BC, CQL), one per finished epoch, laid
+//! Checkpoints of a model-free run (BC, TD3+BC, CQL, EDAC), one per finished epoch, laid
 //! out as policy optimisation's (`checkpoints/epoch-NNNNNN/` named by
 //! `LATEST`, written under a temporary name, fsynced, renamed): the learner's
 //! networks and Adam moments by module path, the generator's position, the
@@ -58,6 +58,12 @@ fn networks(learner: &Learner) -> Vec<(&'static str, NamedTensors)> {
             ("target_critic", collect_tensors(&cql.sac.target_critic)),
             ("temperature", collect_tensors(&cql.sac.temperature)),
         ],
+        Learner::Edac(edac) => vec![
+            ("actor", collect_tensors(&edac.actor)),
+            ("critic", collect_tensors(&edac.critics)),
+            ("target_critic", collect_tensors(&edac.target_critics)),
+            ("temperature", collect_tensors(&edac.temperature)),
+        ],
     }
 }
 
@@ -69,6 +75,11 @@ fn optimizers(learner: &Learner) -> Vec<(&'static str, &AdamState)> {
             ("actor", &cql.sac.adam.actor),
             ("critic", &cql.sac.adam.critic),
             ("temperature", &cql.sac.adam.alpha),
+        ],
+        Learner::Edac(edac) => vec![
+            ("actor", &edac.adam.actor),
+            ("critic", &edac.adam.critic),
+            ("temperature", &edac.adam.alpha),
         ],
     }
 }
@@ -100,7 +111,7 @@ fn write_contents(dir: &Path, training: &ModelFreeTraining) -> Result<(), Artifa
     let adam = safetensors_bytes(&adam, None)?;
     write_synced(&dir.join(ADAM), &adam)?;
     let (learner_updates, last_actor_loss) = match &training.learner {
-        Learner::Bc(_) | Learner::Cql(_) => (0, 0.0),
+        Learner::Bc(_) | Learner::Cql(_) | Learner::Edac(_) => (0, 0.0),
         Learner::Td3Bc(td3) => (td3.updates, td3.last_actor_loss),
     };
     let state = ModelFreeState {
@@ -193,6 +204,19 @@ pub fn load_model_free_checkpoint(
             sac.adam.actor = moments("actor")?;
             sac.adam.critic = moments("critic")?;
             sac.adam.alpha = moments("temperature")?;
+        }
+        Learner::Edac(edac) => {
+            let device = edac.device().clone();
+            let plain = device.clone().inner();
+            edac.actor = load_tensors(edac.actor.clone(), &part("actor"), &device)?;
+            edac.critics = load_tensors(edac.critics.clone(), &part("critic"), &device)?;
+            edac.target_critics =
+                load_tensors(edac.target_critics.clone(), &part("target_critic"), &plain)?;
+            edac.temperature =
+                load_tensors(edac.temperature.clone(), &part("temperature"), &device)?;
+            edac.adam.actor = moments("actor")?;
+            edac.adam.critic = moments("critic")?;
+            edac.adam.alpha = moments("temperature")?;
         }
     }
     if let Some(extra) = adam.keys().next() {

@@ -463,8 +463,10 @@ fn model_free_methods_train_on_the_dataset_alone() {
         args.extend(extra.iter().map(|e| e.to_string()));
         args
     };
-    for algo in ["bc", "td3-bc", "cql"] {
-        ok(&fit(algo, algo, &[]));
+    for algo in ["bc", "td3-bc", "cql", "edac"] {
+        // OfflineRL-Kit gives EDAC no critics or η for the random datasets.
+        let edac = ["--edac-critics", "3", "--edac-eta", "1"];
+        ok(&fit(algo, algo, if algo == "edac" { &edac } else { &[] }));
         let run = tmp.path().join(algo);
         let policy: serde_json::Value =
             serde_json::from_slice(&std::fs::read(run.join("policy.json")).unwrap()).unwrap();
@@ -512,6 +514,13 @@ fn model_free_methods_train_on_the_dataset_alone() {
         err.contains("--task walker2d and the preset hopper-random"),
         "{err}"
     );
+    let err = fails(&fit("edac", "bad", &[]));
+    assert!(
+        err.contains("unknown preset `hopper-random (for EDAC's critics and η)`"),
+        "{err}"
+    );
+    let err = fails(&fit("bc", "bad", &["--edac-eta", "2"]));
+    assert!(err.contains("--edac-eta are EDAC's"), "{err}");
     let err = fails(&fit("mopo", "bad", &[]));
     assert!(
         err.contains("--algo mopo trains in a model: give --model"),

@@ -41,7 +41,7 @@ fn loop_defaults() -> PolicyLoopConfig {
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Model directory written by `fit-model` or `fit-ensemble` (the policies
-    /// are saved there too); not for bc and td3-bc, which learn from the dataset alone.
+    /// are saved there too); not for the model-free methods (bc, td3-bc, cql, edac).
     #[arg(long)]
     pub model: Option<PathBuf>,
     /// The dataset the model was fitted on (start states and real transitions).
@@ -56,17 +56,23 @@ pub struct Args {
     #[arg(long)]
     pub preset: Option<String>,
     /// The method: nuno, nuno-r and nuno-al train in the neural SDE of fit-model,
-    /// mopo and tatu-mopo in the Gaussian ensemble of fit-ensemble; bc and
-    /// td3-bc on the dataset alone (no --model).
+    /// mopo and tatu-mopo in the Gaussian ensemble of fit-ensemble; bc, td3-bc,
+    /// cql and edac on the dataset alone (no --model).
     #[arg(long, default_value_t = Method::Nuno)]
     pub algo: Method,
-    /// bc and td3-bc: the built-in task the data is of (default: the preset's).
+    /// edac: the critics N (default: OfflineRL-Kit's for the preset's dataset).
+    #[arg(long)]
+    pub edac_critics: Option<usize>,
+    /// edac: the diversity weight η (default: OfflineRL-Kit's for the preset's dataset).
+    #[arg(long)]
+    pub edac_eta: Option<f64>,
+    /// The model-free methods: the built-in task the data is of (default: the preset's).
     #[arg(long, conflicts_with = "system")]
     pub task: Option<TaskName>,
-    /// bc and td3-bc: a system file (with a [mujoco] table to evaluate in) in place of --task.
+    /// The model-free methods: a system file (with a [mujoco] table to evaluate in) in place of --task.
     #[arg(long)]
     pub system: Option<PathBuf>,
-    /// bc and td3-bc with --task: NeoRL's observation layout (root x included).
+    /// The model-free methods with --task: NeoRL's observation layout (root x included).
     #[arg(long, conflicts_with = "system")]
     pub neorl: bool,
     /// TATU's pessimism coefficient (tatu-mopo; default: TATU's for the dataset, else 2).
@@ -135,7 +141,7 @@ pub struct Args {
     #[arg(long)]
     pub out: PathBuf,
     /// Where the best and last policies are written (default: --model, next to
-    /// the dynamics, where the server finds them; --out for bc and td3-bc).
+    /// the dynamics, where the server finds them; --out for the model-free methods).
     #[arg(long)]
     pub policies: Option<PathBuf>,
     /// Continue from the last checkpoint in --out.
@@ -256,7 +262,7 @@ impl Args {
         })?;
         anyhow::ensure!(
             self.task.is_none() && self.system.is_none() && !self.neorl,
-            "--task, --system and --neorl name bc's and td3-bc's system; --algo {} reads its model's",
+            "--task, --system and --neorl name a model-free method's system; --algo {} reads its model's",
             self.algo
         );
         let hidden = (self.hidden.clone()).unwrap_or_else(|| self.algo.default_hidden());

@@ -1,4 +1,4 @@
-//! fit-policy for the methods that learn from the dataset alone (bc, td3-bc):
+//! fit-policy for the methods that learn from the dataset alone (bc, td3-bc, cql, edac):
 //! the same flags, run record, checkpoints, metrics and policies as the
 //! model-based methods, with no model.
 
@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use nuno::agent::{LearnerConfig, ModelFreeConfig, ModelFreeTraining, Preset};
+use nuno::agent::{LearnerConfig, Method, ModelFreeConfig, ModelFreeTraining, Preset};
 use nuno::artifact::{
     BEST_POLICY, LAST_POLICY, PolicyProvenance, load_model_free_checkpoint,
     save_model_free_checkpoint, save_policy, sha256_file,
@@ -77,7 +77,7 @@ impl Args {
             task.is_some() || self.system.is_some(),
             "--algo {algo} needs the data's system: --task, --system or a --preset naming a task"
         );
-        let mut learner = LearnerConfig::for_method(algo)?;
+        let mut learner = self.learner(preset)?;
         learner.set_batch_size(self.batch_size);
         if let Some(hidden) = &self.hidden {
             learner.set_hidden(hidden);
@@ -94,6 +94,35 @@ impl Args {
                 seed: self.seed,
             },
         })
+    }
+}
+
+impl Args {
+    /// The method's reference settings; EDAC's N and η from its table for the
+    /// preset's dataset unless both flags give them.
+    fn learner(&self, preset: Option<&'static Preset>) -> anyhow::Result<LearnerConfig> {
+        let algo = self.algo;
+        let flags = (self.edac_critics, self.edac_eta);
+        if algo != Method::Edac {
+            anyhow::ensure!(
+                flags == (None, None),
+                "--edac-critics and --edac-eta are EDAC's: they need --algo edac"
+            );
+            return Ok(LearnerConfig::for_method(algo)?);
+        }
+        let mut learner = match (flags, preset) {
+            ((Some(_), Some(_)), _) => LearnerConfig::for_method(algo)?,
+            (_, Some(preset)) => LearnerConfig::for_dataset(algo, preset.name)?,
+            (_, None) => anyhow::bail!(
+                "--algo edac takes its critics and η per dataset: give a --preset OfflineRL-Kit has them for, or --edac-critics and --edac-eta"
+            ),
+        };
+        if let LearnerConfig::Edac(c) = &mut learner {
+            anyhow::ensure!(flags.0 != Some(0), "--edac-critics must be at least 1");
+            c.num_critics = flags.0.unwrap_or(c.num_critics);
+            c.eta = flags.1.unwrap_or(c.eta);
+        }
+        Ok(learner)
     }
 }
 
