@@ -177,7 +177,19 @@ impl Learner {
         }
     }
 
-    fn update(
+    /// A fresh learner for `actor`'s state and action box (call it inside
+    /// [`crate::nn::seeded_init`] for seeded weights).
+    pub fn new(actor: ActorConfig, config: &LearnerConfig, device: &Device) -> Self {
+        match config {
+            LearnerConfig::Bc(c) => Self::Bc(Box::new(Bc::new(actor, c.clone(), device))),
+            LearnerConfig::Td3Bc(c) => Self::Td3Bc(Box::new(Td3Bc::new(actor, c.clone(), device))),
+            LearnerConfig::Cql(c) => Self::Cql(Box::new(Cql::new(actor, c.clone(), device))),
+            LearnerConfig::Edac(c) => Self::Edac(Box::new(Edac::new(actor, c.clone(), device))),
+        }
+    }
+
+    /// One update on `batch` (states as the learner sees them).
+    pub fn update(
         &mut self,
         batch: &crate::shared::TransitionBatch,
         rng: &mut ChaCha8Rng,
@@ -238,13 +250,8 @@ impl ModelFreeTraining {
         }
         let (low, high) = shape.action_space().into_iter().unzip();
         let actor = ActorConfig::new(shape.obs_dim, shape.act_dim, low, high);
-        let learner = crate::nn::seeded_init(device, config.seed, || match &config.learner {
-            LearnerConfig::Bc(c) => Learner::Bc(Box::new(Bc::new(actor, c.clone(), device))),
-            LearnerConfig::Td3Bc(c) => {
-                Learner::Td3Bc(Box::new(Td3Bc::new(actor, c.clone(), device)))
-            }
-            LearnerConfig::Cql(c) => Learner::Cql(Box::new(Cql::new(actor, c.clone(), device))),
-            LearnerConfig::Edac(c) => Learner::Edac(Box::new(Edac::new(actor, c.clone(), device))),
+        let learner = crate::nn::seeded_init(device, config.seed, || {
+            Learner::new(actor, &config.learner, device)
         });
         let state_stats = config
             .learner

@@ -1,0 +1,96 @@
+//! Update speed of the model-free baselines (BC, TD3+BC, CQL, EDAC with 10 and
+//! 50 critics) at hopper's shape (obs 11, act 3), batch 256, each at its
+//! reference settings, beside SAC's burn update on the same shape: all of them
+//! run on burn's kernels (no fused path yet).
+//!
+//! Run: `cargo bench --bench model_free`.
+
+use std::time::Instant;
+
+use burn::tensor::Device;
+use nuno::agent::{ActorConfig, Learner, LearnerConfig, Method, Sac, SacConfig};
+use nuno::nn::seeded_init;
+use nuno::shared::TransitionBatch;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+
+const OBS: usize = 11;
+const ACT: usize = 3;
+const BATCH: usize = 256;
+
+/// Best seconds per update over 3 rounds of `n`, after `n / 5 + 1` warm-up updates.
+fn time(n: usize, mut update: impl FnMut()) -> f64 {
+    for _ in 0..n / 5 + 1 {
+        update();
+    }
+    let mut best = f64::MAX;
+    for _ in 0..3 {
+        let start = Instant::now();
+        for _ in 0..n {
+            update();
+        }
+        best = best.min(start.elapsed().as_secs_f64() / n as f64);
+    }
+    best
+}
+
+fn main() {
+    let device = Device::flex();
+    let actor = || ActorConfig::new(OBS, ACT, vec![-1.0; ACT], vec![1.0; ACT]);
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let mut normal =
+        |n: usize| -> Vec<f32> { (0..n).map(|_| rng.sample(StandardNormal)).collect() };
+    let batch = TransitionBatch {
+        observations: normal(BATCH * OBS),
+        actions: normal(BATCH * ACT).iter().map(|x: &f32| x.tanh()).collect(),
+        rewards: normal(BATCH),
+        next_observations: normal(BATCH * OBS),
+        terminals: vec![0.0; BATCH],
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    println!("| update, hopper's shape, batch {BATCH} | networks | updates/s | ms | × SAC's |");
+    println!("|---|---|---|---|---|");
+    let mut sac = seeded_init(&device, 0, || Sac::new(actor(), SacConfig::new(), &device));
+    let sac_seconds = time(50, || {
+        sac.update(&batch, &mut rng);
+    });
+    let row = |name: &str, networks: &str, seconds: f64| {
+        println!(
+            "| {name} | {networks} | {:.1} | {:.2} | {:.2} |",
+            1.0 / seconds,
+            seconds * 1e3,
+            sac_seconds / seconds
+        );
+    };
+    row("SAC (burn)", "2×256, 2 critics", sac_seconds);
+    let learners = [
+        ("BC", LearnerConfig::for_method(Method::Bc), 50),
+        ("TD3+BC", LearnerConfig::for_method(Method::Td3Bc), 50),
+        ("CQL", LearnerConfig::for_method(Method::Cql), 10),
+        ("EDAC, N = 10", LearnerConfig::for_method(Method::Edac), 10),
+        (
+            "EDAC, N = 50 (hopper)",
+            LearnerConfig::for_dataset(Method::Edac, "hopper-medium"),
+            3,
+        ),
+    ];
+    for (name, config, n) in learners {
+        let config = config.expect("a model-free method");
+        let hidden = config.hidden();
+        let critics = match &config {
+            LearnerConfig::Bc(_) => 0,
+            LearnerConfig::Edac(c) => c.num_critics,
+            _ => 2,
+        };
+        let mut learner = seeded_init(&device, 0, || Learner::new(actor(), &config, &device));
+        let seconds = time(n, || {
+            learner.update(&batch, &mut rng);
+        });
+        row(
+            name,
+            &format!("{}×{}, {critics} critics", hidden.len(), hidden[0]),
+            seconds,
+        );
+    }
+}
