@@ -5,9 +5,9 @@
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData};
 use nuno::agent::{
-    ActorConfig, Bc, BcConfig, Cql, CqlConfig, CqlSamples, Edac, EdacConfig, LearnerConfig, Method,
-    ModelFreeConfig, ModelFreeTraining, PortableActor, SacConfig, Td3Bc, Td3BcConfig,
-    fold_input_normalization,
+    ActorConfig, Bc, BcConfig, ConservativeTerm, Cql, CqlConfig, CqlSamples, Edac, EdacConfig,
+    LearnerConfig, Method, ModelFreeConfig, ModelFreeTraining, PortableActor, SacConfig, Td3Bc,
+    Td3BcConfig, fold_input_normalization,
 };
 use nuno::artifact::{
     collect_tensors, latest_checkpoint, load_model_free_checkpoint, save_model_free_checkpoint,
@@ -211,10 +211,10 @@ fn cql_config(weight: f64) -> CqlConfig {
     let sac = SacConfig::new()
         .with_actor_hidden(vec![16, 16])
         .with_critic_hidden(vec![16, 16]);
-    CqlConfig::new()
-        .with_sac(sac)
+    let term = ConservativeTerm::new()
         .with_cql_weight(weight)
-        .with_num_repeat_actions(3)
+        .with_num_repeat_actions(3);
+    CqlConfig::new().with_sac(sac).with_term(term)
 }
 
 /// CQL's conservative term by hand: each of the B·N repeated rows takes the
@@ -282,6 +282,47 @@ fn cql_conservative_term_is_the_reference_log_sum_exp() {
     let data = q1(&obs, tensor(actions, [2, 2], &plain), 2);
     let expected = 5.0 * (lse - (data[0] + data[1]) / 2.0);
     assert!((term1 - expected).abs() < 1e-4, "{term1} vs {expected}");
+}
+
+/// COMBO's split: the data term reads the batch's first (real) rows only,
+/// the log-sum-exp every row, so moving the split by k rows changes the term
+/// by β·(mean Q over all rows − mean Q over the first k) exactly.
+#[test]
+fn combo_data_term_reads_the_real_rows_only() {
+    let device = Device::flex();
+    let cql = seeded_init(&device, 7, || {
+        Cql::new(small_actor(3, 2), cql_config(5.0), &device)
+    });
+    let (obs, next_obs, actions) = (rows(4, 3, 0.0), rows(4, 3, 1.0), rows(4, 2, 2.0));
+    let samples = || CqlSamples {
+        noise_at_state: tensor(rows(12, 2, 3.0), [12, 2], cql.device()),
+        noise_at_next: tensor(rows(12, 2, 4.0), [12, 2], cql.device()),
+        uniform: tensor(rows(12, 2, 5.0), [12, 2], cql.device()),
+    };
+    let term = |data_rows: usize| -> f64 {
+        let (t1, _) = cql.config.term.terms(
+            &cql.sac,
+            tensor(obs.clone(), [4, 3], cql.device()),
+            tensor(next_obs.clone(), [4, 3], cql.device()),
+            tensor(actions.clone(), [4, 2], cql.device()),
+            samples(),
+            data_rows,
+        );
+        f64::from(t1.into_scalar::<f32>())
+    };
+    let (q1, _) = cql.sac.critic.valid().forward(
+        tensor(obs.clone(), [4, 3], &device),
+        tensor(actions.clone(), [4, 2], &device),
+    );
+    let q: Vec<f64> = to_f32_vec(q1).into_iter().map(f64::from).collect();
+    let mean = |k: usize| q[..k].iter().sum::<f64>() / k as f64;
+    let expected = 5.0 * (mean(4) - mean(1));
+    let got = term(1) - term(4);
+    assert!((got - expected).abs() < 1e-4, "{got} vs {expected}");
+    assert!(
+        expected.abs() > 1e-3,
+        "the split must matter here: {expected}"
+    );
 }
 
 /// The term does its job: trained on one batch, CQL's critics value uniform

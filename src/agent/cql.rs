@@ -32,7 +32,14 @@ pub struct CqlConfig {
     /// SAC's settings: [256, 256, 256] networks, actor lr 1e-4, critic 3e-4, α lr 1e-4.
     #[config(default = "CqlConfig::kit_sac()")]
     pub sac: SacConfig,
-    /// β, the conservative term's weight (5 for every D4RL task).
+    #[config(default = "ConservativeTerm::new()")]
+    pub term: ConservativeTerm,
+}
+
+/// The conservative term's settings (CQL's, and COMBO's on model rollouts).
+#[derive(Config, Debug, PartialEq)]
+pub struct ConservativeTerm {
+    /// β, the term's weight (CQL: 5 for every D4RL task; COMBO per task).
     #[config(default = 5.0)]
     pub cql_weight: f64,
     /// T, the log-sum-exp's temperature.
@@ -86,10 +93,35 @@ impl Cql {
         self.sac.device()
     }
 
+    /// Each critic's conservative term on `obs` (every row a dataset row).
+    pub fn conservative_terms(
+        &self,
+        obs: Tensor<2>,
+        next_obs: Tensor<2>,
+        actions: Tensor<2>,
+        samples: CqlSamples,
+    ) -> (Tensor<1>, Tensor<1>) {
+        let rows = obs.dims()[0];
+        (self.config.term).terms(&self.sac, obs, next_obs, actions, samples, rows)
+    }
+
+    /// One update on `batch`, every row a dataset row.
+    pub fn update(&mut self, batch: &TransitionBatch, rng: &mut ChaCha8Rng) -> SacLosses {
+        let rows = batch.rewards.len();
+        self.config.term.update(&mut self.sac, batch, rows, rng)
+    }
+}
+
+impl ConservativeTerm {
     /// Draws the term's samples for `rows` states on `device`.
-    pub fn draw_samples(&self, rows: usize, rng: &mut ChaCha8Rng, device: &Device) -> CqlSamples {
-        let act_dim = self.sac.actor.config.act_dim;
-        let n = rows * self.config.num_repeat_actions;
+    pub fn draw_samples(
+        &self,
+        act_dim: usize,
+        rows: usize,
+        rng: &mut ChaCha8Rng,
+        device: &Device,
+    ) -> CqlSamples {
+        let n = rows * self.num_repeat_actions;
         let uniform: Vec<f32> = (0..n * act_dim)
             .map(|_| rng.random_range(-1.0f32..1.0))
             .collect();
@@ -100,19 +132,22 @@ impl Cql {
         }
     }
 
-    /// Each critic's conservative term, β·(T·mean LSE_T(X) − mean Q_i(s, a)),
-    /// as the module doc says.
+    /// Each critic's term, β·(T·mean LSE_T(X) − mean Q_i(s, a)), as the module
+    /// doc says: the LSE over every row of `obs` (COMBO's ρ: the mixed batch),
+    /// the data term over its first `data_rows` (the real ones).
     ///
     /// # Shapes
     /// - `obs`, `next_obs`: `[B, obs_dim]`, `actions`: `[B, act_dim]`; samples `[B·N, act_dim]`
-    pub fn conservative_terms(
+    pub fn terms(
         &self,
+        sac: &Sac,
         obs: Tensor<2>,
         next_obs: Tensor<2>,
         actions: Tensor<2>,
         samples: CqlSamples,
+        data_rows: usize,
     ) -> (Tensor<1>, Tensor<1>) {
-        let repeat = self.config.num_repeat_actions;
+        let repeat = self.num_repeat_actions;
         let repeated = |x: Tensor<2>| {
             let [b, w] = x.dims();
             x.unsqueeze_dim::<3>(1)
@@ -120,18 +155,18 @@ impl Cql {
                 .reshape([b * repeat, w])
         };
         let (obs_n, next_n) = (repeated(obs.clone()), repeated(next_obs));
-        let actor = &self.sac.actor;
-        let at_state = actor.sample(obs_n.clone(), samples.noise_at_state);
-        let at_next = actor.sample(next_n, samples.noise_at_next);
-        let act_dim = actor.config.act_dim as f32;
+        let at_state = sac.actor.sample(obs_n.clone(), samples.noise_at_state);
+        let at_next = sac.actor.sample(next_n, samples.noise_at_next);
+        let act_dim = sac.actor.config.act_dim as f32;
         let uniform_log_density = act_dim * 0.5f32.ln();
-        let critic = &self.sac.critic;
+        let critic = &sac.critic;
         let (pi1, pi2) = critic.forward(obs_n.clone(), at_state.action);
         let (next1, next2) = critic.forward(obs_n.clone(), at_next.action);
         let (rand1, rand2) = critic.forward(obs_n, samples.uniform);
         let (log_pi, log_pi_next) = (at_state.log_prob.detach(), at_next.log_prob.detach());
-        let (data1, data2) = critic.forward(obs, actions);
-        let temperature = self.config.temperature;
+        let (data1, data2) =
+            critic.forward(obs.narrow(0, 0, data_rows), actions.narrow(0, 0, data_rows));
+        let temperature = self.temperature;
         let term = |pi: Tensor<2>, next: Tensor<2>, random: Tensor<2>, data: Tensor<2>| {
             let x = Tensor::cat(
                 vec![
@@ -142,7 +177,7 @@ impl Cql {
                 1,
             );
             let lse = log_sum_exp_rows(x / temperature) * temperature;
-            (lse.mean() - data.mean()) * self.config.cql_weight
+            (lse.mean() - data.mean()) * self.cql_weight
         };
         (
             term(pi1, next1, rand1, data1),
@@ -150,13 +185,19 @@ impl Cql {
         )
     }
 
-    /// One update on `batch`: actor, α, then the critics with the
-    /// conservative term, then the Polyak targets.
-    pub fn update(&mut self, batch: &TransitionBatch, rng: &mut ChaCha8Rng) -> SacLosses {
-        let c = &self.sac.actor.config;
+    /// One update of `sac` on `batch` whose first `data_rows` rows are real:
+    /// actor, α, then the critics with the term, then the Polyak targets.
+    pub fn update(
+        &self,
+        sac: &mut Sac,
+        batch: &TransitionBatch,
+        data_rows: usize,
+        rng: &mut ChaCha8Rng,
+    ) -> SacLosses {
+        let c = &sac.actor.config;
         let (obs_dim, act_dim) = (c.obs_dim, c.act_dim);
         let b = batch.rewards.len();
-        let device = self.sac.device().clone();
+        let device = sac.device().clone();
         let plain = device.clone().inner();
         let tensor = |values: &[f32], width: usize, device: &Device| {
             Tensor::<2>::from_data(TensorData::new(values.to_vec(), [b, width]), device)
@@ -164,64 +205,55 @@ impl Cql {
         let obs = tensor(&batch.observations, obs_dim, &device);
         let actions = tensor(&batch.actions, act_dim, &device);
         let next_obs = tensor(&batch.next_observations, obs_dim, &device);
-        let adam = self.sac.optimizer();
-        let sac_config = self.sac.config.clone();
+        let adam = sac.optimizer();
+        let config = sac.config.clone();
 
         // Actor, then α (OfflineRL-Kit's order).
-        let alpha = self.sac.temperature.alpha().inner();
-        let (actor_loss, log_prob) = self.sac.actor_loss(
+        let alpha = sac.temperature.alpha().inner();
+        let (actor_loss, log_prob) = sac.actor_loss(
             obs.clone(),
             normal([b, act_dim], rng, &device),
             alpha.clone(),
         );
-        let grads = GradientsParams::from_grads(actor_loss.backward(), &self.sac.actor);
-        self.sac.actor = adam.step_module(
-            sac_config.actor_lr,
-            self.sac.actor.clone(),
+        let grads = GradientsParams::from_grads(actor_loss.backward(), &sac.actor);
+        sac.actor = adam.step_module(
+            config.actor_lr,
+            sac.actor.clone(),
             grads,
-            &mut self.sac.adam.actor,
+            &mut sac.adam.actor,
         );
         let log_prob = log_prob.inner();
         let entropy = -log_prob.clone().mean().into_scalar::<f32>();
-        let alpha_loss = self.sac.alpha_loss(log_prob);
-        let grads = GradientsParams::from_grads(alpha_loss.backward(), &self.sac.temperature);
-        self.sac.temperature = adam.step_module(
-            sac_config.alpha_lr,
-            self.sac.temperature.clone(),
+        let alpha_loss = sac.alpha_loss(log_prob);
+        let grads = GradientsParams::from_grads(alpha_loss.backward(), &sac.temperature);
+        sac.temperature = adam.step_module(
+            config.alpha_lr,
+            sac.temperature.clone(),
             grads,
-            &mut self.sac.adam.alpha,
+            &mut sac.adam.alpha,
         );
 
         // Critics: deterministic backup y = r + γ(1 − d)·min Q̄(s', ã'), then the term.
-        let next = self
-            .sac
-            .actor
-            .valid()
-            .sample(next_obs.clone().inner(), normal([b, act_dim], rng, &plain));
-        let next_value = self
-            .sac
+        let next =
+            (sac.actor.valid()).sample(next_obs.clone().inner(), normal([b, act_dim], rng, &plain));
+        let next_value = sac
             .target_critic
             .min_q(next_obs.clone().inner(), next.action);
         let terminals = tensor(&batch.terminals, 1, &plain);
-        let y = tensor(&batch.rewards, 1, &plain)
-            + (terminals.neg() + 1.0) * next_value * sac_config.gamma;
-        let (_, qf1_loss, qf2_loss, qf1_values) =
-            self.sac.critic_loss(obs.clone(), actions.clone(), y);
-        let samples = self.draw_samples(b, rng, &device);
-        let (cql1, cql2) = self.conservative_terms(obs, next_obs, actions, samples);
-        let total = qf1_loss.clone() + qf2_loss.clone() + cql1 + cql2;
-        let grads = GradientsParams::from_grads(total.backward(), &self.sac.critic);
-        self.sac.critic = adam.step_module(
-            sac_config.critic_lr,
-            self.sac.critic.clone(),
+        let y =
+            tensor(&batch.rewards, 1, &plain) + (terminals.neg() + 1.0) * next_value * config.gamma;
+        let (_, qf1_loss, qf2_loss, qf1_values) = sac.critic_loss(obs.clone(), actions.clone(), y);
+        let samples = self.draw_samples(act_dim, b, rng, &device);
+        let (term1, term2) = self.terms(sac, obs, next_obs, actions, samples, data_rows);
+        let total = qf1_loss.clone() + qf2_loss.clone() + term1 + term2;
+        let grads = GradientsParams::from_grads(total.backward(), &sac.critic);
+        sac.critic = adam.step_module(
+            config.critic_lr,
+            sac.critic.clone(),
             grads,
-            &mut self.sac.adam.critic,
+            &mut sac.adam.critic,
         );
-        self.sac.target_critic = polyak_update(
-            self.sac.target_critic.clone(),
-            &self.sac.critic,
-            sac_config.tau,
-        );
+        sac.target_critic = polyak_update(sac.target_critic.clone(), &sac.critic, config.tau);
         SacLosses {
             qf1_values,
             qf1_loss: qf1_loss.into_scalar(),

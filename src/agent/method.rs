@@ -33,10 +33,13 @@ pub enum Method {
     Cql,
     /// EDAC (An et al., 2021, OfflineRL-Kit's `run_edac.py`): no model.
     Edac,
+    /// COMBO (Yu et al., 2021, OfflineRL-Kit's `run_combo.py`): MOPO's Gaussian
+    /// ensemble, no reward penalty, CQL's conservative term on the mixed batch.
+    Combo,
 }
 
 impl Method {
-    pub const ALL: [Method; 9] = [
+    pub const ALL: [Method; 10] = [
         Method::Nuno,
         Method::NunoR,
         Method::NunoAl,
@@ -46,6 +49,7 @@ impl Method {
         Method::Td3Bc,
         Method::Cql,
         Method::Edac,
+        Method::Combo,
     ];
 
     /// The name in grid files, and `fit-policy --algo`'s.
@@ -60,11 +64,18 @@ impl Method {
             Method::Td3Bc => "td3-bc",
             Method::Cql => "cql",
             Method::Edac => "edac",
+            Method::Combo => "combo",
         }
     }
 
-    /// Whether the method trains in the Gaussian ensemble (else the neural SDE).
+    /// Whether the method trains in the Gaussian ensemble (else the neural SDE, or none).
     pub fn uses_ensemble(self) -> bool {
+        matches!(self, Method::Mopo | Method::TatuMopo | Method::Combo)
+    }
+
+    /// Whether the method is MOPO's policy step (MOPO, TATU+MOPO): its (h, λ)
+    /// table and `--mopo-settings`.
+    pub fn is_mopo(self) -> bool {
         matches!(self, Method::Mopo | Method::TatuMopo)
     }
 
@@ -76,7 +87,7 @@ impl Method {
         match self {
             Method::Nuno | Method::NunoAl => Some("sde"),
             Method::NunoR => Some("sde-reward"),
-            Method::Mopo | Method::TatuMopo => Some("ensemble"),
+            Method::Mopo | Method::TatuMopo | Method::Combo => Some("ensemble"),
             Method::Bc | Method::Td3Bc | Method::Cql | Method::Edac => None,
         }
     }
@@ -87,6 +98,7 @@ impl Method {
     pub fn default_hidden(self) -> Vec<usize> {
         match super::LearnerConfig::for_method(self) {
             Ok(learner) => learner.hidden(),
+            Err(_) if self == Method::Combo => super::CqlConfig::kit_sac().actor_hidden,
             Err(_) => super::SacConfig::new().actor_hidden,
         }
     }
@@ -118,9 +130,12 @@ impl Method {
             Method::Nuno | Method::NunoR => Truncation::ModelTable,
             Method::NunoAl => Truncation::AleatoricCvar,
             Method::TatuMopo => Truncation::DatasetDisagreement,
-            Method::Mopo | Method::Bc | Method::Td3Bc | Method::Cql | Method::Edac => {
-                Truncation::Never
-            }
+            Method::Mopo
+            | Method::Combo
+            | Method::Bc
+            | Method::Td3Bc
+            | Method::Cql
+            | Method::Edac => Truncation::Never,
         }
     }
 }

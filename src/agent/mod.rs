@@ -28,7 +28,7 @@ pub(crate) use actor::action_noise;
 pub use actor::{ActionMode, Actor, ActorConfig, ActorPolicy, ActorSample};
 pub use bc::{Bc, BcConfig};
 pub use buffer::ReplayBuffer;
-pub use cql::{Cql, CqlConfig, CqlSamples};
+pub use cql::{ConservativeTerm, Cql, CqlConfig, CqlSamples};
 pub use critic::{Temperature, TwinCritic};
 pub use edac::{CriticEnsemble, Edac, EdacConfig};
 pub use fused_actor::FusedActor;
@@ -54,8 +54,8 @@ pub use policy_loop::{
 };
 pub use portable_actor::PortableActor;
 pub use presets::{
-    EDAC_PRESETS, MOPO_PRESETS, PRESETS, Preset, TATU_DEFAULT_PESSIMISM, TATU_PESSIMISM,
-    edac_preset, mopo_preset, preset, tatu_pessimism,
+    COMBO_PRESETS, EDAC_PRESETS, MOPO_PRESETS, PRESETS, Preset, TATU_DEFAULT_PESSIMISM,
+    TATU_PESSIMISM, combo_preset, edac_preset, mopo_preset, preset, tatu_pessimism,
 };
 pub use sac::{Sac, SacAdam, SacConfig, SacLosses};
 pub use td3_bc::{Td3Bc, Td3BcAdam, Td3BcConfig};

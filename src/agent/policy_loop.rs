@@ -20,6 +20,7 @@ use serde::{Deserialize, Serialize};
 use super::AgentError;
 use super::actor::{ActionMode, ActorConfig, ActorPolicy};
 use super::buffer::ReplayBuffer;
+use super::cql::ConservativeTerm;
 use super::fused_sac::FusedSac;
 use super::model_rollout::{RolloutActions, RolloutConfig, RolloutStats, rollout_model};
 use super::presets::Preset;
@@ -64,6 +65,9 @@ crate::shared::named_enum!(MopoSettings, "MOPO settings", MopoSettings::Offliner
 /// OfflineRL-Kit's MOPO (`run_mopo.py`): actor lr, α lr, the actor's decay, rollout starts.
 const KIT_MOPO: (f64, f64, ActorLrDecay, usize) = (1e-4, 1e-4, ActorLrDecay::Cosine, 50_000);
 
+/// COMBO's real fraction of each batch (`run_combo.py`'s `real-ratio`).
+const COMBO_REAL_RATIO: f64 = 0.5;
+
 /// Every knob of the loop; defaults are Appendix C.2–C.3's.
 #[derive(Config, Debug, PartialEq)]
 pub struct PolicyLoopConfig {
@@ -107,6 +111,12 @@ pub struct PolicyLoopConfig {
     /// β, the fraction of each SAC batch drawn from the real data.
     #[config(default = 0.05)]
     pub real_ratio: f64,
+    /// COMBO: CQL's conservative term in each critic update, its log-sum-exp
+    /// over the mixed batch and its data term over the batch's real rows (no
+    /// reward penalty); `None` for every other method. Runs saved before this
+    /// field had none, and load so.
+    #[config(default = "None")]
+    pub conservative: Option<ConservativeTerm>,
     /// Gradient steps per epoch.
     #[config(default = 1000)]
     pub steps_per_epoch: usize,
@@ -159,6 +169,18 @@ impl PolicyLoopConfig {
         self.sac.alpha_lr = alpha_lr;
         self.actor_lr_decay = decay;
         self.rollout_batch = rollout_batch;
+    }
+
+    /// COMBO's policy step as OfflineRL-Kit's `run_combo.py` runs it:
+    /// MOPO's SAC settings (actor lr 1e-4 cosine, α lr 1e-4, 50 000 rollout
+    /// starts), no reward penalty and no truncation, half of each batch real,
+    /// and the conservative term of weight β on every critic update.
+    pub fn apply_combo_settings(&mut self, beta: f64) {
+        self.apply_mopo_settings(MopoSettings::OfflinerlKit);
+        self.penalty = 0.0;
+        self.truncate = false;
+        self.real_ratio = COMBO_REAL_RATIO;
+        self.conservative = Some(ConservativeTerm::new().with_cql_weight(beta));
     }
 
     /// The actor's learning rate during epoch `epoch` (from 0).
@@ -397,7 +419,9 @@ impl PolicyTraining {
         // The fused kernel trains on host buffers for the epoch and hands the
         // agent back to `self.sac` for rollouts, evaluation and checkpoints.
         self.sac.config.actor_lr = self.config.actor_lr_at(self.epoch);
-        let mut fused = (ctx.kernel == Kernel::Fused).then(|| FusedSac::from_sac(&self.sac));
+        // The fused kernel has no conservative term: COMBO updates on burn's.
+        let fused_updates = ctx.kernel == Kernel::Fused && self.config.conservative.is_none();
+        let mut fused = fused_updates.then(|| FusedSac::from_sac(&self.sac));
         for _ in 0..self.config.steps_per_epoch {
             if self.step.is_multiple_of(self.config.rollout_freq.max(1)) {
                 if let Some(fused) = &fused {
@@ -408,9 +432,11 @@ impl PolicyTraining {
                 seconds.rollouts += rolling.elapsed().as_secs_f64();
             }
             let batch = self.mixed_batch(ctx.dataset);
-            losses.push(match fused.as_mut() {
-                Some(fused) => fused.update(&batch, &mut self.rng),
-                None => self.sac.update(&batch, &mut self.rng),
+            let real_rows = self.real_rows();
+            losses.push(match (fused.as_mut(), &self.config.conservative) {
+                (Some(fused), _) => fused.update(&batch, &mut self.rng),
+                (None, Some(term)) => term.update(&mut self.sac, &batch, real_rows, &mut self.rng),
+                (None, None) => self.sac.update(&batch, &mut self.rng),
             });
             self.step += 1;
         }
@@ -468,11 +494,7 @@ impl PolicyTraining {
     /// then the rest from the model buffer (all real while the model buffer is empty).
     pub fn mixed_batch(&mut self, dataset: &Dataset) -> TransitionBatch {
         let batch_size = self.config.sac.batch_size;
-        let real_count = if self.model_buffer.is_empty() {
-            batch_size
-        } else {
-            ((self.config.real_ratio * batch_size as f64) as usize).min(batch_size)
-        };
+        let real_count = self.real_rows();
         let mut batch = TransitionSampler::new(dataset).sample(real_count, &mut self.rng);
         batch.append(
             &self
@@ -480,6 +502,16 @@ impl PolicyTraining {
                 .sample(batch_size - real_count, &mut self.rng),
         );
         batch
+    }
+
+    /// How many of a batch's first rows [`Self::mixed_batch`] draws from the real data.
+    pub fn real_rows(&self) -> usize {
+        let batch_size = self.config.sac.batch_size;
+        if self.model_buffer.is_empty() {
+            batch_size
+        } else {
+            ((self.config.real_ratio * batch_size as f64) as usize).min(batch_size)
+        }
     }
 
     /// The deterministic policy in the real task, or in the model where the

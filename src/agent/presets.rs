@@ -179,3 +179,34 @@ pub fn edac_preset(name: &str) -> Result<(usize, f64), AgentError> {
                 .join(", "),
         })
 }
+
+/// COMBO's rollout length h and conservative weight β for a D4RL dataset
+/// (OfflineRL-Kit's `run_combo.py` "suggested hypers"), by Table 3's names;
+/// none for the random datasets or NeoRL.
+pub const COMBO_PRESETS: [(&str, usize, f64); 9] = [
+    ("halfcheetah-medium", 5, 0.5),
+    ("hopper-medium", 5, 5.0),
+    ("walker2d-medium", 1, 5.0),
+    ("halfcheetah-medium-replay", 5, 0.5),
+    ("hopper-medium-replay", 5, 0.5),
+    ("walker2d-medium-replay", 1, 0.5),
+    ("halfcheetah-medium-expert", 5, 5.0),
+    ("hopper-medium-expert", 5, 5.0),
+    ("walker2d-medium-expert", 1, 5.0),
+];
+
+/// COMBO's (h, β) for the dataset `name` names.
+pub fn combo_preset(name: &str) -> Result<(usize, f64), AgentError> {
+    COMBO_PRESETS
+        .iter()
+        .find(|(n, _, _)| *n == name)
+        .map(|&(_, h, beta)| (h, beta))
+        .ok_or_else(|| AgentError::UnknownPreset {
+            name: format!("{name} (for COMBO's h and β)"),
+            known: COMBO_PRESETS
+                .iter()
+                .map(|(n, _, _)| *n)
+                .collect::<Vec<_>>()
+                .join(", "),
+        })
+}

@@ -193,7 +193,10 @@ impl Budget {
         let mut budget = self.clone();
         budget.hidden = Some(self.hidden_for(method));
         let mut policy_loop = PolicyLoopConfig::new(SacConfig::new(), 0, 0.0, 0.0);
-        if method.uses_ensemble() {
+        if method == Method::Combo {
+            policy_loop.apply_combo_settings(0.0);
+        }
+        if method.is_mopo() {
             let settings = self.mopo_settings.unwrap_or_default();
             policy_loop.apply_mopo_settings(settings);
             budget.mopo_settings = Some(settings);
@@ -211,6 +214,8 @@ impl Budget {
             budget.forward_velocity = None;
         } else {
             budget.ensemble_max_epochs = None;
+        }
+        if !method.is_mopo() {
             budget.mopo_settings = None;
         }
         budget
@@ -359,18 +364,23 @@ impl GridDataset {
                     .map_err(|e| format!("dataset `{name}`: {e}"))
             })
             .collect::<Result<Vec<_>, _>>()?;
-        if let (
-            Some(m),
-            RowSystem::Task {
-                preset: Some(preset),
-                ..
-            },
-        ) = (methods.iter().find(|m| m.uses_ensemble()), &system)
-            && crate::agent::mopo_preset(preset).is_err()
+        if let RowSystem::Task {
+            preset: Some(preset),
+            ..
+        } = &system
         {
-            return Err(format!(
-                "dataset `{name}`: {m} needs MOPO's hyperparameters, which `{preset}` has none of (its rows are D4RL's)"
-            ));
+            // The baselines' per-dataset tables, checked before anything runs.
+            for m in &methods {
+                let missing = match m {
+                    Method::Mopo | Method::TatuMopo => crate::agent::mopo_preset(preset).err(),
+                    Method::Combo => crate::agent::combo_preset(preset).err(),
+                    Method::Edac => crate::agent::edac_preset(preset).err(),
+                    _ => None,
+                };
+                if let Some(e) = missing {
+                    return Err(format!("dataset `{name}`: {m} needs its own row: {e}"));
+                }
+            }
         }
         Ok(CheckedRow {
             file,

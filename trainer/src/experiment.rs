@@ -459,9 +459,9 @@ fn policy_args(cell: &Cell, b: &Budget, model: Option<PathBuf>, dir: PathBuf) ->
     }
     args.rollout_batch = b.rollout_batch;
     args.model_buffer_factor = b.model_buffer_factor;
-    if cell.method.uses_ensemble() {
+    if cell.method.is_mopo() {
         args.mopo_settings = b.mopo_settings;
-    } else {
+    } else if !cell.method.uses_ensemble() {
         args.recipe = b.recipe;
         args.forward_velocity = b.forward_velocity;
     }

@@ -153,7 +153,7 @@ fn bad_grids_are_refused_before_anything_runs() {
                 "[\"mopo\"]",
                 "[0]",
             ),
-            "mopo needs MOPO's hyperparameters",
+            "mopo needs its own row: unknown preset `neorl-hopper-low (for MOPO)`",
         ),
         (
             dataset_row(
@@ -164,7 +164,18 @@ fn bad_grids_are_refused_before_anything_runs() {
                 "[\"nuno\", \"tatu-mopo\"]",
                 "[0]",
             ),
-            "tatu-mopo needs MOPO's hyperparameters",
+            "tatu-mopo needs its own row: unknown preset `neorl-hopper-low (for MOPO)`",
+        ),
+        (
+            dataset_row(
+                "h",
+                "hopper.hdf5",
+                "hopper",
+                "hopper-random",
+                "[\"bc\", \"combo\"]",
+                "[0]",
+            ),
+            "combo needs its own row: unknown preset `hopper-random (for COMBO's h and β)`",
         ),
         (
             dataset_row(

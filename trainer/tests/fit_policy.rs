@@ -153,6 +153,57 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
     assert!(err.contains("loading policy"), "{err}");
 }
 
+/// COMBO trains in MOPO's ensemble with its own row (h 5, β 5 on
+/// hopper-medium), no penalty, half the batch real, the conservative term on;
+/// a dataset without a COMBO row is refused by name.
+#[test]
+fn combo_trains_in_the_ensemble_with_the_conservative_term() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dataset, model, run) = (
+        tmp.path().join("hopper.hdf5"),
+        tmp.path().join("ensemble"),
+        tmp.path().join("run"),
+    );
+    generate_hopper(dataset.to_str().unwrap(), 1500, 0);
+    tiny_fit_ensemble(&dataset, &model);
+    let fit = |preset: &str, extra: &[&str]| {
+        tiny_fit_policy("combo", &model, &dataset, Some(preset), 20, &run, extra)
+    };
+    ok(&fit("hopper-medium", &[]));
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("run.json")).unwrap()).unwrap();
+    let config = &record["plan"]["config"];
+    assert_eq!(config["horizon"], 5, "{config}");
+    assert_eq!(config["conservative"]["cql_weight"], 5.0, "{config}");
+    assert_eq!(
+        (&config["penalty"], &config["real_ratio"]),
+        (&0.0.into(), &0.5.into())
+    );
+    assert_eq!(config["truncate"], false, "{config}");
+    let records = std::fs::read_to_string(run.join("metrics.jsonl")).unwrap();
+    for line in records.lines() {
+        let r: serde_json::Value = serde_json::from_str(line).unwrap();
+        let f = |k: &str| r["rollout"][k].as_f64().unwrap();
+        assert_eq!(
+            f("mean_penalized_reward"),
+            f("mean_reward"),
+            "no penalty: {r}"
+        );
+    }
+    let err = fails(&fit("hopper-random", &["--resume"]));
+    assert!(err.contains("hopper-random (for COMBO's h and β)"), "{err}");
+    let err = fails(&tiny_fit_policy(
+        "mopo",
+        &model,
+        &dataset,
+        Some("hopper-medium"),
+        20,
+        &run,
+        &["--combo-weight", "1"],
+    ));
+    assert!(err.contains("--combo-weight is COMBO's"), "{err}");
+}
+
 #[test]
 fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
     let tmp = tempfile::tempdir().unwrap();

@@ -12,8 +12,8 @@ use burn::tensor::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{
     ActionMode, AleatoricAsEta, EpochRecord, LoopContext, Method, MopoSettings, PolicyLoopConfig,
-    PolicyTraining, Preset, SacConfig, Truncation, mopo_preset, preset, run_threshold,
-    tatu_pessimism,
+    PolicyTraining, Preset, SacConfig, Truncation, combo_preset, mopo_preset, preset,
+    run_threshold, tatu_pessimism,
 };
 use nuno::artifact::{
     BEST_POLICY, LAST_POLICY, ModelFolder, PolicyProvenance, latest_checkpoint, load_checkpoint,
@@ -56,7 +56,7 @@ pub struct Args {
     #[arg(long)]
     pub preset: Option<String>,
     /// The method: nuno, nuno-r and nuno-al train in the neural SDE of fit-model,
-    /// mopo and tatu-mopo in the Gaussian ensemble of fit-ensemble; bc, td3-bc,
+    /// mopo, tatu-mopo and combo in the Gaussian ensemble of fit-ensemble; bc, td3-bc,
     /// cql and edac on the dataset alone (no --model).
     #[arg(long, default_value_t = Method::Nuno)]
     pub algo: Method,
@@ -111,9 +111,13 @@ pub struct Args {
     /// step) or mean (over the step, NUNO's code) (default: the recipe's).
     #[arg(long)]
     pub forward_velocity: Option<ForwardVelocity>,
-    /// β, the real-data fraction of each SAC batch.
-    #[arg(long, default_value_t = loop_defaults().real_ratio)]
-    pub real_ratio: f64,
+    /// β, the real-data fraction of each SAC batch (default: the method's:
+    /// 0.05, combo 0.5).
+    #[arg(long)]
+    pub real_ratio: Option<f64>,
+    /// combo: the conservative term's weight β (default: OfflineRL-Kit's for the preset's dataset).
+    #[arg(long)]
+    pub combo_weight: Option<f64>,
     /// SAC batch size.
     #[arg(long, default_value_t = loop_defaults().sac.batch_size)]
     pub batch_size: usize,
@@ -279,7 +283,7 @@ impl Args {
                 _ => anyhow::bail!("without --preset, give --horizon, --cvar-alpha and --penalty"),
             },
         };
-        if self.algo.uses_ensemble() {
+        if self.algo.is_mopo() {
             // MOPO's own h and λ with the ensemble's max ‖σ‖ as the penalty; TATU
             // adds its truncation to MOPO's, MOPO alone has none.
             if let Some(name) = &self.preset {
@@ -288,6 +292,22 @@ impl Args {
             config.truncate = self.algo.truncation() != Truncation::Never;
             config.apply_mopo_settings(self.mopo_settings.unwrap_or_default());
         }
+        if self.algo == Method::Combo {
+            // COMBO's own h and β (its table, or --horizon and --combo-weight).
+            let (horizon, beta) = match (&self.preset, self.horizon, self.combo_weight) {
+                (_, Some(h), Some(beta)) => (h, beta),
+                (Some(name), _, _) => combo_preset(name)?,
+                (None, _, _) => anyhow::bail!(
+                    "--algo combo takes h and β per dataset: give a --preset OfflineRL-Kit has them for, or --horizon and --combo-weight"
+                ),
+            };
+            config.horizon = horizon;
+            config.apply_combo_settings(self.combo_weight.unwrap_or(beta));
+        }
+        anyhow::ensure!(
+            self.combo_weight.is_none() || self.algo == Method::Combo,
+            "--combo-weight is COMBO's β: it needs --algo combo"
+        );
         config.horizon = self.horizon.unwrap_or(config.horizon);
         config.cvar_alpha = self.cvar_alpha.unwrap_or(config.cvar_alpha);
         config.penalty = self.penalty.unwrap_or(config.penalty);
@@ -300,7 +320,7 @@ impl Args {
             .model_buffer_factor
             .unwrap_or(config.model_buffer_factor);
         config.forward_velocity = self.forward_velocity.unwrap_or(config.forward_velocity);
-        config.real_ratio = self.real_ratio;
+        config.real_ratio = self.real_ratio.unwrap_or(config.real_ratio);
         config.steps_per_epoch = self.steps_per_epoch;
         config.epochs = self.steps.div_ceil(self.steps_per_epoch);
         config.eval_episodes = self.eval_episodes;
@@ -327,16 +347,17 @@ impl Args {
             "--rollout-batch must be at least 1"
         );
         anyhow::ensure!(
-            self.mopo_settings.is_none() || self.algo.uses_ensemble(),
+            self.mopo_settings.is_none() || self.algo.is_mopo(),
             "--mopo-settings sets MOPO's policy step: it needs --algo mopo or tatu-mopo"
         );
         anyhow::ensure!(self.particles > 0, "--particles must be at least 1");
         anyhow::ensure!(self.batch_size > 0, "--batch-size must be at least 1");
-        anyhow::ensure!(
-            (0.0..=1.0).contains(&self.real_ratio),
-            "--real-ratio must lie in [0, 1], got {}",
-            self.real_ratio
-        );
+        if let Some(ratio) = self.real_ratio {
+            anyhow::ensure!(
+                (0.0..=1.0).contains(&ratio),
+                "--real-ratio must lie in [0, 1], got {ratio}"
+            );
+        }
         anyhow::ensure!(
             (self.hidden.as_ref()).is_none_or(|h| !h.is_empty() && h.iter().all(|&h| h > 0)),
             "--hidden needs positive layer sizes"

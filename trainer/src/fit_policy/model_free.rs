@@ -55,6 +55,8 @@ impl Args {
             (self.rollout_batch.is_some(), "--rollout-batch"),
             (self.model_buffer_factor.is_some(), "--model-buffer-factor"),
             (self.forward_velocity.is_some(), "--forward-velocity"),
+            (self.real_ratio.is_some(), "--real-ratio"),
+            (self.combo_weight.is_some(), "--combo-weight"),
         ];
         if let Some((_, flag)) = in_model_flags.iter().find(|(given, _)| *given) {
             anyhow::bail!(
