@@ -278,6 +278,7 @@ fn a_diverging_model_ends_its_rollouts_and_keeps_nothing_that_is_not_finite() {
         penalty: 1.0,
         threshold: None,
         noise_scale: 1.0,
+        halt: None,
     };
     let out = rollout_model(
         &dynamics,
@@ -337,6 +338,56 @@ fn hopper() -> (TaskConfig, DynamicsSpec) {
     (task, spec)
 }
 
+/// MOReL's HALT compares each step's own signal (η = 0.3 here), not the sum:
+/// under 0.35 nothing halts though the sum passes it; under 0.25 the first
+/// step halts, kept as terminal with its reward less κ.
+#[test]
+fn morels_halt_keeps_the_halting_step_as_terminal_less_kappa() {
+    let (task, spec) = hopper();
+    let rules = Rules::from(TaskRules::new(&task, spec.dt));
+    let dynamics = ConstantEta { spec: spec.clone() };
+    let action = [0.5, -0.5, 0.25];
+    let policy = Constant(action.to_vec(), spec.obs_dim);
+    let mut start = vec![0.0f32; spec.obs_dim];
+    start[0] = 1.25;
+    let starts = start.repeat(4);
+    let run = |threshold: f32| {
+        let config = RolloutConfig {
+            horizon: 10,
+            particles: 1,
+            penalty: 0.0,
+            threshold: None,
+            noise_scale: 1.0,
+            halt: Some(nuno::agent::Halt {
+                threshold,
+                penalty: 5.0,
+            }),
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        rollout_model(
+            &dynamics,
+            RolloutActions::Policy(&policy),
+            &rules,
+            &starts,
+            &config,
+            &mut rng,
+        )
+    };
+    let out = run(0.35);
+    assert_eq!(out.transitions.len(), 40);
+    assert_eq!((out.stats.halted, out.stats.terminated), (0, 0));
+    let out = run(0.25);
+    assert_eq!(out.trace.kept, vec![1; 4]);
+    assert!(out.trace.outcome.iter().all(|&o| o == StepOutcome::Halted));
+    assert_eq!(out.stats.halted, 4);
+    assert_eq!(out.transitions.terminals, vec![1.0; 4]);
+    for i in 0..4 {
+        let next = &out.transitions.next_observations[i * spec.obs_dim..(i + 1) * spec.obs_dim];
+        let reward = rules.reward(&start, &action, next);
+        assert!((out.transitions.rewards[i] - (reward - 5.0)).abs() < 1e-5);
+    }
+}
+
 #[test]
 fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
     let (task, spec) = hopper();
@@ -353,6 +404,7 @@ fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
         penalty: 2.0,
         threshold: Some(1.0),
         noise_scale: 1.0,
+        halt: None,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let out = rollout_model(
@@ -861,6 +913,7 @@ fn sde_rollouts_with_truncation_keep_nothing_past_epsilon() {
         penalty: 0.001,
         threshold: Some(epsilon),
         noise_scale: 1.0,
+        halt: None,
     };
     let out = rollout_model(
         &model,
@@ -1022,6 +1075,7 @@ fn cancelled_rollouts_and_evaluations_stop_at_the_next_step() {
         penalty: 0.0,
         threshold: None,
         noise_scale: 0.0,
+        halt: None,
     };
     let dynamics = Kernel::Fused.dynamics(&model);
     let out = rollout_model_or_cancel(
@@ -1085,6 +1139,7 @@ fn rollouts_penalise_eta_but_truncate_on_the_models_own_signal() {
         penalty: 2.0,
         threshold: Some(2.5),
         noise_scale: 1.0,
+        halt: None,
     };
     let out = rollout_model(
         &dynamics,

@@ -585,6 +585,9 @@ fn a_saved_ensemble_loads_to_the_same_steps_and_refuses_damage() {
     assert!(error.contains("elites"), "{error}");
 }
 
+/// TATU's disagreement from the members' centre, MOReL's largest pairwise
+/// discrepancy (both over the observation only) and MOPO's ‖σ‖, each by hand
+/// from every member's own prediction.
 #[test]
 fn tatu_truncates_on_the_members_disagreement_over_the_observation_only() {
     let fit = fitted();
@@ -600,6 +603,11 @@ fn tatu_truncates_on_the_members_disagreement_over_the_observation_only() {
     let actions: Vec<f32> = points.iter().map(|&(_, a)| a).collect();
     let step = dynamics.step(&states, &actions, &[0.0; 12]);
     let signal = step.truncation_signal.as_ref().expect("a TATU signal");
+    let pairwise = dynamics
+        .with_truncation_signal(EnsembleUncertainty::MaxPairwise)
+        .step(&states, &actions, &[0.0; 12])
+        .truncation_signal
+        .expect("a MOReL signal");
 
     // By hand from every member's own prediction: means of (Δs₀, Δs₁, r).
     let device = Device::flex();
@@ -633,6 +641,21 @@ fn tatu_truncates_on_the_members_disagreement_over_the_observation_only() {
             .iter()
             .map(|(_, std)| std.iter().map(|v| f64::from(v * v)).sum::<f64>().sqrt())
             .fold(0.0, f64::max);
+        let mut largest_pair = 0.0f64;
+        for (i, (a, _)) in members.iter().enumerate() {
+            for (b, _) in &members[i + 1..] {
+                let d = (0..2)
+                    .map(|d| (f64::from(a[d]) - f64::from(b[d])).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                largest_pair = largest_pair.max(d);
+            }
+        }
+        assert!(
+            (f64::from(pairwise[r]) - largest_pair).abs() < 1e-4 * largest_pair.max(1e-3),
+            "point {r}: pairwise {} vs {largest_pair}",
+            pairwise[r]
+        );
         assert!(
             (f64::from(signal[r]) - disagreement).abs() < 1e-4 * disagreement.max(1e-3),
             "point {r}: signal {} vs disagreement {disagreement}",

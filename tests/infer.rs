@@ -302,6 +302,7 @@ fn fused_ten_step_rollouts_match_burn_with_fixed_noise() {
         penalty: 1.0,
         threshold: None,
         noise_scale: 1.0,
+        halt: None,
     };
     let run = |model: &dyn BatchDynamics, policy: &dyn BatchPolicy| {
         rollout_model(

@@ -411,6 +411,7 @@ fn scores_from_trace(
         penalty: config.penalty,
         threshold: config.threshold,
         noise_scale: config.noise_scale,
+        halt: None,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let actions = RolloutActions::Sequence(sequences);

@@ -36,10 +36,14 @@ pub enum Method {
     /// COMBO (Yu et al., 2021, OfflineRL-Kit's `run_combo.py`): MOPO's Gaussian
     /// ensemble, no reward penalty, CQL's conservative term on the mixed batch.
     Combo,
+    /// MOReL (Kidambi et al., 2020, the authors' mjrl code): MOPO's Gaussian
+    /// ensemble as a pessimistic MDP that halts where the members disagree,
+    /// trained by MOPO's SAC loop in place of MOReL's NPG.
+    Morel,
 }
 
 impl Method {
-    pub const ALL: [Method; 10] = [
+    pub const ALL: [Method; 11] = [
         Method::Nuno,
         Method::NunoR,
         Method::NunoAl,
@@ -50,6 +54,7 @@ impl Method {
         Method::Cql,
         Method::Edac,
         Method::Combo,
+        Method::Morel,
     ];
 
     /// The name in grid files, and `fit-policy --algo`'s.
@@ -65,12 +70,16 @@ impl Method {
             Method::Cql => "cql",
             Method::Edac => "edac",
             Method::Combo => "combo",
+            Method::Morel => "morel",
         }
     }
 
     /// Whether the method trains in the Gaussian ensemble (else the neural SDE, or none).
     pub fn uses_ensemble(self) -> bool {
-        matches!(self, Method::Mopo | Method::TatuMopo | Method::Combo)
+        matches!(
+            self,
+            Method::Mopo | Method::TatuMopo | Method::Combo | Method::Morel
+        )
     }
 
     /// Whether the method is MOPO's policy step (MOPO, TATU+MOPO): its (h, λ)
@@ -87,7 +96,7 @@ impl Method {
         match self {
             Method::Nuno | Method::NunoAl => Some("sde"),
             Method::NunoR => Some("sde-reward"),
-            Method::Mopo | Method::TatuMopo | Method::Combo => Some("ensemble"),
+            Method::Mopo | Method::TatuMopo | Method::Combo | Method::Morel => Some("ensemble"),
             Method::Bc | Method::Td3Bc | Method::Cql | Method::Edac => None,
         }
     }
@@ -121,6 +130,10 @@ pub enum Truncation {
     DatasetDisagreement,
     /// Never (MOPO; the model-free methods, which roll nothing out).
     Never,
+    /// MOReL's HALT: a step whose pairwise ensemble disagreement passes the
+    /// pessimism coefficient × its largest value over the dataset ends the
+    /// rollout as a terminal transition.
+    Halt,
 }
 
 impl Method {
@@ -130,6 +143,7 @@ impl Method {
             Method::Nuno | Method::NunoR => Truncation::ModelTable,
             Method::NunoAl => Truncation::AleatoricCvar,
             Method::TatuMopo => Truncation::DatasetDisagreement,
+            Method::Morel => Truncation::Halt,
             Method::Mopo
             | Method::Combo
             | Method::Bc

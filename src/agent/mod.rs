@@ -39,7 +39,7 @@ pub use model_free_loop::{
     state_stats,
 };
 pub use model_rollout::{
-    JudgedRow, ModelRollout, RolloutActions, RolloutConfig, RolloutStats, RolloutTrace,
+    Halt, JudgedRow, ModelRollout, RolloutActions, RolloutConfig, RolloutStats, RolloutTrace,
     StepOutcome, judge_row, rollout_model, rollout_model_or_cancel,
 };
 pub use model_step::{
@@ -54,8 +54,9 @@ pub use policy_loop::{
 };
 pub use portable_actor::PortableActor;
 pub use presets::{
-    COMBO_PRESETS, EDAC_PRESETS, MOPO_PRESETS, PRESETS, Preset, TATU_DEFAULT_PESSIMISM,
-    TATU_PESSIMISM, combo_preset, edac_preset, mopo_preset, preset, tatu_pessimism,
+    COMBO_PRESETS, EDAC_PRESETS, MOPO_PRESETS, MOREL_PESSIMISM, PRESETS, Preset,
+    TATU_DEFAULT_PESSIMISM, TATU_PESSIMISM, combo_preset, edac_preset, mopo_preset, preset,
+    tatu_pessimism,
 };
 pub use sac::{Sac, SacAdam, SacConfig, SacLosses};
 pub use td3_bc::{Td3Bc, Td3BcAdam, Td3BcConfig};

@@ -29,6 +29,20 @@ pub struct RolloutConfig {
     pub threshold: Option<f32>,
     /// Multiplies ε: 1 samples the SDE, 0 follows the drift.
     pub noise_scale: f32,
+    /// MOReL's HALT: a step whose own truncation signal passes the threshold
+    /// is kept as a terminal transition with its reward less κ, ending the
+    /// row. Absent from configurations written before it (none halted).
+    #[serde(default)]
+    pub halt: Option<Halt>,
+}
+
+/// MOReL's absorbing HALT state (Kidambi et al., 2020): where the ensemble's
+/// disagreement at a step passes `threshold`, the pessimistic MDP ends there.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Halt {
+    pub threshold: f32,
+    /// κ, subtracted from the halting step's reward (MOReL's code: 0).
+    pub penalty: f32,
 }
 
 /// Where a rollout's actions come from.
@@ -51,6 +65,9 @@ pub enum StepOutcome {
     /// The model's next state, reward or η was not finite (its drift diverged
     /// off the data); the transition is dropped.
     Diverged,
+    /// The step's own signal passed MOReL's HALT threshold; the transition is
+    /// kept as terminal, its reward less κ.
+    Halted,
 }
 
 /// Per-step records of a batch of rollouts, row-major `[rows, horizon]`
@@ -91,6 +108,9 @@ pub struct RolloutStats {
     /// Absent from records written before divergence was counted.
     #[serde(default)]
     pub diverged: usize,
+    /// Rows that ended in MOReL's HALT (absent from records written before it).
+    #[serde(default)]
+    pub halted: usize,
 }
 
 /// The transitions kept and the trace of every trajectory.
@@ -186,7 +206,6 @@ pub fn rollout_model_or_cancel(
         for (i, &r) in active.iter().enumerate() {
             let from = &obs[i * obs_dim..(i + 1) * obs_dim];
             let action = &actions[i * act_dim..(i + 1) * act_dim];
-            let threshold = config.threshold;
             let row = judge_row(
                 dynamics,
                 rules,
@@ -194,7 +213,7 @@ pub fn rollout_model_or_cancel(
                 i,
                 (from, action),
                 &mut accumulated[r],
-                threshold,
+                (config.threshold, config.halt),
             );
             trace.actions[r].extend_from_slice(action);
             trace.outcome[r] = row.fate;
@@ -207,7 +226,7 @@ pub fn rollout_model_or_cancel(
             if row.fate == StepOutcome::Truncated {
                 continue;
             }
-            let terminal = row.fate == StepOutcome::Terminal;
+            let terminal = matches!(row.fate, StepOutcome::Terminal | StepOutcome::Halted);
             transitions.observations.extend_from_slice(from);
             transitions.actions.extend_from_slice(action);
             // Penalised reward r − λ_pen·η(s, a).
@@ -250,9 +269,9 @@ pub struct JudgedRow<'a> {
 }
 
 /// Row `i` of `step`, taken from `(observation, action)`: its reward, η and
-/// fate, its truncation signal added to `accumulated` unless it diverged. The
-/// one rule for every model rollout (the policy loop's, the server's, the
-/// planners' scores).
+/// fate, its truncation signal added to `accumulated` unless it diverged and
+/// compared with `threshold` so, or alone with `halt`'s. The one rule for
+/// every model rollout (the policy loop's, the server's, the planners' scores).
 pub fn judge_row<'a>(
     dynamics: &dyn BatchDynamics,
     rules: &Rules,
@@ -260,7 +279,7 @@ pub fn judge_row<'a>(
     i: usize,
     (observation, action): (&[f32], &[f32]),
     accumulated: &mut f32,
-    threshold: Option<f32>,
+    (threshold, halt): (Option<f32>, Option<Halt>),
 ) -> JudgedRow<'a> {
     let (obs_dim, state_dim) = (dynamics.obs_dim(), dynamics.state_dim());
     let next_state = &step.next_states[i * state_dim..(i + 1) * state_dim];
@@ -275,8 +294,11 @@ pub fn judge_row<'a>(
         && signal.is_finite()
         && reward.is_finite()
         && next_state.iter().all(|x| x.is_finite());
+    let halted = halt.filter(|h| finite && signal > h.threshold);
     let fate = if !finite {
         StepOutcome::Diverged
+    } else if halted.is_some() {
+        StepOutcome::Halted
     } else {
         // TATU+MOPO accumulates the ensemble's disagreement, the others η.
         *accumulated += signal;
@@ -291,7 +313,7 @@ pub fn judge_row<'a>(
     };
     JudgedRow {
         next_obs,
-        reward,
+        reward: reward - halted.map_or(0.0, |h| h.penalty),
         eta,
         fate,
     }
@@ -313,5 +335,6 @@ fn summarize(trace: &RolloutTrace, transitions: &TransitionBatch) -> RolloutStat
         truncated: count(StepOutcome::Truncated),
         terminated: count(StepOutcome::Terminal),
         diverged: count(StepOutcome::Diverged),
+        halted: count(StepOutcome::Halted),
     }
 }

@@ -22,7 +22,7 @@ use super::actor::{ActionMode, ActorConfig, ActorPolicy};
 use super::buffer::ReplayBuffer;
 use super::cql::ConservativeTerm;
 use super::fused_sac::FusedSac;
-use super::model_rollout::{RolloutActions, RolloutConfig, RolloutStats, rollout_model};
+use super::model_rollout::{Halt, RolloutActions, RolloutConfig, RolloutStats, rollout_model};
 use super::presets::Preset;
 use super::sac::{Sac, SacConfig, SacLosses};
 use crate::data::{Dataset, StartStateSampler, TransitionSampler};
@@ -117,6 +117,12 @@ pub struct PolicyLoopConfig {
     /// field had none, and load so.
     #[config(default = "None")]
     pub conservative: Option<ConservativeTerm>,
+    /// MOReL: the run's threshold is a HALT's (each step's ensemble
+    /// disagreement against it, a halting step kept as terminal with its
+    /// reward less this κ), not an accumulated truncation's; `None` for every
+    /// other method. Runs saved before this field had none, and load so.
+    #[config(default = "None")]
+    pub halt_penalty: Option<f64>,
     /// Gradient steps per epoch.
     #[config(default = 1000)]
     pub steps_per_epoch: usize,
@@ -183,6 +189,17 @@ impl PolicyLoopConfig {
         self.conservative = Some(ConservativeTerm::new().with_cql_weight(beta));
     }
 
+    /// MOReL's pessimistic MDP in the SAC loop (OfflineRL-Kit has no MOReL; its
+    /// NPG planner is replaced by MOPO's policy step): MOPO's SAC settings, no
+    /// reward penalty, each step halted where the ensemble's pairwise
+    /// disagreement passes the run's threshold, κ off its reward.
+    pub fn apply_morel_settings(&mut self, kappa: f64) {
+        self.apply_mopo_settings(MopoSettings::OfflinerlKit);
+        self.penalty = 0.0;
+        self.truncate = true;
+        self.halt_penalty = Some(kappa);
+    }
+
     /// The actor's learning rate during epoch `epoch` (from 0).
     pub fn actor_lr_at(&self, epoch: usize) -> f64 {
         match self.actor_lr_decay {
@@ -219,14 +236,23 @@ impl PolicyLoopConfig {
         Ok(Some(threshold))
     }
 
-    /// The rollouts' settings, sampling at the model's own `noise_scale`.
+    /// The rollouts' settings, sampling at the model's own `noise_scale`: the
+    /// run's threshold truncates on the accumulated signal, or (MOReL) halts
+    /// on each step's.
     fn rollout(&self, threshold: Option<f32>, noise_scale: f32) -> RolloutConfig {
+        let halt = (self.halt_penalty).and_then(|penalty| {
+            threshold.map(|threshold| Halt {
+                threshold,
+                penalty: penalty as f32,
+            })
+        });
         RolloutConfig {
             horizon: self.horizon,
             particles: self.particles,
             penalty: self.penalty,
-            threshold,
+            threshold: threshold.filter(|_| halt.is_none()),
             noise_scale,
+            halt,
         }
     }
 }
@@ -554,6 +580,7 @@ impl PolicyTraining {
             penalty: 0.0,
             threshold: None,
             noise_scale: ctx.dynamics.sample_noise_scale(),
+            halt: None,
         };
         let rollout = rollout_model(
             ctx.dynamics,

@@ -141,6 +141,10 @@ pub const TATU_PESSIMISM: [(&str, f64); 2] =
 /// medium-replay script's 2 (the TATU paper's table is not in our references).
 pub const TATU_DEFAULT_PESSIMISM: f64 = 2.0;
 
+/// MOReL's pessimism coefficient: its D4RL configuration's (`d4rl_hopper_medium.txt`,
+/// the one D4RL dataset the authors' code configures; 0.5 for their own Hopper-v3 data).
+pub const MOREL_PESSIMISM: f64 = 3.0;
+
 /// TATU's pessimism coefficient for the dataset `name` names.
 pub fn tatu_pessimism(name: &str) -> f64 {
     TATU_PESSIMISM

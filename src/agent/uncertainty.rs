@@ -82,6 +82,7 @@ pub fn rollout_threshold(
         penalty: 0.0,
         threshold: None,
         noise_scale: dynamics.sample_noise_scale(),
+        halt: None,
     };
     let mut totals = Vec::with_capacity(starts.len() * config.particles);
     for chunk in starts.chunks(config.chunk) {
@@ -167,7 +168,7 @@ impl Truncation {
     pub fn computed_per_run(self) -> bool {
         matches!(
             self,
-            Truncation::AleatoricCvar | Truncation::DatasetDisagreement
+            Truncation::AleatoricCvar | Truncation::DatasetDisagreement | Truncation::Halt
         )
     }
 }
@@ -175,7 +176,8 @@ impl Truncation {
 /// Where `method`'s rollouts truncate under `config` (none when truncation is
 /// off): NUNO's ε(h, α) read from the model's `table`; NUNO^al's computed on
 /// ‖σ‖ the same way (Appendix D); TATU's from the ensemble's largest
-/// disagreement over the dataset over `pessimism`, which TATU needs.
+/// disagreement over the dataset over `pessimism`, which TATU needs; MOReL's
+/// HALT at `pessimism` × its largest pairwise discrepancy there.
 pub fn run_threshold(
     method: Method,
     config: &PolicyLoopConfig,
@@ -220,6 +222,23 @@ pub fn run_threshold(
                 dataset_max_threshold(ctx.dynamics, ctx.dataset, pessimism, DATASET_SCAN_CHUNK)?;
             let how = format!(
                 "the ensemble's largest disagreement over the dataset's {} transitions / pessimism {pessimism}",
+                ctx.dataset.len()
+            );
+            (value, how)
+        }
+        Truncation::Halt => {
+            let pessimism = pessimism.ok_or_else(|| {
+                AgentError::Threshold("MOReL's threshold needs its pessimism coefficient".into())
+            })?;
+            // MOReL multiplies the largest discrepancy by its coefficient (TATU divides).
+            let value = dataset_max_threshold(
+                ctx.dynamics,
+                ctx.dataset,
+                1.0 / pessimism,
+                DATASET_SCAN_CHUNK,
+            )?;
+            let how = format!(
+                "MOReL's HALT at pessimism {pessimism} × the ensemble's largest pairwise discrepancy over the dataset's {} transitions",
                 ctx.dataset.len()
             );
             (value, how)

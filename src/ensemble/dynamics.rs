@@ -31,6 +31,10 @@ pub enum EnsembleUncertainty {
     /// TATU's disagreement: max over members of ‖μᵢ(s, a) − μ̄(s, a)‖₂ over
     /// the observation's dimensions (TATU's `compute_disc` leaves the reward out).
     MaxDisagreement,
+    /// MOReL's USAD discrepancy: max over pairs of members of ‖μᵢ(s, a) −
+    /// μⱼ(s, a)‖₂ over the observation's dimensions (MOReL's models predict
+    /// the next state alone).
+    MaxPairwise,
 }
 
 /// The members' weights on the fused CPU path (`crate::infer`), with the
@@ -134,6 +138,16 @@ impl EnsembleDynamics {
                     .iter()
                     .map(|m| norm(&mut obs.clone().zip(&centre).map(|(i, c)| m[i] - c)))
                     .fold(0.0, f32::max)
+            }
+            EnsembleUncertainty::MaxPairwise => {
+                let obs = r * s..r * s + self.obs_dim;
+                let mut largest = 0.0f32;
+                for (i, a) in means.iter().enumerate() {
+                    for b in &means[i + 1..] {
+                        largest = largest.max(norm(&mut obs.clone().map(|k| a[k] - b[k])));
+                    }
+                }
+                largest
             }
         }
     }

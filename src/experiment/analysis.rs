@@ -82,6 +82,7 @@ pub fn prediction_error(
             penalty: 0.0,
             threshold: None,
             noise_scale: dynamics.sample_noise_scale(),
+            halt: None,
         },
         &mut rng,
     );
@@ -269,6 +270,7 @@ pub fn exploitation(
             penalty: config.penalty,
             threshold: None,
             noise_scale: dynamics.sample_noise_scale(),
+            halt: None,
         },
         &mut rng,
     );

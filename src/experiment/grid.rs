@@ -193,8 +193,10 @@ impl Budget {
         let mut budget = self.clone();
         budget.hidden = Some(self.hidden_for(method));
         let mut policy_loop = PolicyLoopConfig::new(SacConfig::new(), 0, 0.0, 0.0);
-        if method == Method::Combo {
-            policy_loop.apply_combo_settings(0.0);
+        match method {
+            Method::Combo => policy_loop.apply_combo_settings(0.0),
+            Method::Morel => policy_loop.apply_morel_settings(0.0),
+            _ => {}
         }
         if method.is_mopo() {
             let settings = self.mopo_settings.unwrap_or_default();
@@ -372,7 +374,9 @@ impl GridDataset {
             // The baselines' per-dataset tables, checked before anything runs.
             for m in &methods {
                 let missing = match m {
-                    Method::Mopo | Method::TatuMopo => crate::agent::mopo_preset(preset).err(),
+                    Method::Mopo | Method::TatuMopo | Method::Morel => {
+                        crate::agent::mopo_preset(preset).err()
+                    }
                     Method::Combo => crate::agent::combo_preset(preset).err(),
                     Method::Edac => crate::agent::edac_preset(preset).err(),
                     _ => None,

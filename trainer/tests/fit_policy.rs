@@ -204,6 +204,60 @@ fn combo_trains_in_the_ensemble_with_the_conservative_term() {
     assert!(err.contains("--combo-weight is COMBO's"), "{err}");
 }
 
+/// MOReL trains in MOPO's ensemble as a pessimistic MDP: MOPO's h, no
+/// penalty, a HALT at 3 × the largest pairwise discrepancy on the dataset
+/// (kept in threshold.json), κ from --halt-penalty.
+#[test]
+fn morel_halts_where_the_members_disagree() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dataset, model, run) = (
+        tmp.path().join("hopper.hdf5"),
+        tmp.path().join("ensemble"),
+        tmp.path().join("run"),
+    );
+    generate_hopper(dataset.to_str().unwrap(), 1500, 0);
+    tiny_fit_ensemble(&dataset, &model);
+    let fit = |extra: &[&str]| {
+        tiny_fit_policy(
+            "morel",
+            &model,
+            &dataset,
+            Some("hopper-medium"),
+            20,
+            &run,
+            extra,
+        )
+    };
+    ok(&fit(&["--halt-penalty", "2"]));
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("run.json")).unwrap()).unwrap();
+    let plan = &record["plan"];
+    assert_eq!(plan["pessimism"], 3.0, "{plan}");
+    let config = &plan["config"];
+    assert_eq!(
+        (&config["horizon"], &config["penalty"]),
+        (&5.into(), &0.0.into())
+    );
+    assert_eq!(config["halt_penalty"], 2.0, "{config}");
+    let threshold: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("threshold.json")).unwrap()).unwrap();
+    assert!(
+        threshold["how"].as_str().unwrap().contains("MOReL's HALT"),
+        "{threshold}"
+    );
+    assert!(threshold["threshold"].as_f64().unwrap() > 0.0);
+    let err = fails(&tiny_fit_policy(
+        "mopo",
+        &model,
+        &dataset,
+        Some("hopper-medium"),
+        20,
+        &run,
+        &["--halt-penalty", "1"],
+    ));
+    assert!(err.contains("--halt-penalty is MOReL's"), "{err}");
+}
+
 #[test]
 fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
     let tmp = tempfile::tempdir().unwrap();

@@ -171,6 +171,7 @@ pub async fn rollout(
         penalty: r.penalty,
         threshold,
         noise_scale,
+        halt: None,
     };
     let (seed, mode) = (r.seed, r.policy_mode);
     let worker = model.clone();
@@ -362,7 +363,8 @@ fn binary_rollout(
         .iter()
         .map(|o| match o {
             StepOutcome::Continued => 0.0,
-            StepOutcome::Terminal => 1.0,
+            // The server's rollouts never halt (MOReL's HALT is a training rule).
+            StepOutcome::Terminal | StepOutcome::Halted => 1.0,
             StepOutcome::Truncated => 2.0,
             StepOutcome::Diverged => 3.0,
         })

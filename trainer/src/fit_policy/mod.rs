@@ -11,9 +11,9 @@ use anyhow::Context;
 use burn::tensor::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{
-    ActionMode, AleatoricAsEta, EpochRecord, LoopContext, Method, MopoSettings, PolicyLoopConfig,
-    PolicyTraining, Preset, SacConfig, Truncation, combo_preset, mopo_preset, preset,
-    run_threshold, tatu_pessimism,
+    ActionMode, AleatoricAsEta, EpochRecord, LoopContext, MOREL_PESSIMISM, Method, MopoSettings,
+    PolicyLoopConfig, PolicyTraining, Preset, SacConfig, Truncation, combo_preset, mopo_preset,
+    preset, run_threshold, tatu_pessimism,
 };
 use nuno::artifact::{
     BEST_POLICY, LAST_POLICY, ModelFolder, PolicyProvenance, latest_checkpoint, load_checkpoint,
@@ -56,7 +56,7 @@ pub struct Args {
     #[arg(long)]
     pub preset: Option<String>,
     /// The method: nuno, nuno-r and nuno-al train in the neural SDE of fit-model,
-    /// mopo, tatu-mopo and combo in the Gaussian ensemble of fit-ensemble; bc, td3-bc,
+    /// mopo, tatu-mopo, combo and morel in the Gaussian ensemble of fit-ensemble; bc, td3-bc,
     /// cql and edac on the dataset alone (no --model).
     #[arg(long, default_value_t = Method::Nuno)]
     pub algo: Method,
@@ -75,7 +75,8 @@ pub struct Args {
     /// The model-free methods with --task: NeoRL's observation layout (root x included).
     #[arg(long, conflicts_with = "system")]
     pub neorl: bool,
-    /// TATU's pessimism coefficient (tatu-mopo; default: TATU's for the dataset, else 2).
+    /// TATU's pessimism coefficient (tatu-mopo; default: TATU's for the dataset, else 2),
+    /// or MOReL's (morel: the HALT threshold's multiple of the largest disagreement; default 3).
     #[arg(long)]
     pub pessimism: Option<f64>,
     /// Total gradient steps (rounded up to whole epochs).
@@ -115,6 +116,9 @@ pub struct Args {
     /// 0.05, combo 0.5).
     #[arg(long)]
     pub real_ratio: Option<f64>,
+    /// morel: κ, subtracted from a halting step's reward (default: the authors' code's 0).
+    #[arg(long)]
+    pub halt_penalty: Option<f64>,
     /// combo: the conservative term's weight β (default: OfflineRL-Kit's for the preset's dataset).
     #[arg(long)]
     pub combo_weight: Option<f64>,
@@ -308,6 +312,18 @@ impl Args {
             self.combo_weight.is_none() || self.algo == Method::Combo,
             "--combo-weight is COMBO's β: it needs --algo combo"
         );
+        if self.algo == Method::Morel {
+            // MOPO's rollout length for the dataset (MOReL's own rollouts are
+            // NPG's whole episodes), no penalty, the HALT.
+            if let (Some(name), None) = (&self.preset, self.horizon) {
+                (config.horizon, _) = mopo_preset(name)?;
+            }
+            config.apply_morel_settings(self.halt_penalty.unwrap_or(0.0));
+        }
+        anyhow::ensure!(
+            self.halt_penalty.is_none() || self.algo == Method::Morel,
+            "--halt-penalty is MOReL's κ: it needs --algo morel"
+        );
         config.horizon = self.horizon.unwrap_or(config.horizon);
         config.cvar_alpha = self.cvar_alpha.unwrap_or(config.cvar_alpha);
         config.penalty = self.penalty.unwrap_or(config.penalty);
@@ -325,10 +341,14 @@ impl Args {
         config.epochs = self.steps.div_ceil(self.steps_per_epoch);
         config.eval_episodes = self.eval_episodes;
         config.seed = self.seed;
-        let pessimism = (self.algo == Method::TatuMopo).then(|| {
-            self.pessimism
-                .unwrap_or_else(|| tatu_pessimism(self.preset.as_deref().unwrap_or_default()))
-        });
+        let pessimism = match self.algo {
+            Method::TatuMopo => Some(
+                self.pessimism
+                    .unwrap_or_else(|| tatu_pessimism(self.preset.as_deref().unwrap_or_default())),
+            ),
+            Method::Morel => Some(self.pessimism.unwrap_or(MOREL_PESSIMISM)),
+            _ => None,
+        };
         Ok(InModel {
             model,
             config,
@@ -363,8 +383,8 @@ impl Args {
             "--hidden needs positive layer sizes"
         );
         anyhow::ensure!(
-            self.pessimism.is_none() || self.algo == Method::TatuMopo,
-            "--pessimism is TATU's coefficient: it needs --algo tatu-mopo"
+            self.pessimism.is_none() || matches!(self.algo, Method::TatuMopo | Method::Morel),
+            "--pessimism is TATU's or MOReL's coefficient: it needs --algo tatu-mopo or morel"
         );
         anyhow::ensure!(
             !self.algo.uses_ensemble()
@@ -607,6 +627,12 @@ fn load_model(
         ModelFolder::GaussianEnsemble { model, metadata } if algo == Method::TatuMopo => {
             ModelFolder::GaussianEnsemble {
                 model: Box::new(model.with_truncation_signal(EnsembleUncertainty::MaxDisagreement)),
+                metadata,
+            }
+        }
+        ModelFolder::GaussianEnsemble { model, metadata } if algo == Method::Morel => {
+            ModelFolder::GaussianEnsemble {
+                model: Box::new(model.with_truncation_signal(EnsembleUncertainty::MaxPairwise)),
                 metadata,
             }
         }

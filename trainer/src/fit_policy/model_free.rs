@@ -57,6 +57,7 @@ impl Args {
             (self.forward_velocity.is_some(), "--forward-velocity"),
             (self.real_ratio.is_some(), "--real-ratio"),
             (self.combo_weight.is_some(), "--combo-weight"),
+            (self.halt_penalty.is_some(), "--halt-penalty"),
         ];
         if let Some((_, flag)) = in_model_flags.iter().find(|(given, _)| *given) {
             anyhow::bail!(
