@@ -259,34 +259,9 @@ impl Args {
         })
     }
 
-    /// A model-based method's model folder and policy loop: the preset's h, α
-    /// and λ_pen (MOPO's row for MOPO's methods), the recipe's, single flags over them.
-    fn in_model(&self, preset: Option<&'static Preset>) -> anyhow::Result<InModel> {
-        let model = self.model.clone().with_context(|| {
-            format!(
-                "--algo {} trains in a model: give --model (a fit-model or fit-ensemble folder)",
-                self.algo
-            )
-        })?;
-        anyhow::ensure!(
-            self.task.is_none() && self.system.is_none() && !self.neorl,
-            "--task, --system and --neorl name a model-free method's system; --algo {} reads its model's",
-            self.algo
-        );
-        let hidden = (self.hidden.clone()).unwrap_or_else(|| self.algo.default_hidden());
-        let sac = SacConfig::new()
-            .with_batch_size(self.batch_size)
-            .with_actor_hidden(hidden.clone())
-            .with_critic_hidden(hidden);
-        let mut config = match preset {
-            Some(preset) => PolicyLoopConfig::from_preset(preset, sac),
-            None => match (self.horizon, self.cvar_alpha, self.penalty) {
-                (Some(h), Some(alpha), Some(penalty)) => {
-                    PolicyLoopConfig::new(sac, h, alpha, penalty)
-                }
-                _ => anyhow::bail!("without --preset, give --horizon, --cvar-alpha and --penalty"),
-            },
-        };
+    /// The ensemble baselines' own settings over the preset's loop: MOPO's
+    /// (h, λ) and SAC settings, COMBO's (h, β), MOReL's HALT.
+    fn apply_baseline(&self, config: &mut PolicyLoopConfig) -> anyhow::Result<()> {
         if self.algo.is_mopo() {
             // MOPO's own h and λ with the ensemble's max ‖σ‖ as the penalty; TATU
             // adds its truncation to MOPO's, MOPO alone has none.
@@ -324,6 +299,39 @@ impl Args {
             self.halt_penalty.is_none() || self.algo == Method::Morel,
             "--halt-penalty is MOReL's κ: it needs --algo morel"
         );
+        Ok(())
+    }
+
+    /// A model-based method's model folder and policy loop: the preset's h, α
+    /// and λ_pen (MOPO's row for MOPO's methods), the recipe's, single flags over them.
+    fn in_model(&self, preset: Option<&'static Preset>) -> anyhow::Result<InModel> {
+        let model = self.model.clone().with_context(|| {
+            format!(
+                "--algo {} trains in a model: give --model (a fit-model or fit-ensemble folder)",
+                self.algo
+            )
+        })?;
+        anyhow::ensure!(
+            self.task.is_none() && self.system.is_none() && !self.neorl,
+            "--task, --system and --neorl name a model-free method's system; --algo {} reads its model's",
+            self.algo
+        );
+        let hidden = (self.hidden.clone()).unwrap_or_else(|| self.algo.default_hidden());
+        let sac = SacConfig::new()
+            .with_batch_size(self.batch_size)
+            .with_actor_hidden(hidden.clone())
+            .with_critic_hidden(hidden);
+        let mut config = match preset {
+            Some(preset) => PolicyLoopConfig::from_preset(preset, sac),
+            None => match (self.horizon, self.cvar_alpha, self.penalty) {
+                (Some(h), Some(alpha), Some(penalty)) => {
+                    PolicyLoopConfig::new(sac, h, alpha, penalty)
+                }
+                _ => anyhow::bail!("without --preset, give --horizon, --cvar-alpha and --penalty"),
+            },
+        };
+        self.apply_baseline(&mut config)?;
+
         config.horizon = self.horizon.unwrap_or(config.horizon);
         config.cvar_alpha = self.cvar_alpha.unwrap_or(config.cvar_alpha);
         config.penalty = self.penalty.unwrap_or(config.penalty);
