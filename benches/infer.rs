@@ -231,6 +231,7 @@ fn main() {
         penalty: 1.0,
         threshold: None,
         noise_scale: 1.0,
+        halt: None,
     };
     println!();
     println!("| 10-step rollout with policy (hopper) | batch | transitions/s |");

@@ -123,6 +123,7 @@ fn steps_taken(
         penalty: config.penalty,
         threshold: config.threshold,
         noise_scale: config.noise_scale,
+        halt: None,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(SEED);
     let actions = RolloutActions::Sequence(candidates);
