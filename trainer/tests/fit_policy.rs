@@ -206,7 +206,8 @@ fn combo_trains_in_the_ensemble_with_the_conservative_term() {
 
 /// MOReL trains in MOPO's ensemble as a pessimistic MDP: MOPO's h, no
 /// penalty, a HALT at 3 × the largest pairwise discrepancy on the dataset
-/// (kept in threshold.json), κ from --halt-penalty.
+/// (kept in threshold.json), κ from --halt-penalty. MOPO's rows, which MOReL
+/// reads its h from, stop at D4RL: on NeoRL both --horizon and --penalty stand in.
 #[test]
 fn morel_halts_where_the_members_disagree() {
     let tmp = tempfile::tempdir().unwrap();
@@ -256,6 +257,18 @@ fn morel_halts_where_the_members_disagree() {
         &["--halt-penalty", "1"],
     ));
     assert!(err.contains("--halt-penalty is MOReL's"), "{err}");
+    // MOPO's table has no NeoRL rows: --horizon and --penalty stand in, one alone does not.
+    let neorl = |extra: &[&str]| {
+        let preset = Some("neorl-hopper-low");
+        tiny_fit_policy("mopo", &model, &dataset, preset, 20, &run, extra)
+    };
+    let err = fails(&neorl(&["--horizon", "3", "--resume"]));
+    assert!(err.contains("neorl-hopper-low (for MOPO)"), "{err}");
+    let err = fails(&neorl(&["--horizon", "3", "--penalty", "1", "--resume"]));
+    assert!(
+        err.contains("preset neorl-hopper-low is for hopper"),
+        "past MOPO's table, to the model's check: {err}"
+    );
 }
 
 #[test]

@@ -265,7 +265,9 @@ impl Args {
         if self.algo.is_mopo() {
             // MOPO's own h and λ with the ensemble's max ‖σ‖ as the penalty; TATU
             // adds its truncation to MOPO's, MOPO alone has none.
-            if let Some(name) = &self.preset {
+            // Given both, --horizon and --penalty stand in for a dataset MOPO's
+            // table has no row for (NeoRL's).
+            if let (Some(name), false) = (&self.preset, self.horizon.and(self.penalty).is_some()) {
                 (config.horizon, config.penalty) = mopo_preset(name)?;
             }
             config.truncate = self.algo.truncation() != Truncation::Never;
