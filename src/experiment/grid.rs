@@ -276,6 +276,47 @@ mod tests {
             "{error}"
         );
     }
+
+    /// A NeoRL row gives MOPO's h and λ, which MOPO's table lacks: its
+    /// MOPO-family cells carry them, its NUNO cells do not; a row that has
+    /// MOPO's own preset row, or runs no method that reads them, is refused.
+    #[test]
+    fn a_neorl_row_gives_mopos_pair() {
+        let row = "[budget]\nmodel_steps = 100\npolicy_steps = 100\n\
+                   [[datasets]]\nname = \"low\"\nfile = \"l.npz\"\ntask = \"hopper\"\n\
+                   preset = \"neorl-hopper-low\"\nmopo = { horizon = 5, penalty = 2.5 }\n\
+                   methods = [\"nuno\", \"mopo\", \"morel\"]\nseeds = [0]\n";
+        let grid: Grid = toml::from_str(row).unwrap();
+        let cells = grid.cells(Path::new("/grids")).unwrap();
+        let pair = |m: Method| cells.iter().find(|c| c.method == m).unwrap().mopo;
+        let given = Some(MopoRow {
+            horizon: 5,
+            penalty: 2.5,
+        });
+        assert_eq!((pair(Method::Nuno), pair(Method::Mopo)), (None, given));
+        assert_eq!(pair(Method::Morel), given);
+        let without = row.replace("mopo = { horizon = 5, penalty = 2.5 }\n", "");
+        let error = toml::from_str::<Grid>(&without)
+            .unwrap()
+            .cells(Path::new("/grids"))
+            .unwrap_err();
+        assert!(error.contains("neorl-hopper-low (for MOPO)"), "{error}");
+        let own = row.replace("neorl-hopper-low", "hopper-random");
+        let error = toml::from_str::<Grid>(&own)
+            .unwrap()
+            .cells(Path::new("/grids"))
+            .unwrap_err();
+        assert!(error.contains("`hopper-random` has its own row"), "{error}");
+        let unread = row.replace("\"mopo\", \"morel\"", "\"bc\"");
+        let error = toml::from_str::<Grid>(&unread)
+            .unwrap()
+            .cells(Path::new("/grids"))
+            .unwrap_err();
+        assert!(
+            error.contains("runs no mopo, tatu-mopo or morel"),
+            "{error}"
+        );
+    }
 }
 
 fn default_likelihood() -> LikelihoodPath {
@@ -306,8 +347,20 @@ pub struct GridDataset {
     /// What a preset gives, for a system or a task without a Table 3 row.
     #[serde(default)]
     pub policy: Option<PolicySettings>,
+    /// MOPO's h and λ for a preset MOPO's table has no row for (NeoRL's): what
+    /// mopo and tatu-mopo run with, and morel's h.
+    #[serde(default)]
+    pub mopo: Option<MopoRow>,
     pub methods: Vec<String>,
     pub seeds: Vec<u64>,
+}
+
+/// MOPO's rollout length h and penalty λ, given in a grid row.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MopoRow {
+    pub horizon: usize,
+    pub penalty: f64,
 }
 
 /// fit-policy's `--horizon`, `--cvar-alpha` and `--penalty`: h, α and λ_pen
@@ -374,7 +427,7 @@ impl GridDataset {
             // The baselines' per-dataset tables, checked before anything runs.
             for m in &methods {
                 let missing = match m {
-                    Method::Mopo | Method::TatuMopo | Method::Morel => {
+                    Method::Mopo | Method::TatuMopo | Method::Morel if self.mopo.is_none() => {
                         crate::agent::mopo_preset(preset).err()
                     }
                     Method::Combo => crate::agent::combo_preset(preset).err(),
@@ -386,11 +439,38 @@ impl GridDataset {
                 }
             }
         }
+        self.check_mopo_row(&methods)?;
         Ok(CheckedRow {
             file,
             system,
             methods,
         })
+    }
+
+    /// A row's `mopo` pair: only where MOPO's table has no row for its preset,
+    /// and only with a method that reads it.
+    fn check_mopo_row(&self, methods: &[Method]) -> Result<(), String> {
+        let (name, Some(row)) = (&self.name, self.mopo) else {
+            return Ok(());
+        };
+        if let Some(preset) = &self.preset
+            && crate::agent::mopo_preset(preset).is_ok()
+        {
+            return Err(format!(
+                "dataset `{name}`: `mopo` is for datasets MOPO's table lacks; `{preset}` has its own row"
+            ));
+        }
+        if !methods.iter().any(|m| m.is_mopo() || *m == Method::Morel) {
+            return Err(format!(
+                "dataset `{name}`: `mopo` sets MOPO's h and λ, but the row runs no mopo, tatu-mopo or morel"
+            ));
+        }
+        if row.horizon == 0 || !(row.penalty.is_finite() && row.penalty >= 0.0) {
+            return Err(format!(
+                "dataset `{name}`: `mopo` needs horizon ≥ 1 and a finite penalty ≥ 0"
+            ));
+        }
+        Ok(())
     }
 
     /// A task with its preset or its policy settings, or a system file
@@ -460,6 +540,9 @@ impl GridDataset {
             system_in_grid: None,
             system: None,
             policy: None,
+            mopo: self
+                .mopo
+                .filter(|_| method.is_mopo() || method == Method::Morel),
             method,
             seed,
         };
@@ -518,6 +601,9 @@ pub struct Cell {
     /// h, α and λ_pen where there is no preset.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub policy: Option<PolicySettings>,
+    /// MOPO's h and λ the row gives (its methods' cells only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mopo: Option<MopoRow>,
     pub method: Method,
     pub seed: u64,
 }
@@ -542,6 +628,7 @@ impl Cell {
             && self.system_in_grid.as_ref().map(|f| f.file_name())
                 == other.system_in_grid.as_ref().map(|f| f.file_name())
             && self.policy == other.policy
+            && self.mopo == other.mopo
             && self.method == other.method
             && self.seed == other.seed
     }

@@ -16,7 +16,7 @@ pub use analysis::{
     ActionSource, Exploitation, ExploitationConfig, PredictionConfig, PredictionError,
     exploitation, prediction_error, uncertainty_by_action,
 };
-pub use grid::{Budget, Cell, CellSelection, Grid, GridDataset};
+pub use grid::{Budget, Cell, CellSelection, Grid, GridDataset, MopoRow};
 pub use linear_model::LinearModel;
 pub use paper_tables::{PaperScore, paper_layout_table, paper_score};
 pub use results::{

@@ -428,6 +428,7 @@ pub(super) fn test_result(
             system_in_grid: None,
             system: None,
             policy: None,
+            mopo: None,
             method,
             seed,
         },

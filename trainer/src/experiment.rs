@@ -457,6 +457,11 @@ fn policy_args(cell: &Cell, b: &Budget, model: Option<PathBuf>, dir: PathBuf) ->
         args.cvar_alpha = Some(policy.cvar_alpha);
         args.penalty = Some(policy.penalty);
     }
+    if let Some(mopo) = cell.mopo {
+        // MOReL reads MOPO's h alone (it has no penalty).
+        args.horizon = Some(mopo.horizon);
+        args.penalty = cell.method.is_mopo().then_some(mopo.penalty);
+    }
     args.rollout_batch = b.rollout_batch;
     args.model_buffer_factor = b.model_buffer_factor;
     if cell.method.is_mopo() {
