@@ -194,6 +194,27 @@ impl Edac {
         cross.mean() / (n.max(2) - 1) as f64
     }
 
+    /// The critics' target off the graph, at the current α:
+    /// y = r + γ(1 − d)(min_j Q̄_j(s', ã') − α·log π(ã'|s')), ã' ~ π(·|s').
+    fn critic_target(
+        &self,
+        batch: &TransitionBatch,
+        rng: &mut ChaCha8Rng,
+        plain: &Device,
+    ) -> Tensor<2> {
+        let (obs_dim, act_dim) = (self.actor.config.obs_dim, self.actor.config.act_dim);
+        let b = batch.rewards.len();
+        let tensor = |values: &[f32], width: usize| {
+            Tensor::<2>::from_data(TensorData::new(values.to_vec(), [b, width]), plain)
+        };
+        let next_obs = tensor(&batch.next_observations, obs_dim);
+        let next = (self.actor.valid()).sample(next_obs.clone(), normal([b, act_dim], rng, plain));
+        let next_value =
+            self.target_critics.min_q(next_obs, next.action) - next.log_prob * self.alpha();
+        let not_done = tensor(&batch.terminals, 1).neg() + 1.0;
+        tensor(&batch.rewards, 1) + not_done * next_value * self.config.sac.gamma
+    }
+
     /// One update on `batch`: actor, α, then the critics with the diversity
     /// term, then the Polyak targets.
     pub fn update(&mut self, batch: &TransitionBatch, rng: &mut ChaCha8Rng) -> SacLosses {
@@ -201,12 +222,11 @@ impl Edac {
         let (obs_dim, act_dim) = (c.obs_dim, c.act_dim);
         let b = batch.rewards.len();
         let device = self.device.clone();
-        let plain = device.clone().inner();
-        let tensor = |values: &[f32], width: usize, device: &Device| {
-            Tensor::<2>::from_data(TensorData::new(values.to_vec(), [b, width]), device)
+        let tensor = |values: &[f32], width: usize| {
+            Tensor::<2>::from_data(TensorData::new(values.to_vec(), [b, width]), &device)
         };
-        let obs = tensor(&batch.observations, obs_dim, &device);
-        let actions = tensor(&batch.actions, act_dim, &device);
+        let obs = tensor(&batch.observations, obs_dim);
+        let actions = tensor(&batch.actions, act_dim);
         let sac = self.config.sac.clone();
         let adam = Adam::new(sac.adam_epsilon.unwrap_or(1e-8));
 
@@ -239,17 +259,7 @@ impl Edac {
             &mut self.adam.alpha,
         );
 
-        // Critics: y = r + γ(1 − d)(min_j Q̄_j(s', ã') − α·log π(ã'|s')), the new α.
-        let next_obs = tensor(&batch.next_observations, obs_dim, &plain);
-        let next = self
-            .actor
-            .valid()
-            .sample(next_obs.clone(), normal([b, act_dim], rng, &plain));
-        let next_value =
-            self.target_critics.min_q(next_obs, next.action) - next.log_prob * self.alpha();
-        let terminals = tensor(&batch.terminals, 1, &plain);
-        let y =
-            tensor(&batch.rewards, 1, &plain) + (terminals.neg() + 1.0) * next_value * sac.gamma;
+        let y = self.critic_target(batch, rng, &device.clone().inner());
         let qs = self.critics.forward(obs.clone(), actions.clone());
         let qf1_values = qs[0].clone().mean().into_scalar::<f32>();
         let td: Vec<Tensor<1>> = qs

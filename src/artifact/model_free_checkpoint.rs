@@ -172,7 +172,26 @@ pub fn load_model_free_checkpoint(
             moments,
         })
     };
-    match &mut training.learner {
+    restore_learner(&mut training.learner, &state, &part, &mut moments)?;
+    if let Some(extra) = adam.keys().next() {
+        return Err(ArtifactError::UnexpectedTensor(format!("{ADAM}: {extra}")));
+    }
+    training.rng = state.rng.restore();
+    training.step = state.step;
+    training.epoch = state.epoch;
+    training.history = state.history;
+    Ok(())
+}
+
+/// The learner's networks from `part` (its saved tensors by network name),
+/// its Adam states from `moments` (by optimiser name), its counters from `state`.
+fn restore_learner(
+    learner: &mut Learner,
+    state: &ModelFreeState,
+    part: &dyn Fn(&str) -> NamedTensors,
+    moments: &mut dyn FnMut(&str) -> Result<AdamState, ArtifactError>,
+) -> Result<(), ArtifactError> {
+    match learner {
         Learner::Bc(bc) => {
             let device = bc.device().clone();
             bc.actor = load_tensors(bc.actor.clone(), &part("actor"), &device)?;
@@ -219,12 +238,5 @@ pub fn load_model_free_checkpoint(
             edac.adam.alpha = moments("temperature")?;
         }
     }
-    if let Some(extra) = adam.keys().next() {
-        return Err(ArtifactError::UnexpectedTensor(format!("{ADAM}: {extra}")));
-    }
-    training.rng = state.rng.restore();
-    training.step = state.step;
-    training.epoch = state.epoch;
-    training.history = state.history;
     Ok(())
 }

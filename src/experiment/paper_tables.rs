@@ -85,11 +85,6 @@ pub fn paper_score(preset: &str, method: Method) -> Option<PaperScore> {
     lookup(&TABLE_2_METHODS, scores)
 }
 
-/// One dataset × method of nuno's table.
-struct Entry<'a> {
-    runs: Vec<&'a CellResult>,
-}
-
 /// The finished cells of any number of experiments as the paper's tables:
 /// one row per dataset (Table 3's rows in the paper's order, then the
 /// datasets without a preset by name), one column per method, each cell
@@ -99,41 +94,7 @@ struct Entry<'a> {
 /// different results for one dataset, method and seed, or one dataset ×
 /// method finished under two budgets, are refused.
 pub fn paper_layout_table(results: &[CellResult]) -> Result<String, ExperimentError> {
-    let mut cells: BTreeMap<(String, Method, u64), &CellResult> = BTreeMap::new();
-    for r in results {
-        let key = (row_name(r), r.cell.method, r.cell.seed);
-        match cells.get(&key) {
-            Some(seen) if seen.best_score != r.best_score || seen.steps != r.steps => {
-                return Err(ExperimentError::Invalid(format!(
-                    "two different results for {} / {} / seed {} (best {:.1} at {} steps and {:.1} at {} steps): \
-                     give the folders of one experiment per dataset",
-                    key.0, key.1, key.2, seen.best_score, seen.steps, r.best_score, r.steps
-                )));
-            }
-            _ => {
-                cells.insert(key, r);
-            }
-        }
-    }
-    let mut entries: BTreeMap<(String, Method), Entry> = BTreeMap::new();
-    for ((row, method, _), r) in &cells {
-        let entry = entries
-            .entry((row.clone(), *method))
-            .or_insert_with(|| Entry { runs: Vec::new() });
-        if let Some(first) = entry.runs.first() {
-            let budget = |c: &CellResult| c.budget.as_ref().map(|b| b.for_method(*method));
-            let data = |c: &CellResult| c.dataset_sha256.clone();
-            let same_data = data(first).is_none() || data(r).is_none() || data(first) == data(r);
-            if first.steps != r.steps || budget(first) != budget(r) || !same_data {
-                return Err(ExperimentError::Invalid(format!(
-                    "{row} / {method}: seeds {} and {} ran under different budgets or on different \
-                     dataset files ({} and {} policy steps); give the folders of one experiment per dataset",
-                    first.cell.seed, r.cell.seed, first.steps, r.steps
-                )));
-            }
-        }
-        entry.runs.push(r);
-    }
+    let entries = grouped(results)?;
     let mut methods: Vec<Method> = entries.keys().map(|(_, m)| *m).collect();
     methods.sort();
     methods.dedup();
@@ -156,15 +117,15 @@ pub fn paper_layout_table(results: &[CellResult]) -> Result<String, ExperimentEr
     for row in &rows {
         let steps = (entries.iter())
             .filter(|((r, _), _)| r == row)
-            .map(|(_, e)| e.runs[0].steps)
+            .map(|(_, runs)| runs[0].steps)
             .max()
             .unwrap_or(0);
         out.push_str(&format!("| {row} | {steps} |"));
         for m in &methods {
             let text = match entries.get(&(row.clone(), *m)) {
-                Some(entry) => {
-                    let (mean, std) = mean_std_sample(entry.runs.iter().map(|r| r.best_score));
-                    let ours = match entry.runs.len() {
+                Some(runs) => {
+                    let (mean, std) = mean_std_sample(runs.iter().map(|r| r.best_score));
+                    let ours = match runs.len() {
                         1 => format!("{mean:.1} (1)"),
                         n => format!("{mean:.1} ± {std:.1} ({n})"),
                     };
@@ -180,6 +141,47 @@ pub fn paper_layout_table(results: &[CellResult]) -> Result<String, ExperimentEr
         out.push('\n');
     }
     Ok(out)
+}
+
+/// The results by row and method, each cell once; conflicting copies and
+/// one row × method under two budgets refused.
+fn grouped(
+    results: &[CellResult],
+) -> Result<BTreeMap<(String, Method), Vec<&CellResult>>, ExperimentError> {
+    let mut cells: BTreeMap<(String, Method, u64), &CellResult> = BTreeMap::new();
+    for r in results {
+        let key = (row_name(r), r.cell.method, r.cell.seed);
+        match cells.get(&key) {
+            Some(seen) if seen.best_score != r.best_score || seen.steps != r.steps => {
+                return Err(ExperimentError::Invalid(format!(
+                    "two different results for {} / {} / seed {} (best {:.1} at {} steps and {:.1} at {} steps): \
+                     give the folders of one experiment per dataset",
+                    key.0, key.1, key.2, seen.best_score, seen.steps, r.best_score, r.steps
+                )));
+            }
+            _ => {
+                cells.insert(key, r);
+            }
+        }
+    }
+    let mut entries: BTreeMap<(String, Method), Vec<&CellResult>> = BTreeMap::new();
+    for ((row, method, _), r) in cells {
+        let runs = entries.entry((row.clone(), method)).or_default();
+        if let Some(first) = runs.first() {
+            let budget = |c: &CellResult| c.budget.as_ref().map(|b| b.for_method(method));
+            let data = |c: &CellResult| c.dataset_sha256.clone();
+            let same_data = data(first).is_none() || data(r).is_none() || data(first) == data(r);
+            if first.steps != r.steps || budget(first) != budget(r) || !same_data {
+                return Err(ExperimentError::Invalid(format!(
+                    "{row} / {method}: seeds {} and {} ran under different budgets or on different \
+                     dataset files ({} and {} policy steps); give the folders of one experiment per dataset",
+                    first.cell.seed, r.cell.seed, first.steps, r.steps
+                )));
+            }
+        }
+        runs.push(r);
+    }
+    Ok(entries)
 }
 
 /// A cell's row: its Table 3 preset (the paper's dataset), else its grid name.
