@@ -130,6 +130,10 @@ pub struct OnlineSac {
     pub updates: usize,
     pub episodes: usize,
     pub history: Vec<OnlineRecord>,
+    /// Updates run from the step after this one: `start_steps`, or later in a
+    /// run continued with an emptied replay buffer (see
+    /// [`crate::artifact::load_online_checkpoint`]), so the buffer refills first.
+    pub updates_after: usize,
 }
 
 impl OnlineSac {
@@ -162,6 +166,7 @@ impl OnlineSac {
             updates: 0,
             episodes: 0,
             history: Vec::new(),
+            updates_after: config.start_steps,
             sac,
             task,
             config,
@@ -228,7 +233,7 @@ impl OnlineSac {
             }
             seconds.environment += acting.elapsed().as_secs_f64();
 
-            if self.step > self.config.start_steps {
+            if self.step > self.updates_after {
                 let updating = Instant::now();
                 for _ in 0..self.config.updates_per_step {
                     let batch = self

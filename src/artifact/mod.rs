@@ -46,8 +46,9 @@ pub use model_free_checkpoint::{
     MODEL_FREE_CHECKPOINT_SCHEMA_VERSION, load_model_free_checkpoint, save_model_free_checkpoint,
 };
 pub use online_run::{
-    ONLINE_RUN_SCHEMA_VERSION, OnlineRunInfo, RunPolicy, load_online_checkpoint, read_online_run,
-    read_run_transitions, run_policies, save_online_checkpoint, start_online_run,
+    ONLINE_RUN_SCHEMA_VERSION, OnlineRunInfo, RunPolicy, RunSnapshot, load_online_checkpoint,
+    read_online_run, read_run_transitions, run_policies, save_online_checkpoint,
+    snapshot_online_run, start_online_run,
 };
 pub use policy::{
     BEST_POLICY, LAST_POLICY, POLICY_SCHEMA_VERSION, PolicyMetadata, PolicyProvenance, has_policy,

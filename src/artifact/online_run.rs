@@ -21,7 +21,7 @@ use serde::{Deserialize, Serialize};
 use super::json_file::{read_checked_weights, read_versioned_json, write_json};
 use super::policy::{PolicyMetadata, PolicyProvenance, save_policy};
 use super::sac_state::{
-    RngState, SacFiles, latest_checkpoint, read_sac, save_checkpoint_dir, write_sac,
+    RngState, SacFiles, latest_checkpoint, read_sac, save_checkpoint_dir, write_sac, write_synced,
 };
 use super::safetensors_file::{safetensors_bytes, write_bytes};
 use super::tensors::NamedTensors;
@@ -86,6 +86,10 @@ struct OnlineState {
     rng: RngState,
     history: Vec<OnlineRecord>,
     intervals: Vec<Interval>,
+    /// Set when the run was continued with an emptied replay buffer: updates
+    /// resume after this step.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    updates_after: Option<usize>,
     #[serde(flatten)]
     sac: SacFiles,
 }
@@ -192,6 +196,8 @@ pub fn save_online_checkpoint(
             rng: RngState::of(&run.rng),
             history: run.history.clone(),
             intervals,
+            updates_after: (run.updates_after != run.config.start_steps)
+                .then_some(run.updates_after),
             sac: write_sac(tmp, &run.sac)?,
         };
         write_json(&tmp.join(STATE), &state)
@@ -200,13 +206,38 @@ pub fn save_online_checkpoint(
 
 /// Restores the latest checkpoint in `dir` into `run`, a fresh run built with
 /// the same settings; `false` when there is none yet.
-pub fn load_online_checkpoint(dir: &Path, run: &mut OnlineSac) -> Result<bool, ArtifactError> {
+///
+/// The replay buffer is rebuilt from the recorded intervals. Where they are
+/// missing (a [`snapshot_online_run`] carries none), `refill` says how to go
+/// on: `None` refuses, naming the first missing file; `Some(n)` continues with
+/// the intervals that are there, and the policy acts `n` steps before updates
+/// resume, so the buffer holds its own data before SAC samples from it.
+pub fn load_online_checkpoint(
+    dir: &Path,
+    run: &mut OnlineSac,
+    refill: Option<usize>,
+) -> Result<bool, ArtifactError> {
     let Some(checkpoint) = latest_checkpoint(&dir.join(CHECKPOINTS))? else {
         return Ok(false);
     };
     let state = read_state(&checkpoint)?;
     read_sac(&checkpoint, &state.sac, &mut run.sac)?;
-    for interval in &state.intervals {
+    let (present, missing): (Vec<&Interval>, Vec<&Interval>) = state
+        .intervals
+        .iter()
+        .partition(|i| dir.join(&i.file).exists());
+    if let (Some(first), None) = (missing.first(), refill) {
+        return Err(ArtifactError::Invalid(format!(
+            "{}: the run's transitions for steps {}..{} are not there ({} of {} intervals missing, \
+             as in a snapshot); continue with --refill STEPS to rebuild the replay buffer from new steps",
+            dir.join(&first.file).display(),
+            first.from,
+            first.to,
+            missing.len(),
+            state.intervals.len()
+        )));
+    }
+    for interval in present {
         let recording = read_interval(dir, interval, &run.recording)?;
         let (o, a) = (recording.obs_dim, recording.act_dim);
         for i in 0..recording.len() {
@@ -224,7 +255,140 @@ pub fn load_online_checkpoint(dir: &Path, run: &mut OnlineSac) -> Result<bool, A
     run.updates = state.updates;
     run.episodes = state.episodes;
     run.history = state.history;
+    run.updates_after = match (missing.is_empty(), refill) {
+        (false, Some(n)) => state.step + n,
+        _ => state.updates_after.unwrap_or(run.config.start_steps),
+    };
     Ok(true)
+}
+
+/// What [`snapshot_online_run`] kept.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunSnapshot {
+    /// The checkpoint's step.
+    pub step: usize,
+    /// The steps whose policies were kept.
+    pub policies: Vec<usize>,
+}
+
+/// Copies what the run in `dir` needs to go on and to have its behaviour
+/// levels picked into `out`, small enough to commit: `run.json`, the latest
+/// checkpoint (networks, Adam, generator, history), and of its policies the
+/// first to reach each band of `band` normalised points, the best and the
+/// latest. A level's target is a fraction of the best return within a
+/// tolerance (`LEVEL_TOLERANCE`), so bands narrower than it lose no pick. The
+/// transitions stay behind: a run continued from a snapshot refills its replay
+/// buffer ([`load_online_checkpoint`]). `out` is replaced whole.
+pub fn snapshot_online_run(
+    dir: &Path,
+    out: &Path,
+    band: f64,
+) -> Result<RunSnapshot, ArtifactError> {
+    if !(band > 0.0 && band.is_finite()) {
+        return Err(ArtifactError::Invalid(format!(
+            "a snapshot's score band must be positive, got {band}"
+        )));
+    }
+    let checkpoint = latest_checkpoint(&dir.join(CHECKPOINTS))?.ok_or_else(|| {
+        ArtifactError::Invalid(format!("{}: the run has no checkpoint yet", dir.display()))
+    })?;
+    let state = read_state(&checkpoint)?;
+    let policies = run_policies(dir)?;
+    let kept = banded_policies(&policies, band);
+    let name = checkpoint
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    replace_dir(out, |tmp| {
+        copy_file(&dir.join(RUN), &tmp.join(RUN))?;
+        save_checkpoint_dir(&tmp.join(CHECKPOINTS), &name, |to| {
+            copy_dir_files(&checkpoint, to)
+        })?;
+        std::fs::create_dir_all(tmp.join(POLICIES)).map_err(|e| ArtifactError::io(tmp, e))?;
+        for policy in &kept {
+            for ext in ["safetensors", "json"] {
+                let file = format!("{}.{ext}", policy.stem);
+                copy_file(&policy.dir.join(&file), &tmp.join(POLICIES).join(&file))?;
+            }
+        }
+        Ok(())
+    })?;
+    Ok(RunSnapshot {
+        step: state.step,
+        policies: kept.iter().map(|p| p.step).collect(),
+    })
+}
+
+/// The first policy in each `band`-point band of normalised score, the best
+/// and the latest, by step.
+fn banded_policies(policies: &[RunPolicy], band: f64) -> Vec<&RunPolicy> {
+    let score = |p: &RunPolicy| p.metadata.provenance.normalized_score.unwrap_or(f64::NAN);
+    let best = policies
+        .iter()
+        .filter(|p| score(p).is_finite())
+        .max_by(|a, b| score(a).total_cmp(&score(b)))
+        .map(|p| p.step);
+    let latest = policies.last().map(|p| p.step);
+    let mut bands = std::collections::BTreeSet::new();
+    policies
+        .iter()
+        .filter(|p| {
+            let first_in_band =
+                score(p).is_finite() && bands.insert((score(p) / band).floor() as i64);
+            first_in_band || Some(p.step) == best || Some(p.step) == latest
+        })
+        .collect()
+}
+
+/// Writes directory `out` whole with `write` (into a temporary sibling, then
+/// swapped in), so a failure leaves the old one.
+fn replace_dir(
+    out: &Path,
+    write: impl FnOnce(&Path) -> Result<(), ArtifactError>,
+) -> Result<(), ArtifactError> {
+    let sibling = |tag: &str| {
+        let name = out
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        out.with_file_name(format!(".{name}.{tag}-{}", std::process::id()))
+    };
+    let (tmp, old) = (sibling("tmp"), sibling("old"));
+    for stale in [&tmp, &old] {
+        if stale.exists() {
+            std::fs::remove_dir_all(stale).map_err(|e| ArtifactError::io(stale, e))?;
+        }
+    }
+    std::fs::create_dir_all(&tmp).map_err(|e| ArtifactError::io(&tmp, e))?;
+    if let Err(e) = write(&tmp) {
+        let _ = std::fs::remove_dir_all(&tmp);
+        return Err(e);
+    }
+    if out.exists() {
+        std::fs::rename(out, &old).map_err(|e| ArtifactError::io(out, e))?;
+    }
+    std::fs::rename(&tmp, out).map_err(|e| ArtifactError::io(out, e))?;
+    if old.exists() {
+        std::fs::remove_dir_all(&old).map_err(|e| ArtifactError::io(&old, e))?;
+    }
+    Ok(())
+}
+
+/// Copies a file, fsynced.
+fn copy_file(from: &Path, to: &Path) -> Result<(), ArtifactError> {
+    let bytes = std::fs::read(from).map_err(|e| ArtifactError::io(from, e))?;
+    write_synced(to, &bytes)
+}
+
+/// Copies the plain files of directory `from` into `to`.
+fn copy_dir_files(from: &Path, to: &Path) -> Result<(), ArtifactError> {
+    for entry in std::fs::read_dir(from).map_err(|e| ArtifactError::io(from, e))? {
+        let path = entry.map_err(|e| ArtifactError::io(from, e))?.path();
+        if let Some(name) = path.file_name().filter(|_| path.is_file()) {
+            copy_file(&path, &to.join(name))?;
+        }
+    }
+    Ok(())
 }
 
 /// The run's transitions from its start to checkpoint step `to`, in D4RL's
@@ -264,7 +428,8 @@ pub fn read_run_transitions(dir: &Path, to: usize) -> Result<Dataset, ArtifactEr
         .map_err(|e| ArtifactError::Invalid(e.to_string()))
 }
 
-/// Every policy the run saved, by step, with its evaluation.
+/// Every policy the run holds, by step, with its evaluation (a snapshot
+/// holds some of them).
 pub fn run_policies(dir: &Path) -> Result<Vec<RunPolicy>, ArtifactError> {
     let checkpoint = latest_checkpoint(&dir.join(CHECKPOINTS))?.ok_or_else(|| {
         ArtifactError::Invalid(format!("{}: the run has no checkpoint yet", dir.display()))
@@ -274,6 +439,11 @@ pub fn run_policies(dir: &Path) -> Result<Vec<RunPolicy>, ArtifactError> {
     state
         .intervals
         .iter()
+        .filter(|interval| {
+            policies
+                .join(format!("{}.json", policy_stem(interval.to)))
+                .exists()
+        })
         .map(|interval| {
             let stem = policy_stem(interval.to);
             let metadata = read_versioned_json(
@@ -331,6 +501,15 @@ fn read_interval(
     like: &Recording,
 ) -> Result<Recording, ArtifactError> {
     let path = dir.join(&interval.file);
+    if !path.exists() {
+        return Err(ArtifactError::Invalid(format!(
+            "{}: the run's transitions for steps {}..{} are not there (a snapshot carries none; \
+             they are on the machine that ran those steps)",
+            path.display(),
+            interval.from,
+            interval.to
+        )));
+    }
     let mut tensors = read_checked_weights(&path, &interval.sha256)?;
     let n = interval.to - interval.from;
     // Runs record them whenever the policy has a density; present, they must fit.

@@ -10,7 +10,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{OnlineRecord, OnlineSac, OnlineSacConfig, SacConfig};
 use nuno::artifact::{
     load_online_checkpoint, read_online_run, run_policies, save_behaviour, save_online_checkpoint,
-    start_online_run,
+    snapshot_online_run, start_online_run,
 };
 use nuno::data::{BehaviourLevel, LEVEL_TOLERANCE, select_behaviour};
 use nuno::envs::TaskName;
@@ -29,6 +29,10 @@ pub enum Command {
     /// Pick a run's checkpoints for each behaviour level and write them to a
     /// behaviour directory (`models/behaviour`), with their evaluations.
     Select(SelectArgs),
+    /// Copy what a run needs to go on and to have its levels picked (no
+    /// transitions) into a folder small enough to commit; continue it on
+    /// another machine with `online-sac --resume --refill STEPS`.
+    Snapshot(SnapshotArgs),
 }
 
 /// Online SAC's defaults (CleanRL's), which the flags' defaults read.
@@ -73,6 +77,25 @@ pub struct OnlineArgs {
     /// Continue from the last checkpoint in --out.
     #[arg(long)]
     resume: bool,
+    /// With --resume, where the run's recorded transitions are missing (a
+    /// snapshot): continue without them, the policy acting this many steps
+    /// before SAC updates resume, to refill the replay buffer.
+    #[arg(long, requires = "resume")]
+    refill: Option<usize>,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct SnapshotArgs {
+    /// Run directory written by `collect online-sac`.
+    #[arg(long)]
+    run: PathBuf,
+    /// Snapshot folder (replaced whole), e.g. `models/behaviour/<task>/run`.
+    #[arg(long)]
+    out: PathBuf,
+    /// Keep the first policy in each band of this many normalised points (and
+    /// the best and latest); narrower than `select`'s tolerance loses no pick.
+    #[arg(long, default_value_t = 2.5)]
+    band: f64,
 }
 
 #[derive(Debug, clap::Args)]
@@ -96,6 +119,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::OnlineSac(args) => online_sac(args),
         Command::Select(args) => select(args),
+        Command::Snapshot(args) => snapshot(args),
     }
 }
 
@@ -125,8 +149,15 @@ fn online_sac(args: OnlineArgs) -> anyhow::Result<()> {
         args.out.display()
     );
     start_online_run(&args.out, &run, &system)?;
-    if args.resume && load_online_checkpoint(&args.out, &mut run)? {
-        println!("resumed at step {}", run.step);
+    anyhow::ensure!(
+        args.refill != Some(0),
+        "--refill needs at least one step: SAC samples batches from what the refill records"
+    );
+    if args.resume && load_online_checkpoint(&args.out, &mut run, args.refill)? {
+        println!(
+            "resumed at step {} (updates from step {})",
+            run.step, run.updates_after
+        );
     }
 
     let bar = ProgressBar::new(args.steps as u64).with_style(ProgressStyle::with_template(
@@ -212,6 +243,19 @@ fn select(args: SelectArgs) -> anyhow::Result<()> {
             written.display()
         );
     }
+    Ok(())
+}
+
+fn snapshot(args: SnapshotArgs) -> anyhow::Result<()> {
+    let kept = snapshot_online_run(&args.run, &args.out, args.band)
+        .with_context(|| format!("snapshotting the run in {}", args.run.display()))?;
+    println!(
+        "step {}: the checkpoint and {} policies (steps {:?}) -> {}",
+        kept.step,
+        kept.policies.len(),
+        kept.policies,
+        args.out.display()
+    );
     Ok(())
 }
 

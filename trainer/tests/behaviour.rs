@@ -131,6 +131,113 @@ fn online_sac_records_d4rl_columns_and_resumes_bit_for_bit() {
     }
 }
 
+/// The metrics.csv column `name`, one value per checkpoint.
+fn metric(run: &Path, name: &str) -> Vec<f64> {
+    let csv = std::fs::read_to_string(run.join("metrics.csv")).unwrap();
+    let mut lines = csv.lines();
+    let column = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .position(|c| c == name)
+        .unwrap_or_else(|| panic!("no column {name}"));
+    lines
+        .map(|l| l.split(',').nth(column).unwrap().parse().unwrap())
+        .collect()
+}
+
+#[test]
+fn a_snapshot_carries_a_run_to_another_machine() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = |name: &str| tmp.path().join(name);
+    let s = |path: &Path| path.to_str().unwrap().to_string();
+    let (run, snapshot, moved) = (p("run"), p("snapshot"), p("moved"));
+    ok(&online::<&str>(&run, 1200, 5, &[]));
+    let error = fails(&[
+        "collect",
+        "snapshot",
+        "--run",
+        &s(&run),
+        "--out",
+        &s(&snapshot),
+        "--band",
+        "0",
+    ]);
+    assert!(error.contains("band"), "{error}");
+    // One band holds every score: the first policy, the best and the latest.
+    ok(&[
+        "collect",
+        "snapshot",
+        "--run",
+        &s(&run),
+        "--out",
+        &s(&snapshot),
+        "--band",
+        "1e6",
+    ]);
+    let scores = metric(&run, "eval/normalized_score");
+    let best = 300
+        * (1 + (0..scores.len())
+            .max_by(|&a, &b| scores[a].total_cmp(&scores[b]))
+            .unwrap());
+    let mut expected = vec![300, best, 1200];
+    expected.sort();
+    expected.dedup();
+    let mut kept: Vec<usize> = std::fs::read_dir(snapshot.join("policies"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter_map(|n| {
+            n.strip_suffix(".json")
+                .map(|stem| stem["step-".len()..].parse().unwrap())
+        })
+        .collect();
+    kept.sort();
+    assert_eq!(kept, expected);
+    assert!(!snapshot.join("transitions").exists());
+    for file in ["networks.safetensors", "adam.safetensors"] {
+        let name = format!("checkpoints/step-00001200/{file}");
+        assert_eq!(
+            std::fs::read(run.join(&name)).unwrap(),
+            std::fs::read(snapshot.join(&name)).unwrap()
+        );
+    }
+
+    // On another machine: the transitions are missing, and continuing must say how.
+    copy_dir(&snapshot, &moved);
+    let error = fails(&online(&moved, 1500, 5, &["--resume"]));
+    assert!(error.contains("--refill"), "{error}");
+    let out = ok(&online(&moved, 1800, 5, &["--resume", "--refill", "400"]));
+    assert!(
+        out.contains("resumed at step 1200 (updates from step 1600)"),
+        "{out}"
+    );
+    // Updates ran after step 300 (one per step) and, continued, after step 1600.
+    let updates = metric(&moved, "updates");
+    assert_eq!(updates[3], 900.0);
+    assert_eq!(updates[5], 900.0 + 200.0);
+    let refill = interval(&moved.join("transitions/steps-00001200-00001500.safetensors"));
+    let uniform = -3.0 * std::f32::consts::LN_2;
+    assert!(
+        refill["action_log_probs"]
+            .1
+            .iter()
+            .all(|&l| l != uniform && l.is_finite())
+    );
+    // The continued run's levels are picked from the policies it holds.
+    ok(&[
+        "collect",
+        "select",
+        "--run",
+        &s(&moved),
+        "--out",
+        &s(&p("behaviour")),
+        "--levels",
+        "expert",
+        "--tolerance",
+        "1",
+    ]);
+}
+
 #[test]
 #[cfg_attr(
     not(feature = "external-tests"),
