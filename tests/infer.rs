@@ -365,3 +365,46 @@ fn dense_layer_reads_a_column_window_of_wider_rows() {
         }
     }
 }
+
+/// A row's output must not depend on the rows beside it: the row loop (fewer
+/// than GEMM_MIN_ROWS rows) and gemm (more) give the bits of one chain of
+/// fused multiply-adds by hand where the CPU has FMA (gemm's kernels then use
+/// it), of plain multiply-then-add otherwise, at whatever level NUNO_SIMD
+/// caps. The server's dynamic batching answers a request batched with others
+/// as it does alone only because of this.
+#[test]
+fn a_layers_rows_do_not_depend_on_the_batch_around_them() {
+    let mut rng = ChaCha8Rng::seed_from_u64(41);
+    let has_fma = detected_simd_level() >= SimdLevel::Avx2;
+    for (k, n) in [(14usize, 256usize), (256, 256), (200, 17)] {
+        let w: Vec<f32> = (0..k * n).map(|_| rng.random_range(-0.1..0.1)).collect();
+        let layer = Dense::new(k, n, &w, vec![0.0; n]);
+        let x: Vec<f32> = (0..2 * GEMM_MIN_ROWS * k)
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
+        let chain = |r: usize, j: usize| {
+            (0..k).fold(0.0f32, |acc, i| {
+                let (a, b) = (x[r * k + i], w[i * n + j]);
+                if has_fma {
+                    a.mul_add(b, acc)
+                } else {
+                    acc + a * b
+                }
+            })
+        };
+        for rows in [1, GEMM_MIN_ROWS - 1, GEMM_MIN_ROWS, 2 * GEMM_MIN_ROWS] {
+            let mut out = vec![0.0; rows * n];
+            layer.forward(Rows::dense(&x[..rows * k], k), &mut out, None);
+            for r in 0..rows {
+                for j in 0..n {
+                    assert_eq!(
+                        out[r * n + j].to_bits(),
+                        chain(r, j).to_bits(),
+                        "{k}×{n}, {rows} rows: row {r} column {j} at {:?}",
+                        simd_level()
+                    );
+                }
+            }
+        }
+    }
+}

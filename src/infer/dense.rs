@@ -6,7 +6,7 @@
 //! the `gemm` crate's AVX-512 kernels from [`GEMM_MIN_ROWS`] rows up, a
 //! row-times-matrix loop below that, where packing would cost more than it saves.
 
-use super::simd::{SimdLevel, simd_level};
+use super::simd::{SimdLevel, detected_simd_level, simd_level};
 use super::vector_math::{Vectorized, bias_then_activate, widest};
 use crate::nn::{Activation, Mlp, to_f32_vec};
 
@@ -311,7 +311,17 @@ fn accumulate_rows(layer: &Dense, input: Rows, out: &mut [f32]) {
         // SAFETY: simd_level() is at most what the CPU supports: AVX-512F here.
         return unsafe { avx512::accumulate_rows(layer, input, out) };
     }
-    widest(RowLoop { layer, input, out });
+    // gemm sums each output as one chain of fused multiply-adds wherever the
+    // CPU has FMA, whatever vector level the loop runs at: the loop sums the
+    // same way, so a row's output does not depend on how many rows share the
+    // call (a request batched with others answers as it does alone).
+    let fused = detected_simd_level() >= SimdLevel::Avx2;
+    widest(RowLoop {
+        layer,
+        input,
+        out,
+        fused,
+    });
 }
 
 /// The portable row loop, vectorised along W's rows.
@@ -319,6 +329,8 @@ struct RowLoop<'a> {
     layer: &'a Dense,
     input: Rows<'a>,
     out: &'a mut [f32],
+    /// Each step a fused multiply-add (one rounding), as gemm's where the CPU has FMA.
+    fused: bool,
 }
 
 impl Vectorized for RowLoop<'_> {
@@ -328,8 +340,14 @@ impl Vectorized for RowLoop<'_> {
         for (r, y) in self.out.chunks_exact_mut(n).enumerate() {
             let weights = self.layer.weight.chunks_exact(self.layer.stride);
             for (&x, w) in self.input.row(r).iter().zip(weights) {
-                for (y, w) in y.iter_mut().zip(w) {
-                    *y += x * w;
+                if self.fused {
+                    for (y, w) in y.iter_mut().zip(w) {
+                        *y = x.mul_add(*w, *y);
+                    }
+                } else {
+                    for (y, w) in y.iter_mut().zip(w) {
+                        *y += x * w;
+                    }
                 }
             }
         }
