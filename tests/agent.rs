@@ -603,6 +603,7 @@ fn hopper_context<'a>(model: &'a nuno::sde::NeuralSde, dataset: &'a Dataset) -> 
         system,
         // burn throughout, like the dynamics (the fused path: tests/infer.rs, the CLI test).
         kernel: Kernel::Burn,
+        ensemble: None,
     }
 }
 

@@ -716,3 +716,52 @@ fn the_fused_path_steps_the_ensemble_as_burn_does() {
         b.truncation_signal.as_ref().unwrap(),
     );
 }
+
+/// MOBILE's penalty with a known "critic" (the next state's first
+/// coordinate): u is the unbiased std over the two elites of their sample
+/// means, so about |m₁ − m₂|/√2 for the elites' mean next states m_e, which
+/// the ensemble's own step reports when its member column picks each elite;
+/// only the model rows lose β·u.
+#[test]
+fn mobiles_penalty_is_the_elites_spread_of_the_next_value() {
+    let fit = fitted();
+    let dynamics =
+        EnsembleDynamics::new(&fit, 2, 1, EnsembleUncertainty::MaxAleatoric).on_fused_path();
+    assert_eq!(dynamics.elite_count(), 2);
+    // Off the data (s ∈ [−1, 1]²), where the elites disagree.
+    let (s, a) = ([8.0f32, -8.0], 3.0f32);
+    let elite = |z: f32| dynamics.step(&[s[0], s[1], 0.0], &[a], &[0.0, 0.0, 0.0, z]);
+    let (first, second) = (elite(-3.0), elite(3.0));
+    let expected = (first.means[0] - second.means[0]).abs() / 2f32.sqrt();
+    let samples = 20_000;
+    let spread = (first.sigma[0].powi(2) + second.sigma[0].powi(2)).sqrt();
+    let tolerance = 4.0 * spread / (samples as f32).sqrt() / 2f32.sqrt();
+    assert!(
+        expected > 10.0 * tolerance,
+        "the elites must disagree: {expected}"
+    );
+
+    let mut batch = nuno::shared::TransitionBatch {
+        observations: vec![0.1, 0.2, s[0], s[1]],
+        actions: vec![0.3, a],
+        rewards: vec![1.0, 1.0],
+        next_observations: vec![0.0; 4],
+        terminals: vec![0.0, 0.0],
+    };
+    let term = nuno::agent::BellmanPenalty::new(3.0).with_samples(samples);
+    let mut first_coordinate =
+        |next: &[f32], _: &mut ChaCha8Rng| next.chunks_exact(2).map(|row| row[0]).collect();
+    let u = term.penalize(
+        &mut batch,
+        1,
+        &dynamics,
+        &mut first_coordinate,
+        &mut ChaCha8Rng::seed_from_u64(9),
+    );
+    assert!(
+        (u - expected).abs() < tolerance,
+        "u {u} vs {expected} ± {tolerance}"
+    );
+    assert_eq!(batch.rewards[0], 1.0, "a real row keeps its reward");
+    assert!((batch.rewards[1] - (1.0 - 3.0 * u)).abs() < 1e-5);
+}

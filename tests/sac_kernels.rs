@@ -4,6 +4,7 @@
 
 use std::collections::BTreeMap;
 
+use burn::module::Module;
 use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
 use nuno::agent::{ActorConfig, FusedSac, Sac, SacConfig, SacLosses};
@@ -234,4 +235,75 @@ fn a_thousand_updates_track_burns_losses() {
         // rounding differences grow slowly through the updates.
         assert_close(name, &f, &b, 1e-4, 1e-5);
     }
+}
+
+/// MOBILE's critic target: the deterministic backup leaves out exactly
+/// −γ(1 − d)·α·log π(ã'|s') (the same ã', computed apart), the floor lifts
+/// every target below it to it, and the fused kernel's update with both
+/// equals burn's; both kernels' target values min_j Q̄_j(s, ã) agree.
+#[test]
+fn mobiles_backup_and_target_values_match_a_hand_computation_on_both_kernels() {
+    let rows = 64;
+    let data = batch(rows, &mut ChaCha8Rng::seed_from_u64(20));
+    let stochastic = agent(21);
+    let mut deterministic = agent(21);
+    deterministic.config.deterministic_backup = true;
+    let plain = Device::flex().inner();
+    let column = |v: &[f32]| Tensor::<2>::from_data(TensorData::new(v.to_vec(), [rows, 1]), &plain);
+    let next_obs = Tensor::<2>::from_data(
+        TensorData::new(data.next_observations.clone(), [rows, OBS]),
+        &plain,
+    );
+    let noise = normal([rows, ACT], &mut ChaCha8Rng::seed_from_u64(22), &plain);
+    let target = |sac: &Sac| {
+        let y = sac.critic_target(
+            next_obs.clone(),
+            column(&data.rewards),
+            column(&data.terminals),
+            noise.clone(),
+        );
+        nuno::nn::to_f32_vec(y)
+    };
+    let (with_entropy, without) = (target(&stochastic), target(&deterministic));
+    let log_prob = nuno::nn::to_f32_vec(
+        stochastic
+            .actor
+            .valid()
+            .sample(next_obs.clone(), noise.clone())
+            .log_prob,
+    );
+    let alpha = 0.7f32;
+    let expected: Vec<f32> = (0..rows)
+        .map(|r| with_entropy[r] + 0.99 * (1.0 - data.terminals[r]) * alpha * log_prob[r])
+        .collect();
+    assert_close("deterministic backup", &without, &expected, 1e-5, 1e-5);
+
+    let mut floored = agent(21);
+    floored.config.deterministic_backup = true;
+    floored.config.target_floor = Some(0.0);
+    let lifted = target(&floored);
+    assert!(
+        without.iter().any(|&y| y < 0.0),
+        "the data must reach below the floor"
+    );
+    for (y, raw) in lifted.iter().zip(&without) {
+        assert_eq!(*y, raw.max(0.0));
+    }
+
+    // One whole update with both settings, fused against burn.
+    let mut reference = floored;
+    let mut fused = FusedSac::from_sac(&reference);
+    reference.update(&data, &mut ChaCha8Rng::seed_from_u64(23));
+    fused.update(&data, &mut ChaCha8Rng::seed_from_u64(23));
+    let mut ours = agent(24);
+    fused.write_to(&mut ours);
+    let (expected, got) = (all_tensors(&reference), all_tensors(&ours));
+    for (name, values) in &expected {
+        assert_close(name, &got[name], values, 1e-5, 1e-6);
+    }
+
+    let values = reference.target_values(&data.observations, &mut ChaCha8Rng::seed_from_u64(25));
+    let fused_values = FusedSac::from_sac(&reference)
+        .target_values(&data.observations, &mut ChaCha8Rng::seed_from_u64(25));
+    assert_close("target values", &fused_values, &values, 1e-5, 1e-5);
 }

@@ -19,6 +19,9 @@ pub struct FusedSac {
     obs_dim: usize,
     act_dim: usize,
     gamma: f32,
+    /// The critic target's entropy term left out, and its floor (MOBILE).
+    deterministic_backup: bool,
+    target_floor: Option<f32>,
     tau: f64,
     lr: (f64, f64, f64),
     target_entropy: f32,
@@ -112,6 +115,8 @@ impl FusedSac {
             obs_dim: c.obs_dim,
             act_dim: c.act_dim,
             gamma: sac.config.gamma as f32,
+            deterministic_backup: sac.config.deterministic_backup,
+            target_floor: sac.config.target_floor,
             tau: sac.config.tau,
             lr: (
                 sac.config.critic_lr,
@@ -295,7 +300,8 @@ impl FusedSac {
     }
 
     /// y = r + γ(1 − d)(min_i Q̄_i(s', ã') − α·log π(ã'|s')), ã' drawn with
-    /// `work.noise`, into `work.y`.
+    /// `work.noise`, into `work.y` (as [`Sac::critic_target`]: without the
+    /// entropy term under a deterministic backup, at least the floor).
     fn critic_target(&mut self, batch: &TransitionBatch, alpha: f32) {
         let b = batch.rewards.len();
         self.act_into_critic_input(&batch.next_observations);
@@ -308,10 +314,34 @@ impl FusedSac {
         w.y.clear();
         for r in 0..b {
             let min_q = w.q1_tape.output[r].min(w.q2_tape.output[r]);
-            let next_value = min_q - w.sample.log_prob[r] * alpha;
+            let next_value = if self.deterministic_backup {
+                min_q
+            } else {
+                min_q - w.sample.log_prob[r] * alpha
+            };
             let not_done = -batch.terminals[r] + 1.0;
-            w.y.push(batch.rewards[r] + not_done * next_value * self.gamma);
+            let y = batch.rewards[r] + not_done * next_value * self.gamma;
+            w.y.push(self.target_floor.map_or(y, |floor| y.max(floor)));
         }
+    }
+
+    /// min_i Q̄_i(s, ã) at ã ~ π(·|s) for every row of `observations`, ε from
+    /// `rng` (as [`Sac::target_values`]): MOBILE's penalty samples.
+    pub fn target_values(&mut self, observations: &[f32], rng: &mut ChaCha8Rng) -> Vec<f32> {
+        let b = observations.len() / self.obs_dim;
+        fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
+        rayon::scope(|_| {
+            self.act_into_critic_input(observations);
+            let w = &mut self.work;
+            let input = &w.critic_input;
+            rayon::join(
+                || self.target_q1.forward(input, b, &mut w.q1_tape),
+                || self.target_q2.forward(input, b, &mut w.q2_tape),
+            );
+            (0..b)
+                .map(|r| w.q1_tape.output[r].min(w.q2_tape.output[r]))
+                .collect()
+        })
     }
 
     /// ∂L_Q/∂θ of both critics into `work.q*_grads`; returns the critic's losses.

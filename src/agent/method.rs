@@ -40,10 +40,14 @@ pub enum Method {
     /// ensemble as a pessimistic MDP that halts where the members disagree,
     /// trained by MOPO's SAC loop in place of MOReL's NPG.
     Morel,
+    /// MOBILE (Sun et al., 2023, OfflineRL-Kit's `run_mobile.py`): MOPO's
+    /// Gaussian ensemble, the reward penalised at each update by the Bellman
+    /// inconsistency over its elites.
+    Mobile,
 }
 
 impl Method {
-    pub const ALL: [Method; 11] = [
+    pub const ALL: [Method; 12] = [
         Method::Nuno,
         Method::NunoR,
         Method::NunoAl,
@@ -55,6 +59,7 @@ impl Method {
         Method::Edac,
         Method::Combo,
         Method::Morel,
+        Method::Mobile,
     ];
 
     /// The name in grid files, and `fit-policy --algo`'s.
@@ -71,6 +76,7 @@ impl Method {
             Method::Edac => "edac",
             Method::Combo => "combo",
             Method::Morel => "morel",
+            Method::Mobile => "mobile",
         }
     }
 
@@ -78,7 +84,7 @@ impl Method {
     pub fn uses_ensemble(self) -> bool {
         matches!(
             self,
-            Method::Mopo | Method::TatuMopo | Method::Combo | Method::Morel
+            Method::Mopo | Method::TatuMopo | Method::Combo | Method::Morel | Method::Mobile
         )
     }
 
@@ -96,7 +102,9 @@ impl Method {
         match self {
             Method::Nuno | Method::NunoAl => Some("sde"),
             Method::NunoR => Some("sde-reward"),
-            Method::Mopo | Method::TatuMopo | Method::Combo | Method::Morel => Some("ensemble"),
+            Method::Mopo | Method::TatuMopo | Method::Combo | Method::Morel | Method::Mobile => {
+                Some("ensemble")
+            }
             Method::Bc | Method::Td3Bc | Method::Cql | Method::Edac => None,
         }
     }
@@ -146,6 +154,7 @@ impl Method {
             Method::Morel => Truncation::Halt,
             Method::Mopo
             | Method::Combo
+            | Method::Mobile
             | Method::Bc
             | Method::Td3Bc
             | Method::Cql

@@ -12,6 +12,7 @@ mod edac;
 mod fused_actor;
 mod fused_sac;
 mod method;
+mod mobile;
 mod model_free_loop;
 mod model_rollout;
 mod model_step;
@@ -34,6 +35,7 @@ pub use edac::{CriticEnsemble, Edac, EdacConfig};
 pub use fused_actor::FusedActor;
 pub use fused_sac::{FusedGradients, FusedSac};
 pub use method::{Method, Truncation};
+pub use mobile::{BellmanPenalty, bellman_inconsistency};
 pub use model_free_loop::{
     Learner, LearnerConfig, ModelFreeConfig, ModelFreeTraining, fold_input_normalization,
     state_stats,
@@ -54,9 +56,9 @@ pub use policy_loop::{
 };
 pub use portable_actor::PortableActor;
 pub use presets::{
-    COMBO_PRESETS, EDAC_PRESETS, MOPO_PRESETS, MOREL_PESSIMISM, PRESETS, Preset,
-    TATU_DEFAULT_PESSIMISM, TATU_PESSIMISM, combo_preset, edac_preset, mopo_preset, preset,
-    tatu_pessimism,
+    COMBO_PRESETS, EDAC_PRESETS, MOBILE_PRESETS, MOPO_PRESETS, MOREL_PESSIMISM, PRESETS, Preset,
+    TATU_DEFAULT_PESSIMISM, TATU_PESSIMISM, combo_preset, edac_preset, mobile_preset, mopo_preset,
+    preset, tatu_pessimism,
 };
 pub use sac::{Sac, SacAdam, SacConfig, SacLosses};
 pub use td3_bc::{Td3Bc, Td3BcAdam, Td3BcConfig};

@@ -316,6 +316,7 @@ impl ModelFreeTraining {
                 evaluation: evaluating.elapsed().as_secs_f64(),
                 ..PhaseSeconds::default()
             },
+            bellman_penalty: None,
         };
         self.history.push(record.clone());
         Ok(record)

@@ -22,10 +22,12 @@ use super::actor::{ActionMode, ActorConfig, ActorPolicy};
 use super::buffer::ReplayBuffer;
 use super::cql::ConservativeTerm;
 use super::fused_sac::FusedSac;
+use super::mobile::BellmanPenalty;
 use super::model_rollout::{Halt, RolloutActions, RolloutConfig, RolloutStats, rollout_model};
 use super::presets::Preset;
 use super::sac::{Sac, SacConfig, SacLosses};
 use crate::data::{Dataset, StartStateSampler, TransitionSampler};
+use crate::ensemble::EnsembleDynamics;
 use crate::envs::{EvaluationConfig, EvaluationReport, ForwardVelocity, Rules, System, evaluate};
 use crate::infer::Kernel;
 use crate::sde::{CODE_MODEL_BUFFER_FACTOR, Recipe, ThresholdTable};
@@ -123,6 +125,12 @@ pub struct PolicyLoopConfig {
     /// other method. Runs saved before this field had none, and load so.
     #[config(default = "None")]
     pub halt_penalty: Option<f64>,
+    /// MOBILE: each update's model rows rewarded r − β·u(s, a), u the Bellman
+    /// inconsistency over the ensemble's elites (needs
+    /// [`LoopContext::ensemble`]); `None` for every other method. Runs saved
+    /// before this field had none, and load so.
+    #[config(default = "None")]
+    pub bellman_penalty: Option<BellmanPenalty>,
     /// Gradient steps per epoch.
     #[config(default = 1000)]
     pub steps_per_epoch: usize,
@@ -198,6 +206,24 @@ impl PolicyLoopConfig {
         self.penalty = 0.0;
         self.truncate = true;
         self.halt_penalty = Some(kappa);
+    }
+
+    /// MOBILE's policy step as OfflineRL-Kit's `run_mobile.py` runs it:
+    /// MOPO's SAC settings, no reward penalty at rollout time and no
+    /// truncation, the Bellman penalty of weight β on every update's model
+    /// rows, a deterministic backup floored at 0, and α fixed where the
+    /// dataset's row turns its tuning off.
+    pub fn apply_mobile_settings(&mut self, beta: f64, fixed_alpha: Option<f64>) {
+        self.apply_mopo_settings(MopoSettings::OfflinerlKit);
+        self.penalty = 0.0;
+        self.truncate = false;
+        self.sac.deterministic_backup = true;
+        self.sac.target_floor = Some(0.0);
+        if let Some(alpha) = fixed_alpha {
+            self.sac.initial_alpha = alpha;
+            self.sac.alpha_lr = 0.0;
+        }
+        self.bellman_penalty = Some(BellmanPenalty::new(beta));
     }
 
     /// The actor's learning rate during epoch `epoch` (from 0).
@@ -349,6 +375,10 @@ pub struct EpochRecord {
     /// Absent from records written before phases were timed.
     #[serde(default)]
     pub seconds: PhaseSeconds,
+    /// MOBILE: the mean Bellman inconsistency u(s, a) over the epoch's model
+    /// rows (before β); absent for every other method.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bellman_penalty: Option<f32>,
 }
 
 /// What the loop reads but does not own.
@@ -361,6 +391,9 @@ pub struct LoopContext<'a> {
     pub rules: Rules,
     /// What runs SAC's updates, and the policy in rollouts and evaluation episodes.
     pub kernel: Kernel,
+    /// The Gaussian ensemble itself, where the method samples its elites one
+    /// by one (MOBILE's penalty); `None` otherwise.
+    pub ensemble: Option<&'a EnsembleDynamics>,
 }
 
 /// The loop's whole state: what a checkpoint saves.
@@ -392,6 +425,13 @@ impl PolicyTraining {
         if config.truncate && threshold.is_none() {
             return Err(AgentError::Threshold(
                 "the loop truncates but was given no threshold".into(),
+            ));
+        }
+        if config.bellman_penalty.is_some() && ctx.ensemble.is_none() {
+            return Err(AgentError::Mismatch(
+                "MOBILE's penalty samples a Gaussian ensemble's elites: train it in an ensemble \
+                 folder (fit-ensemble)"
+                    .into(),
             ));
         }
         let (obs_dim, act_dim) = (ctx.dynamics.obs_dim(), ctx.dynamics.act_dim());
@@ -442,6 +482,7 @@ impl PolicyTraining {
         let mut seconds = PhaseSeconds::default();
         let mut losses = Vec::with_capacity(self.config.steps_per_epoch);
         let mut rollout = RolloutStats::default();
+        let mut penalties = Vec::new();
         // The fused kernel trains on host buffers for the epoch and hands the
         // agent back to `self.sac` for rollouts, evaluation and checkpoints.
         self.sac.config.actor_lr = self.config.actor_lr_at(self.epoch);
@@ -457,8 +498,11 @@ impl PolicyTraining {
                 rollout = self.model_rollout(ctx);
                 seconds.rollouts += rolling.elapsed().as_secs_f64();
             }
-            let batch = self.mixed_batch(ctx.dataset);
+            let mut batch = self.mixed_batch(ctx.dataset);
             let real_rows = self.real_rows();
+            if let Some(u) = self.penalize_model_rows(ctx, &mut batch, fused.as_mut()) {
+                penalties.push(u);
+            }
             losses.push(match (fused.as_mut(), &self.config.conservative) {
                 (Some(fused), _) => fused.update(&batch, &mut self.rng),
                 (None, Some(term)) => term.update(&mut self.sac, &batch, real_rows, &mut self.rng),
@@ -490,9 +534,34 @@ impl PolicyTraining {
             eval,
             eta,
             seconds,
+            bellman_penalty: (!penalties.is_empty())
+                .then(|| penalties.iter().sum::<f32>() / penalties.len() as f32),
         };
         self.history.push(record.clone());
         Ok(record)
+    }
+
+    /// MOBILE: the batch's model rows rewarded r − β·u(s, a), u from the
+    /// target critics of the kernel that trains; returns the mean u where the
+    /// batch has model rows (nothing for other methods).
+    fn penalize_model_rows(
+        &mut self,
+        ctx: &LoopContext,
+        batch: &mut TransitionBatch,
+        mut fused: Option<&mut FusedSac>,
+    ) -> Option<f32> {
+        let (Some(term), Some(ensemble)) = (&self.config.bellman_penalty, ctx.ensemble) else {
+            return None;
+        };
+        let sac = &self.sac;
+        let mut target_values = |obs: &[f32], rng: &mut ChaCha8Rng| match fused.as_deref_mut() {
+            Some(fused) => fused.target_values(obs, rng),
+            None => sac.target_values(obs, rng),
+        };
+        let first_model_row = self.real_rows();
+        (first_model_row < batch.rewards.len()).then(|| {
+            term.penalize(batch, first_model_row, ensemble, &mut target_values, &mut self.rng)
+        })
     }
 
     /// Rolls the sampled policy through the model from dataset states into the model buffer.

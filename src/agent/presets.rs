@@ -117,18 +117,7 @@ pub const MOPO_PRESETS: [(&str, usize, f64); 12] = [
 
 /// MOPO's (h, λ) for the dataset `name` names.
 pub fn mopo_preset(name: &str) -> Result<(usize, f64), AgentError> {
-    MOPO_PRESETS
-        .iter()
-        .find(|(n, _, _)| *n == name)
-        .map(|&(_, h, penalty)| (h, penalty))
-        .ok_or_else(|| AgentError::UnknownPreset {
-            name: format!("{name} (for MOPO)"),
-            known: MOPO_PRESETS
-                .iter()
-                .map(|(n, _, _)| *n)
-                .collect::<Vec<_>>()
-                .join(", "),
-        })
+    table_row(&MOPO_PRESETS, name, "for MOPO").map(|&(_, h, penalty)| (h, penalty))
 }
 
 /// TATU's pessimism coefficient where TATU's own scripts give one for a
@@ -170,18 +159,7 @@ pub const EDAC_PRESETS: [(&str, usize, f64); 9] = [
 
 /// EDAC's (N, η) for the dataset `name` names.
 pub fn edac_preset(name: &str) -> Result<(usize, f64), AgentError> {
-    EDAC_PRESETS
-        .iter()
-        .find(|(n, _, _)| *n == name)
-        .map(|&(_, n, eta)| (n, eta))
-        .ok_or_else(|| AgentError::UnknownPreset {
-            name: format!("{name} (for EDAC's critics and η)"),
-            known: EDAC_PRESETS
-                .iter()
-                .map(|(n, _, _)| *n)
-                .collect::<Vec<_>>()
-                .join(", "),
-        })
+    table_row(&EDAC_PRESETS, name, "for EDAC's critics and η").map(|&(_, n, eta)| (n, eta))
 }
 
 /// COMBO's rollout length h and conservative weight β for a D4RL dataset
@@ -201,16 +179,67 @@ pub const COMBO_PRESETS: [(&str, usize, f64); 9] = [
 
 /// COMBO's (h, β) for the dataset `name` names.
 pub fn combo_preset(name: &str) -> Result<(usize, f64), AgentError> {
-    COMBO_PRESETS
+    table_row(&COMBO_PRESETS, name, "for COMBO's h and β").map(|&(_, h, beta)| (h, beta))
+}
+
+/// MOBILE's rollout length h, penalty weight β and, where its script turns
+/// the temperature's tuning off, the fixed α, for a D4RL dataset
+/// (OfflineRL-Kit's `run_mobile.py` "suggested hypers", the only per-task
+/// table with the random datasets), by Table 3's names; none for NeoRL.
+pub const MOBILE_PRESETS: [(&str, usize, f64, Option<f64>); 12] = [
+    ("halfcheetah-random", 5, 0.5, None),
+    ("hopper-random", 5, 5.0, None),
+    ("walker2d-random", 5, 2.0, None),
+    ("halfcheetah-medium", 5, 0.5, None),
+    ("hopper-medium", 5, 1.5, Some(0.2)),
+    ("walker2d-medium", 5, 0.5, None),
+    ("halfcheetah-medium-replay", 5, 0.1, None),
+    ("hopper-medium-replay", 5, 0.1, None),
+    ("walker2d-medium-replay", 1, 0.5, None),
+    ("halfcheetah-medium-expert", 5, 2.0, None),
+    ("hopper-medium-expert", 5, 1.5, None),
+    ("walker2d-medium-expert", 1, 1.5, None),
+];
+
+/// MOBILE's (h, β, fixed α) for the dataset `name` names.
+pub fn mobile_preset(name: &str) -> Result<(usize, f64, Option<f64>), AgentError> {
+    table_row(&MOBILE_PRESETS, name, "for MOBILE's h and β")
+        .map(|&(_, h, beta, alpha)| (h, beta, alpha))
+}
+
+/// A dataset's row of a per-task table whose rows start with its name;
+/// unknown names are refused with the table's names (`what`: whose table).
+fn table_row<'t, T: DatasetRow>(
+    table: &'t [T],
+    name: &str,
+    what: &str,
+) -> Result<&'t T, AgentError> {
+    table
         .iter()
-        .find(|(n, _, _)| *n == name)
-        .map(|&(_, h, beta)| (h, beta))
+        .find(|row| row.dataset() == name)
         .ok_or_else(|| AgentError::UnknownPreset {
-            name: format!("{name} (for COMBO's h and β)"),
-            known: COMBO_PRESETS
+            name: format!("{name} ({what})"),
+            known: table
                 .iter()
-                .map(|(n, _, _)| *n)
+                .map(DatasetRow::dataset)
                 .collect::<Vec<_>>()
                 .join(", "),
         })
+}
+
+/// A per-task table's row, named by its dataset.
+trait DatasetRow {
+    fn dataset(&self) -> &str;
+}
+
+impl<A, B> DatasetRow for (&str, A, B) {
+    fn dataset(&self) -> &str {
+        self.0
+    }
+}
+
+impl<A, B, C> DatasetRow for (&str, A, B, C) {
+    fn dataset(&self) -> &str {
+        self.0
+    }
 }

@@ -52,6 +52,15 @@ pub struct SacConfig {
     /// runs used burn's default 1e-5, so they resume with the ε they had.
     #[config(default = "Some(1e-8)")]
     pub adam_epsilon: Option<f32>,
+    /// Leave the entropy term out of the critic target (OfflineRL-Kit's
+    /// `deterministic_backup`, MOBILE's). Runs saved before this field kept
+    /// it, and load so.
+    #[config(default = false)]
+    pub deterministic_backup: bool,
+    /// Clamp the critic target from below (MOBILE's `clamp(target_q, 0)`);
+    /// `None` leaves it. Runs saved before this field had none, and load so.
+    #[config(default = "None")]
+    pub target_floor: Option<f32>,
     #[config(default = -5.0)]
     pub log_std_min: f32,
     #[config(default = 2.0)]
@@ -166,7 +175,8 @@ impl Sac {
     }
 
     /// The critic target, off the graph:
-    /// y = r + γ(1 − d)(min_i Q̄_i(s', ã') − α·log π(ã'|s')),  ã' ~ π(·|s') drawn with `noise`.
+    /// y = r + γ(1 − d)(min_i Q̄_i(s', ã') − α·log π(ã'|s')),  ã' ~ π(·|s') drawn with `noise`
+    /// (without the entropy term under `deterministic_backup`, at least `target_floor`).
     ///
     /// # Shapes
     /// - `next_obs`: `[batch, obs_dim]`, `rewards`, `terminals`: `[batch, 1]`,
@@ -180,8 +190,32 @@ impl Sac {
     ) -> Tensor<2> {
         let alpha = self.temperature.alpha().inner();
         let next = self.actor.valid().sample(next_obs.clone(), noise);
-        let next_value = self.target_critic.min_q(next_obs, next.action) - next.log_prob * alpha;
-        rewards + (terminals.neg() + 1.0) * next_value * self.config.gamma
+        let mut next_value = self.target_critic.min_q(next_obs, next.action);
+        if !self.config.deterministic_backup {
+            next_value = next_value - next.log_prob * alpha;
+        }
+        let y = rewards + (terminals.neg() + 1.0) * next_value * self.config.gamma;
+        match self.config.target_floor {
+            Some(floor) => y.clamp_min(floor),
+            None => y,
+        }
+    }
+
+    /// min_i Q̄_i(s, ã) at ã ~ π(·|s) for every row of `observations`, ε from
+    /// `rng`: the target critics' value of the policy (MOBILE's penalty samples).
+    pub fn target_values(&self, observations: &[f32], rng: &mut ChaCha8Rng) -> Vec<f32> {
+        let c = &self.actor.config;
+        let b = observations.len() / c.obs_dim;
+        let plain = self.device.clone().inner();
+        let obs = Tensor::<2>::from_data(
+            TensorData::new(observations.to_vec(), [b, c.obs_dim]),
+            &plain,
+        );
+        let next = self
+            .actor
+            .valid()
+            .sample(obs.clone(), normal([b, c.act_dim], rng, &plain));
+        crate::nn::to_f32_vec(self.target_critic.min_q(obs, next.action))
     }
 
     /// L_Q = mean (Q₁(s, a) − y)² + mean (Q₂(s, a) − y)², returned as

@@ -170,6 +170,18 @@ impl ModelFolder {
         }
     }
 
+    /// The Gaussian ensemble itself (MOBILE samples its elites one by one),
+    /// its networks run by `kernel`; `None` for a neural SDE.
+    pub fn ensemble(&self, kernel: Kernel) -> Option<EnsembleDynamics> {
+        match self {
+            Self::NeuralSde { .. } => None,
+            Self::GaussianEnsemble { model, .. } => Some(match kernel {
+                Kernel::Fused => model.on_fused_path(),
+                Kernel::Burn => model.as_ref().clone(),
+            }),
+        }
+    }
+
     /// The model behind the batch interface, its networks run by `kernel`.
     pub fn dynamics(&self, kernel: Kernel) -> Box<dyn BatchDynamics + '_> {
         match kernel {

@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use super::fit::{EnsembleFit, Scaler};
 use super::model::{GaussianEnsemble, softplus};
 use crate::infer::{DenseMlp, MlpScratch, Rows, row_chunks, run_tiles, tile_rows, with_buffers};
-use crate::nn::to_f32_vec;
+use crate::nn::{fill_standard_normal, to_f32_vec};
 use crate::shared::{BatchDynamics, BatchShape, ModelStep, step_batch};
 
 thread_local! {
@@ -150,6 +150,47 @@ impl EnsembleDynamics {
                 largest
             }
         }
+    }
+
+    /// MOBILE's next states (OfflineRL-Kit's `sample_next_obss`): `samples`
+    /// draws s' = s + μ_e + σ_e·ε from every elite e's Gaussian at each row,
+    /// `[elite][sample][row][obs_dim]` flattened, ε from `rng`.
+    pub fn elite_next_observations(
+        &self,
+        observations: &[f32],
+        actions: &[f32],
+        samples: usize,
+        rng: &mut impl rand::Rng,
+    ) -> Vec<f32> {
+        let (o, s) = (self.obs_dim, self.state_dim());
+        let batch = observations.len() / o;
+        // The state row carries the reward last; the means do not read it.
+        let states: Vec<f32> = observations
+            .chunks_exact(o)
+            .flat_map(|row| row.iter().copied().chain([0.0]))
+            .collect();
+        let (means, stds) = self.predict(&states, actions, batch);
+        let mut eps = Vec::new();
+        fill_standard_normal(&mut eps, self.elites.len() * samples * batch * o, rng);
+        let mut next = Vec::with_capacity(eps.len());
+        for &elite in &self.elites {
+            for _ in 0..samples {
+                for r in 0..batch {
+                    for d in 0..o {
+                        let (i, mean) = (r * s + d, means[elite][r * s + d]);
+                        next.push(
+                            observations[r * o + d] + mean + stds[elite][i] * eps[next.len()],
+                        );
+                    }
+                }
+            }
+        }
+        next
+    }
+
+    /// The number of elites, the members rollouts sample from.
+    pub fn elite_count(&self) -> usize {
+        self.elites.len()
     }
 
     /// Every member's mean and std, `[members][batch · (obs_dim + 1)]`.

@@ -196,6 +196,7 @@ impl Budget {
         match method {
             Method::Combo => policy_loop.apply_combo_settings(0.0),
             Method::Morel => policy_loop.apply_morel_settings(0.0),
+            Method::Mobile => policy_loop.apply_mobile_settings(0.0, None),
             _ => {}
         }
         if method.is_mopo() {
@@ -431,6 +432,7 @@ impl GridDataset {
                         crate::agent::mopo_preset(preset).err()
                     }
                     Method::Combo => crate::agent::combo_preset(preset).err(),
+                    Method::Mobile => crate::agent::mobile_preset(preset).err(),
                     Method::Edac => crate::agent::edac_preset(preset).err(),
                     _ => None,
                 };

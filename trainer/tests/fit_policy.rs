@@ -645,3 +645,58 @@ fn model_free_methods_train_on_the_dataset_alone() {
         "{err}"
     );
 }
+
+/// MOBILE trains in MOPO's ensemble with its own row (hopper-medium: h 5, β
+/// 1.5, α fixed at 0.2), no penalty at rollout time and no truncation, a
+/// deterministic backup floored at 0, and every epoch records the Bellman
+/// inconsistency its updates subtracted; a model without an ensemble, and the
+/// flag without the method, are refused by name.
+#[test]
+fn mobile_penalises_updates_by_the_elites_bellman_inconsistency() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dataset, model, run) = (
+        tmp.path().join("hopper.hdf5"),
+        tmp.path().join("ensemble"),
+        tmp.path().join("run"),
+    );
+    generate_hopper(dataset.to_str().unwrap(), 1500, 0);
+    tiny_fit_ensemble(&dataset, &model);
+    let fit = |algo: &str, preset: &str, extra: &[&str]| {
+        tiny_fit_policy(algo, &model, &dataset, Some(preset), 20, &run, extra)
+    };
+    ok(&fit("mobile", "hopper-medium", &[]));
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("run.json")).unwrap()).unwrap();
+    let config = &record["plan"]["config"];
+    assert_eq!(config["horizon"], 5, "{config}");
+    assert_eq!(config["bellman_penalty"]["beta"], 1.5, "{config}");
+    assert_eq!(
+        (&config["penalty"], &config["truncate"]),
+        (&0.0.into(), &false.into())
+    );
+    let sac = &config["sac"];
+    assert_eq!(
+        (&sac["deterministic_backup"], &sac["target_floor"]),
+        (&true.into(), &0.0.into())
+    );
+    assert_eq!(
+        (&sac["initial_alpha"], &sac["alpha_lr"]),
+        (&0.2.into(), &0.0.into())
+    );
+    let records = std::fs::read_to_string(run.join("metrics.jsonl")).unwrap();
+    for line in records.lines() {
+        let r: serde_json::Value = serde_json::from_str(line).unwrap();
+        assert!(r["bellman_penalty"].as_f64().unwrap() > 0.0, "{r}");
+        assert!(
+            (r["losses"]["alpha"].as_f64().unwrap() - 0.2).abs() < 1e-6,
+            "{r}"
+        );
+    }
+    let err = fails(&fit("mobile", "neorl-hopper-low", &["--resume"]));
+    assert!(
+        err.contains("neorl-hopper-low (for MOBILE's h and β)"),
+        "{err}"
+    );
+    let err = fails(&fit("mopo", "hopper-medium", &["--mobile-penalty", "1"]));
+    assert!(err.contains("--mobile-penalty is MOBILE's"), "{err}");
+}

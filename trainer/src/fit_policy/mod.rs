@@ -12,8 +12,8 @@ use burn::tensor::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{
     ActionMode, AleatoricAsEta, EpochRecord, LoopContext, MOREL_PESSIMISM, Method, MopoSettings,
-    PolicyLoopConfig, PolicyTraining, Preset, SacConfig, Truncation, combo_preset, mopo_preset,
-    preset, run_threshold, tatu_pessimism,
+    PolicyLoopConfig, PolicyTraining, Preset, SacConfig, Truncation, combo_preset, mobile_preset,
+    mopo_preset, preset, run_threshold, tatu_pessimism,
 };
 use nuno::artifact::{
     BEST_POLICY, LAST_POLICY, ModelFolder, PolicyProvenance, latest_checkpoint, load_checkpoint,
@@ -56,7 +56,7 @@ pub struct Args {
     #[arg(long)]
     pub preset: Option<String>,
     /// The method: nuno, nuno-r and nuno-al train in the neural SDE of fit-model,
-    /// mopo, tatu-mopo, combo and morel in the Gaussian ensemble of fit-ensemble; bc, td3-bc,
+    /// mopo, tatu-mopo, combo, morel and mobile in the Gaussian ensemble of fit-ensemble; bc, td3-bc,
     /// cql and edac on the dataset alone (no --model).
     #[arg(long, default_value_t = Method::Nuno)]
     pub algo: Method,
@@ -122,6 +122,9 @@ pub struct Args {
     /// combo: the conservative term's weight β (default: OfflineRL-Kit's for the preset's dataset).
     #[arg(long)]
     pub combo_weight: Option<f64>,
+    /// mobile: the Bellman penalty's weight β (default: OfflineRL-Kit's for the preset's dataset).
+    #[arg(long)]
+    pub mobile_penalty: Option<f64>,
     /// SAC batch size.
     #[arg(long, default_value_t = loop_defaults().sac.batch_size)]
     pub batch_size: usize,
@@ -301,6 +304,28 @@ impl Args {
             self.halt_penalty.is_none() || self.algo == Method::Morel,
             "--halt-penalty is MOReL's κ: it needs --algo morel"
         );
+        self.apply_mobile(config)
+    }
+
+    /// MOBILE's own h, β and (hopper-medium) fixed α: its table, or
+    /// --horizon and --mobile-penalty.
+    fn apply_mobile(&self, config: &mut PolicyLoopConfig) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            self.mobile_penalty.is_none() || self.algo == Method::Mobile,
+            "--mobile-penalty is MOBILE's β: it needs --algo mobile"
+        );
+        if self.algo != Method::Mobile {
+            return Ok(());
+        }
+        let (horizon, beta, fixed_alpha) = match (&self.preset, self.horizon, self.mobile_penalty) {
+            (_, Some(h), Some(beta)) => (h, beta, None),
+            (Some(name), _, _) => mobile_preset(name)?,
+            (None, _, _) => anyhow::bail!(
+                "--algo mobile takes h and β per dataset: give a --preset OfflineRL-Kit has them for, or --horizon and --mobile-penalty"
+            ),
+        };
+        config.horizon = horizon;
+        config.apply_mobile_settings(self.mobile_penalty.unwrap_or(beta), fixed_alpha);
         Ok(())
     }
 
@@ -441,12 +466,17 @@ fn train_in_model(plan: &Plan, run: &InModel) -> anyhow::Result<()> {
     } else {
         base.as_ref()
     };
+    // MOBILE samples the ensemble's elites one by one.
+    let ensemble = model
+        .ensemble(plan.kernel)
+        .filter(|_| plan.method == Method::Mobile);
     let ctx = LoopContext {
         dataset: &dataset,
         dynamics,
         rules: model.rules(&system)?,
         system,
         kernel: plan.kernel,
+        ensemble: ensemble.as_ref(),
     };
     let mut training = start(plan, run, &model, &ctx, &device)?;
     write_run_record(&plan.out, "fit-policy", plan, &[&plan.dataset])?;
