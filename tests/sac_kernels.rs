@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use burn::module::Module;
 use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
-use nuno::agent::{ActorConfig, FusedSac, Sac, SacConfig, SacLosses};
+use nuno::agent::{ActorConfig, CriticBackup, FusedSac, Sac, SacConfig, SacLosses};
 use nuno::artifact::collect_tensors;
 use nuno::infer::TrainableMlp;
 use nuno::nn::{gradients_by_path, normal, seeded_init};
@@ -247,7 +247,10 @@ fn mobiles_backup_and_target_values_match_a_hand_computation_on_both_kernels() {
     let data = batch(rows, &mut ChaCha8Rng::seed_from_u64(20));
     let stochastic = agent(21);
     let mut deterministic = agent(21);
-    deterministic.config.deterministic_backup = true;
+    deterministic.config.backup = Some(CriticBackup {
+        deterministic: true,
+        floor: None,
+    });
     let plain = Device::flex().inner();
     let column = |v: &[f32]| Tensor::<2>::from_data(TensorData::new(v.to_vec(), [rows, 1]), &plain);
     let next_obs = Tensor::<2>::from_data(
@@ -279,8 +282,10 @@ fn mobiles_backup_and_target_values_match_a_hand_computation_on_both_kernels() {
     assert_close("deterministic backup", &without, &expected, 1e-5, 1e-5);
 
     let mut floored = agent(21);
-    floored.config.deterministic_backup = true;
-    floored.config.target_floor = Some(0.0);
+    floored.config.backup = Some(CriticBackup {
+        deterministic: true,
+        floor: Some(0.0),
+    });
     let lifted = target(&floored);
     assert!(
         without.iter().any(|&y| y < 0.0),

@@ -8,7 +8,7 @@
 use rand_chacha::ChaCha8Rng;
 
 use super::actor::tanh_gaussian_log_density;
-use super::sac::{Sac, SacAdam, SacLosses};
+use super::sac::{CriticBackup, Sac, SacAdam, SacLosses};
 use crate::infer::{MlpTape, TrainableMlp};
 use crate::nn::{Adam, AdamState, AdamStep, fill_standard_normal, to_f32_vec};
 use crate::shared::LoggedActions;
@@ -19,9 +19,8 @@ pub struct FusedSac {
     obs_dim: usize,
     act_dim: usize,
     gamma: f32,
-    /// The critic target's entropy term left out, and its floor (MOBILE).
-    deterministic_backup: bool,
-    target_floor: Option<f32>,
+    /// The critic target's form where it is not SAC's (MOBILE).
+    backup: Option<CriticBackup>,
     tau: f64,
     lr: (f64, f64, f64),
     target_entropy: f32,
@@ -115,8 +114,7 @@ impl FusedSac {
             obs_dim: c.obs_dim,
             act_dim: c.act_dim,
             gamma: sac.config.gamma as f32,
-            deterministic_backup: sac.config.deterministic_backup,
-            target_floor: sac.config.target_floor,
+            backup: sac.config.backup,
             tau: sac.config.tau,
             lr: (
                 sac.config.critic_lr,
@@ -314,14 +312,15 @@ impl FusedSac {
         w.y.clear();
         for r in 0..b {
             let min_q = w.q1_tape.output[r].min(w.q2_tape.output[r]);
-            let next_value = if self.deterministic_backup {
+            let next_value = if self.backup.is_some_and(|b| b.deterministic) {
                 min_q
             } else {
                 min_q - w.sample.log_prob[r] * alpha
             };
             let not_done = -batch.terminals[r] + 1.0;
             let y = batch.rewards[r] + not_done * next_value * self.gamma;
-            w.y.push(self.target_floor.map_or(y, |floor| y.max(floor)));
+            let floor = self.backup.and_then(|b| b.floor);
+            w.y.push(floor.map_or(y, |floor| y.max(floor)));
         }
     }
 

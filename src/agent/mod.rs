@@ -60,7 +60,7 @@ pub use presets::{
     TATU_DEFAULT_PESSIMISM, TATU_PESSIMISM, combo_preset, edac_preset, mobile_preset, mopo_preset,
     preset, tatu_pessimism,
 };
-pub use sac::{Sac, SacAdam, SacConfig, SacLosses};
+pub use sac::{CriticBackup, Sac, SacAdam, SacConfig, SacLosses};
 pub use td3_bc::{Td3Bc, Td3BcAdam, Td3BcConfig};
 pub use uncertainty::{
     AleatoricAsEta, RunThreshold, dataset_max_threshold, rollout_threshold, run_threshold,

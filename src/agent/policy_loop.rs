@@ -25,7 +25,7 @@ use super::fused_sac::FusedSac;
 use super::mobile::BellmanPenalty;
 use super::model_rollout::{Halt, RolloutActions, RolloutConfig, RolloutStats, rollout_model};
 use super::presets::Preset;
-use super::sac::{Sac, SacConfig, SacLosses};
+use super::sac::{CriticBackup, Sac, SacConfig, SacLosses};
 use crate::data::{Dataset, StartStateSampler, TransitionSampler};
 use crate::ensemble::EnsembleDynamics;
 use crate::envs::{EvaluationConfig, EvaluationReport, ForwardVelocity, Rules, System, evaluate};
@@ -217,8 +217,10 @@ impl PolicyLoopConfig {
         self.apply_mopo_settings(MopoSettings::OfflinerlKit);
         self.penalty = 0.0;
         self.truncate = false;
-        self.sac.deterministic_backup = true;
-        self.sac.target_floor = Some(0.0);
+        self.sac.backup = Some(CriticBackup {
+            deterministic: true,
+            floor: Some(0.0),
+        });
         if let Some(alpha) = fixed_alpha {
             self.sac.initial_alpha = alpha;
             self.sac.alpha_lr = 0.0;
@@ -560,7 +562,13 @@ impl PolicyTraining {
         };
         let first_model_row = self.real_rows();
         (first_model_row < batch.rewards.len()).then(|| {
-            term.penalize(batch, first_model_row, ensemble, &mut target_values, &mut self.rng)
+            term.penalize(
+                batch,
+                first_model_row,
+                ensemble,
+                &mut target_values,
+                &mut self.rng,
+            )
         })
     }
 

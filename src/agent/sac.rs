@@ -52,19 +52,22 @@ pub struct SacConfig {
     /// runs used burn's default 1e-5, so they resume with the ε they had.
     #[config(default = "Some(1e-8)")]
     pub adam_epsilon: Option<f32>,
-    /// Leave the entropy term out of the critic target (OfflineRL-Kit's
-    /// `deterministic_backup`, MOBILE's). Runs saved before this field kept
-    /// it, and load so.
-    #[config(default = false)]
-    pub deterministic_backup: bool,
-    /// Clamp the critic target from below (MOBILE's `clamp(target_q, 0)`);
-    /// `None` leaves it. Runs saved before this field had none, and load so.
-    #[config(default = "None")]
-    pub target_floor: Option<f32>,
+    /// The critic target's form where it is not SAC's (MOBILE's); `None`:
+    /// SAC's. Runs saved before this field had none, and load so.
+    pub backup: Option<CriticBackup>,
     #[config(default = -5.0)]
     pub log_std_min: f32,
     #[config(default = 2.0)]
     pub log_std_max: f32,
+}
+
+/// A critic target other than SAC's soft one.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CriticBackup {
+    /// Leave the entropy term out (OfflineRL-Kit's `deterministic_backup`).
+    pub deterministic: bool,
+    /// Clamp the target from below (MOBILE's `clamp(target_q, 0)`).
+    pub floor: Option<f32>,
 }
 
 /// burn's default Adam ε, which runs used before [`SacConfig::adam_epsilon`] existed.
@@ -176,7 +179,7 @@ impl Sac {
 
     /// The critic target, off the graph:
     /// y = r + γ(1 − d)(min_i Q̄_i(s', ã') − α·log π(ã'|s')),  ã' ~ π(·|s') drawn with `noise`
-    /// (without the entropy term under `deterministic_backup`, at least `target_floor`).
+    /// (without the entropy term and at least the floor under a [`CriticBackup`]).
     ///
     /// # Shapes
     /// - `next_obs`: `[batch, obs_dim]`, `rewards`, `terminals`: `[batch, 1]`,
@@ -190,12 +193,13 @@ impl Sac {
     ) -> Tensor<2> {
         let alpha = self.temperature.alpha().inner();
         let next = self.actor.valid().sample(next_obs.clone(), noise);
+        let backup = self.config.backup;
         let mut next_value = self.target_critic.min_q(next_obs, next.action);
-        if !self.config.deterministic_backup {
+        if !backup.is_some_and(|b| b.deterministic) {
             next_value = next_value - next.log_prob * alpha;
         }
         let y = rewards + (terminals.neg() + 1.0) * next_value * self.config.gamma;
-        match self.config.target_floor {
+        match backup.and_then(|b| b.floor) {
             Some(floor) => y.clamp_min(floor),
             None => y,
         }

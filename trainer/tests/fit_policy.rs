@@ -676,7 +676,7 @@ fn mobile_penalises_updates_by_the_elites_bellman_inconsistency() {
     );
     let sac = &config["sac"];
     assert_eq!(
-        (&sac["deterministic_backup"], &sac["target_floor"]),
+        (&sac["backup"]["deterministic"], &sac["backup"]["floor"]),
         (&true.into(), &0.0.into())
     );
     assert_eq!(
