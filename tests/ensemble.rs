@@ -6,7 +6,8 @@ use burn::tensor::{Device, Tensor, TensorData};
 use ndarray::{Array1, Array2};
 use nuno::data::{Dataset, DatasetMetadata, DatasetParts};
 use nuno::ensemble::{
-    EnsembleConfig, EnsembleDynamics, EnsembleFit, EnsembleUncertainty, fit_ensemble,
+    AdversarialConfig, AdversarialEnsemble, EnsembleConfig, EnsembleDynamics, EnsembleFit,
+    EnsembleUncertainty, fit_ensemble,
 };
 use nuno::infer::Kernel;
 use nuno::nn::to_f32_vec;
@@ -764,4 +765,79 @@ fn mobiles_penalty_is_the_elites_spread_of_the_next_value() {
     );
     assert_eq!(batch.rewards[0], 1.0, "a real row keeps its reward");
     assert!((batch.rewards[1] - (1.0 - 3.0 * u)).abs() < 1e-5);
+}
+
+/// RAMBO's adversarial update: the drawn transition's log-likelihood is the
+/// elites' Gaussian mixture's, by hand from the means and σ the ensemble's own
+/// step reports for each elite; one step with a positive advantage makes the
+/// drawn transition less likely, with a negative one more likely (the
+/// adversarial term's sign), the supervised term present in both.
+#[test]
+fn rambos_adversarial_step_lowers_the_likelihood_of_what_the_policy_values() {
+    let fit = fitted();
+    let dynamics = EnsembleDynamics::new(&fit, 2, 1, EnsembleUncertainty::MaxAleatoric);
+    let config = AdversarialConfig::new(1e3).with_learning_rate(1e-3);
+    let device = Device::flex();
+    let (obs, actions) = (vec![0.4f32, -0.3, -0.2, 0.5], vec![0.5f32, -0.7]);
+    let adversary = AdversarialEnsemble::new(&dynamics, config.clone(), &device);
+    let sample = adversary.sample(&obs, &actions, &mut ChaCha8Rng::seed_from_u64(3));
+
+    // By hand: ln((1/2)·Σ_e Π_d N(x_d | m_e,d, σ_e,d)), each elite's m and σ
+    // from the step with no noise and its member column (Φ(∓3) picks each).
+    let by_hand = |dynamics: &EnsembleDynamics, state: [f32; 3], action: f32, x: [f32; 3]| {
+        let densities: Vec<f64> = [-3.0f32, 3.0]
+            .iter()
+            .map(|&z| {
+                let step = dynamics.step(&state, &[action], &[0.0, 0.0, 0.0, z]);
+                (0..3)
+                    .map(|d| {
+                        let (m, s) = (f64::from(step.means[d]), f64::from(step.sigma[d]));
+                        let u = (f64::from(x[d]) - m) / s;
+                        (-0.5 * u * u).exp() / (s * (2.0 * std::f64::consts::PI).sqrt())
+                    })
+                    .product()
+            })
+            .collect();
+        (0.5 * densities.iter().sum::<f64>()).ln()
+    };
+    let close = |ours: f32, hand: f64| (f64::from(ours) - hand).abs() < 1e-3 * hand.abs().max(1.0);
+    for r in 0..2 {
+        let state = [obs[2 * r], obs[2 * r + 1], 0.0];
+        let next = &sample.next_observations[2 * r..2 * r + 2];
+        let x = [next[0], next[1], sample.rewards[r]];
+        let (ours, hand) = (
+            sample.log_probs()[r],
+            by_hand(&dynamics, state, actions[r], x),
+        );
+        assert!(close(ours, hand), "row {r}: {ours} vs {hand}");
+    }
+
+    // One row, one step each way; the real batch is a dataset-like transition.
+    let real = (
+        &obs[..2],
+        &actions[..1],
+        &[0.55f32, -0.36][..],
+        &[0.9f32][..],
+    );
+    for advantage in [1.0f32, -1.0] {
+        let mut adversary = AdversarialEnsemble::new(&dynamics, config.clone(), &device);
+        let sample = adversary.sample(&obs[..2], &actions[..1], &mut ChaCha8Rng::seed_from_u64(4));
+        let (next, reward) = (sample.next_observations.clone(), sample.rewards.clone());
+        let before = sample.log_probs()[0];
+        adversary.step(sample, &[advantage], real);
+        let after = adversary.log_prob(&obs[..2], &actions[..1], &next, &reward)[0];
+        // The stepped ensemble, handed back as dynamics, steps with the new weights.
+        let stepped = adversary.dynamics(&dynamics);
+        let hand = by_hand(
+            &stepped,
+            [obs[0], obs[1], 0.0],
+            actions[0],
+            [next[0], next[1], reward[0]],
+        );
+        assert!(close(after, hand), "stepped: {after} vs {hand}");
+        assert!(
+            (after - before) * advantage < 0.0,
+            "A = {advantage}: log p {before} → {after}"
+        );
+    }
 }

@@ -188,6 +188,25 @@ impl EnsembleDynamics {
         next
     }
 
+    /// The members, scaler and elites (RAMBO's adversarial training starts from them).
+    pub(super) fn parts(&self) -> (&GaussianEnsemble, &Scaler, &[usize]) {
+        (&self.model, &self.scaler, &self.elites)
+    }
+
+    /// The same dynamics with `model`'s weights (on the fused path if this one is).
+    pub fn with_model(&self, model: GaussianEnsemble) -> Self {
+        let plain = Self {
+            model,
+            fused: None,
+            ..self.clone()
+        };
+        if self.fused.is_some() {
+            plain.on_fused_path()
+        } else {
+            plain
+        }
+    }
+
     /// The number of elites, the members rollouts sample from.
     pub fn elite_count(&self) -> usize {
         self.elites.len()

@@ -3,6 +3,7 @@
 //! a diagonal Gaussian over (s' − s, r) given (s, a), fitted with OfflineRL-Kit's
 //! defaults; the elites predict.
 
+mod adversarial;
 mod config;
 mod dynamics;
 mod fit;
@@ -10,6 +11,9 @@ mod fused_trainer;
 mod model;
 mod trainer;
 
+pub use adversarial::{
+    AdversarialConfig, AdversarialEnsemble, AdversarialLosses, AdversarialSample,
+};
 pub use config::EnsembleConfig;
 pub use dynamics::{EnsembleDynamics, EnsembleUncertainty};
 pub use fit::{EnsembleEpoch, EnsembleFit, EnsembleFitState, Scaler, fit_ensemble};

@@ -107,14 +107,12 @@ impl EnsembleTrainer for BurnTrainer {
 
     fn step(&mut self, batches: &[MemberBatch]) -> f64 {
         let model = &self.model;
-        let mut loss =
-            (model.max_logvar.val().sum() - model.min_logvar.val().sum()) * self.terms.bounds_coef;
+        let mut loss = bounds_loss(model, self.terms.bounds_coef);
         for (m, batch) in batches.iter().enumerate() {
             let (x, y) = self.tensors(batch, &self.device);
-            let (mean, logvar) = model.member(m, x);
-            let inverse_variance = logvar.clone().neg().exp();
-            let nll = (mean - y).powi_scalar(2).mul(inverse_variance).mean() + logvar.mean();
-            loss = loss + nll + weight_decay(&model.members[m], &self.terms.weight_decay);
+            loss = loss
+                + member_nll(model, m, x, y)
+                + weight_decay(&model.members[m], &self.terms.weight_decay);
         }
         let value = f64::from(to_f32_vec(loss.clone())[0]);
         let grads = GradientsParams::from_grads(loss.backward(), &self.model);
@@ -160,8 +158,26 @@ impl EnsembleTrainer for BurnTrainer {
     }
 }
 
+/// Member `m`'s Gaussian negative log-likelihood of targets `y` at inputs
+/// `x` (up to constants): mean((μ − y)²·e^(−log σ²)) + mean(log σ²).
+pub(super) fn member_nll(
+    model: &GaussianEnsemble,
+    m: usize,
+    x: Tensor<2>,
+    y: Tensor<2>,
+) -> Tensor<1> {
+    let (mean, logvar) = model.member(m, x);
+    let inverse_variance = logvar.clone().neg().exp();
+    (mean - y).powi_scalar(2).mul(inverse_variance).mean() + logvar.mean()
+}
+
+/// coef·(Σ max log σ² − Σ min log σ²): keeps the learned bounds tight.
+pub(super) fn bounds_loss(model: &GaussianEnsemble, coef: f64) -> Tensor<1> {
+    (model.max_logvar.val().sum() - model.min_logvar.val().sum()) * coef
+}
+
 /// Σ_l c_l·‖W_l‖²/2 over a member's layers.
-fn weight_decay(member: &Mlp, coefficients: &[f64]) -> Tensor<1> {
+pub(super) fn weight_decay(member: &Mlp, coefficients: &[f64]) -> Tensor<1> {
     member
         .layers
         .iter()
