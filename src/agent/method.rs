@@ -44,10 +44,13 @@ pub enum Method {
     /// Gaussian ensemble, the reward penalised at each update by the Bellman
     /// inconsistency over its elites.
     Mobile,
+    /// RAMBO (Rigter et al., 2022, OfflineRL-Kit's `run_rambo.py`): MOPO's
+    /// Gaussian ensemble trained adversarially against the policy, no penalty.
+    Rambo,
 }
 
 impl Method {
-    pub const ALL: [Method; 12] = [
+    pub const ALL: [Method; 13] = [
         Method::Nuno,
         Method::NunoR,
         Method::NunoAl,
@@ -60,6 +63,7 @@ impl Method {
         Method::Combo,
         Method::Morel,
         Method::Mobile,
+        Method::Rambo,
     ];
 
     /// The name in grid files, and `fit-policy --algo`'s.
@@ -77,6 +81,7 @@ impl Method {
             Method::Combo => "combo",
             Method::Morel => "morel",
             Method::Mobile => "mobile",
+            Method::Rambo => "rambo",
         }
     }
 
@@ -84,7 +89,12 @@ impl Method {
     pub fn uses_ensemble(self) -> bool {
         matches!(
             self,
-            Method::Mopo | Method::TatuMopo | Method::Combo | Method::Morel | Method::Mobile
+            Method::Mopo
+                | Method::TatuMopo
+                | Method::Combo
+                | Method::Morel
+                | Method::Mobile
+                | Method::Rambo
         )
     }
 
@@ -102,9 +112,12 @@ impl Method {
         match self {
             Method::Nuno | Method::NunoAl => Some("sde"),
             Method::NunoR => Some("sde-reward"),
-            Method::Mopo | Method::TatuMopo | Method::Combo | Method::Morel | Method::Mobile => {
-                Some("ensemble")
-            }
+            Method::Mopo
+            | Method::TatuMopo
+            | Method::Combo
+            | Method::Morel
+            | Method::Mobile
+            | Method::Rambo => Some("ensemble"),
             Method::Bc | Method::Td3Bc | Method::Cql | Method::Edac => None,
         }
     }
@@ -155,6 +168,7 @@ impl Method {
             Method::Mopo
             | Method::Combo
             | Method::Mobile
+            | Method::Rambo
             | Method::Bc
             | Method::Td3Bc
             | Method::Cql

@@ -21,6 +21,7 @@ mod policy;
 mod policy_loop;
 mod portable_actor;
 mod presets;
+mod rambo;
 mod sac;
 mod td3_bc;
 mod uncertainty;
@@ -51,15 +52,16 @@ pub use model_step::{
 pub use online_sac::{OnlineRecord, OnlineSac, OnlineSacConfig, OnlineSeconds};
 pub use policy::RandomPolicy;
 pub use policy_loop::{
-    ActorLrDecay, EpochRecord, EtaProbe, EvalSummary, LoopContext, MopoSettings, PhaseSeconds,
-    PolicyLoopConfig, PolicyTraining,
+    ActorLrDecay, Adversary, EpochRecord, EtaProbe, EvalSummary, LoopContext, MopoSettings,
+    PhaseSeconds, PolicyLoopConfig, PolicyTraining,
 };
 pub use portable_actor::PortableActor;
 pub use presets::{
     COMBO_PRESETS, EDAC_PRESETS, MOBILE_PRESETS, MOPO_PRESETS, MOREL_PESSIMISM, PRESETS, Preset,
-    TATU_DEFAULT_PESSIMISM, TATU_PESSIMISM, combo_preset, edac_preset, mobile_preset, mopo_preset,
-    preset, tatu_pessimism,
+    RAMBO_PRESETS, TATU_DEFAULT_PESSIMISM, TATU_PESSIMISM, combo_preset, edac_preset,
+    mobile_preset, mopo_preset, preset, rambo_preset, tatu_pessimism,
 };
+pub use rambo::{RamboConfig, advantages, adversarial_phase, behaviour_clone, standardise};
 pub use sac::{CriticBackup, Sac, SacAdam, SacConfig, SacLosses};
 pub use td3_bc::{Td3Bc, Td3BcAdam, Td3BcConfig};
 pub use uncertainty::{

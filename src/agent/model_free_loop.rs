@@ -317,6 +317,7 @@ impl ModelFreeTraining {
                 ..PhaseSeconds::default()
             },
             bellman_penalty: None,
+            adversary: None,
         };
         self.history.push(record.clone());
         Ok(record)

@@ -25,9 +25,12 @@ use super::fused_sac::FusedSac;
 use super::mobile::BellmanPenalty;
 use super::model_rollout::{Halt, RolloutActions, RolloutConfig, RolloutStats, rollout_model};
 use super::presets::Preset;
+use super::rambo::{RamboConfig, adversarial_phase, behaviour_clone};
 use super::sac::{CriticBackup, Sac, SacConfig, SacLosses};
 use crate::data::{Dataset, StartStateSampler, TransitionSampler};
-use crate::ensemble::EnsembleDynamics;
+use crate::ensemble::{
+    AdversarialConfig, AdversarialEnsemble, AdversarialLosses, EnsembleDynamics,
+};
 use crate::envs::{EvaluationConfig, EvaluationReport, ForwardVelocity, Rules, System, evaluate};
 use crate::infer::Kernel;
 use crate::sde::{CODE_MODEL_BUFFER_FACTOR, Recipe, ThresholdTable};
@@ -69,6 +72,10 @@ const KIT_MOPO: (f64, f64, ActorLrDecay, usize) = (1e-4, 1e-4, ActorLrDecay::Cos
 
 /// COMBO's real fraction of each batch (`run_combo.py`'s `real-ratio`).
 const COMBO_REAL_RATIO: f64 = 0.5;
+
+/// RAMBO's real fraction of each batch and steps between rollouts (`run_rambo.py`).
+const RAMBO_REAL_RATIO: f64 = 0.5;
+const RAMBO_ROLLOUT_FREQ: usize = 250;
 
 /// Every knob of the loop; defaults are Appendix C.2–C.3's.
 #[derive(Config, Debug, PartialEq)]
@@ -131,6 +138,12 @@ pub struct PolicyLoopConfig {
     /// before this field had none, and load so.
     #[config(default = "None")]
     pub bellman_penalty: Option<BellmanPenalty>,
+    /// RAMBO: the actor cloned on the data first, then the ensemble trained
+    /// against the policy every `adversary_every` steps (needs
+    /// [`LoopContext::ensemble`]); `None` for every other method. Runs saved
+    /// before this field had none, and load so.
+    #[config(default = "None")]
+    pub rambo: Option<RamboConfig>,
     /// Gradient steps per epoch.
     #[config(default = 1000)]
     pub steps_per_epoch: usize,
@@ -226,6 +239,20 @@ impl PolicyLoopConfig {
             self.sac.alpha_lr = 0.0;
         }
         self.bellman_penalty = Some(BellmanPenalty::new(beta));
+    }
+
+    /// RAMBO's policy step as OfflineRL-Kit's `run_rambo.py` runs it: MOPO's
+    /// SAC settings without the actor's decay, no reward penalty and no
+    /// truncation, half of each batch real, rollouts every 250 steps, and the
+    /// adversarial model update of weight `adv_weight`.
+    pub fn apply_rambo_settings(&mut self, adv_weight: f64) {
+        self.apply_mopo_settings(MopoSettings::OfflinerlKit);
+        self.actor_lr_decay = ActorLrDecay::Constant;
+        self.penalty = 0.0;
+        self.truncate = false;
+        self.real_ratio = RAMBO_REAL_RATIO;
+        self.rollout_freq = RAMBO_ROLLOUT_FREQ;
+        self.rambo = Some(RamboConfig::new(AdversarialConfig::new(adv_weight)));
     }
 
     /// The actor's learning rate during epoch `epoch` (from 0).
@@ -381,6 +408,10 @@ pub struct EpochRecord {
     /// rows (before β); absent for every other method.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bellman_penalty: Option<f32>,
+    /// RAMBO: the mean losses of the epoch's adversarial steps; absent for
+    /// every other method and epochs without a phase.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adversary: Option<AdversarialLosses>,
 }
 
 /// What the loop reads but does not own.
@@ -411,6 +442,15 @@ pub struct PolicyTraining {
     /// ε(h, α), when truncating.
     pub threshold: Option<f32>,
     pub history: Vec<EpochRecord>,
+    /// RAMBO: the ensemble as the adversary trains it, and as rollouts step
+    /// it (in place of [`LoopContext::dynamics`]).
+    pub adversary: Option<Adversary>,
+}
+
+/// RAMBO's adversarially trained ensemble and its current dynamics.
+pub struct Adversary {
+    pub ensemble: AdversarialEnsemble,
+    pub dynamics: EnsembleDynamics,
 }
 
 impl PolicyTraining {
@@ -429,13 +469,19 @@ impl PolicyTraining {
                 "the loop truncates but was given no threshold".into(),
             ));
         }
-        if config.bellman_penalty.is_some() && ctx.ensemble.is_none() {
+        if (config.bellman_penalty.is_some() || config.rambo.is_some()) && ctx.ensemble.is_none() {
             return Err(AgentError::Mismatch(
-                "MOBILE's penalty samples a Gaussian ensemble's elites: train it in an ensemble \
-                 folder (fit-ensemble)"
+                "MOBILE's penalty and RAMBO's adversary work on a Gaussian ensemble's members: \
+                 train them in an ensemble folder (fit-ensemble)"
                     .into(),
             ));
         }
+        let adversary = (config.rambo.as_ref())
+            .zip(ctx.ensemble)
+            .map(|(rambo, ensemble)| Adversary {
+                ensemble: AdversarialEnsemble::new(ensemble, rambo.adversary.clone(), device),
+                dynamics: ensemble.clone(),
+            });
         let (obs_dim, act_dim) = (ctx.dynamics.obs_dim(), ctx.dynamics.act_dim());
         if ctx.dataset.obs_dim() != obs_dim || ctx.dataset.act_dim() != act_dim {
             return Err(AgentError::Mismatch(format!(
@@ -464,6 +510,7 @@ impl PolicyTraining {
             epoch: 0,
             threshold,
             history: Vec::new(),
+            adversary,
             sac,
             config,
         })
@@ -488,10 +535,17 @@ impl PolicyTraining {
         // The fused kernel trains on host buffers for the epoch and hands the
         // agent back to `self.sac` for rollouts, evaluation and checkpoints.
         self.sac.config.actor_lr = self.config.actor_lr_at(self.epoch);
+        let mut adversarial = Vec::new();
+        if let (Some(rambo), 0) = (&self.config.rambo, self.step) {
+            behaviour_clone(&mut self.sac, ctx.dataset, rambo, &mut self.rng);
+        }
         // The fused kernel has no conservative term: COMBO updates on burn's.
         let fused_updates = ctx.kernel == Kernel::Fused && self.config.conservative.is_none();
         let mut fused = fused_updates.then(|| FusedSac::from_sac(&self.sac));
         for _ in 0..self.config.steps_per_epoch {
+            if let Some(losses) = self.adversary_turn(ctx, fused.as_ref()) {
+                adversarial.push(losses);
+            }
             if self.step.is_multiple_of(self.config.rollout_freq.max(1)) {
                 if let Some(fused) = &fused {
                     fused.write_actor_to(&mut self.sac);
@@ -538,6 +592,7 @@ impl PolicyTraining {
             seconds,
             bellman_penalty: (!penalties.is_empty())
                 .then(|| penalties.iter().sum::<f32>() / penalties.len() as f32),
+            adversary: AdversarialLosses::mean(&adversarial),
         };
         self.history.push(record.clone());
         Ok(record)
@@ -572,16 +627,47 @@ impl PolicyTraining {
         })
     }
 
+    /// RAMBO: at every `adversary_every`-th step, one adversarial phase
+    /// against the current agent (the fused kernel's, written back first),
+    /// then rollouts step the ensemble it left; nothing for other methods.
+    fn adversary_turn(
+        &mut self,
+        ctx: &LoopContext,
+        fused: Option<&FusedSac>,
+    ) -> Option<AdversarialLosses> {
+        let rambo = self.config.rambo.as_ref()?;
+        let (adversary, like) = (self.adversary.as_mut()?, ctx.ensemble?);
+        if !self.step.is_multiple_of(rambo.adversary_every.max(1)) {
+            return None;
+        }
+        if let Some(fused) = fused {
+            fused.write_to(&mut self.sac);
+        }
+        let losses = adversarial_phase(
+            &mut adversary.ensemble,
+            &self.sac,
+            (ctx.dataset, &ctx.rules),
+            (rambo, self.config.horizon),
+            &mut self.rng,
+        );
+        adversary.dynamics = adversary.ensemble.dynamics(like);
+        Some(losses)
+    }
+
     /// Rolls the sampled policy through the model from dataset states into the model buffer.
     fn model_rollout(&mut self, ctx: &LoopContext) -> RolloutStats {
         let starts =
             StartStateSampler::new(ctx.dataset).sample(self.config.rollout_batch, &mut self.rng);
         let policy = ctx.kernel.policy(self.policy(ActionMode::Sampled));
+        let dynamics: &dyn BatchDynamics = match &self.adversary {
+            Some(adversary) => &adversary.dynamics,
+            None => ctx.dynamics,
+        };
         let config = self
             .config
-            .rollout(self.threshold, ctx.dynamics.sample_noise_scale());
+            .rollout(self.threshold, dynamics.sample_noise_scale());
         let result = rollout_model(
-            ctx.dynamics,
+            dynamics,
             RolloutActions::Policy(policy.as_ref()),
             &ctx.rules
                 .with_forward_velocity(self.config.forward_velocity),

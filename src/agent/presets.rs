@@ -207,6 +207,26 @@ pub fn mobile_preset(name: &str) -> Result<(usize, f64, Option<f64>), AgentError
         .map(|&(_, h, beta, alpha)| (h, beta, alpha))
 }
 
+/// RAMBO's rollout length h and adversarial weight w_adv for a D4RL dataset
+/// (OfflineRL-Kit's `run_rambo.py` "suggested hypers"), by Table 3's names;
+/// none for the random datasets or NeoRL.
+pub const RAMBO_PRESETS: [(&str, usize, f64); 9] = [
+    ("halfcheetah-medium", 5, 3e-4),
+    ("hopper-medium", 5, 3e-4),
+    ("walker2d-medium", 5, 0.0),
+    ("halfcheetah-medium-replay", 5, 3e-4),
+    ("hopper-medium-replay", 5, 3e-4),
+    ("walker2d-medium-replay", 5, 0.0),
+    ("halfcheetah-medium-expert", 5, 0.0),
+    ("hopper-medium-expert", 5, 0.0),
+    ("walker2d-medium-expert", 2, 3e-4),
+];
+
+/// RAMBO's (h, w_adv) for the dataset `name` names.
+pub fn rambo_preset(name: &str) -> Result<(usize, f64), AgentError> {
+    table_row(&RAMBO_PRESETS, name, "for RAMBO's h and w_adv").map(|&(_, h, w)| (h, w))
+}
+
 /// A dataset's row of a per-task table whose rows start with its name;
 /// unknown names are refused with the table's names (`what`: whose table).
 fn table_row<'t, T: DatasetRow>(

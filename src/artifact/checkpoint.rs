@@ -14,21 +14,25 @@ use serde::{Deserialize, Serialize};
 
 use super::json_file::{read_checked_weights, read_versioned_json_filled, write_json};
 use super::sac_state::{
-    RngState, SacFiles, read_sac, save_checkpoint_dir, write_sac, write_synced,
+    RngState, SacFiles, put_moments, read_sac, save_checkpoint_dir, take_moments, write_sac,
+    write_synced,
 };
 use super::safetensors_file::safetensors_bytes;
-use super::tensors::NamedTensors;
+use super::tensors::{NamedTensors, collect_tensors, load_tensors};
 use super::{ArtifactError, sha256_hex};
 use crate::agent::{
     ActorLrDecay, EpochRecord, PolicyLoopConfig, PolicyTraining, ReplayBuffer, SacConfig,
 };
 use crate::envs::ForwardVelocity;
+use crate::nn::AdamState;
 use crate::shared::TransitionBatch;
 
 /// Version 2: Adam's moments by module path in `adam.safetensors` (version 1
 /// kept burn's optimiser records keyed by parameter id).
 pub const CHECKPOINT_SCHEMA_VERSION: u32 = 2;
 const BUFFER: &str = "model_buffer.safetensors";
+/// RAMBO's adversarially trained ensemble: `model.*` weights, `adam/*` moments.
+const ADVERSARY: &str = "adversary.safetensors";
 const STATE: &str = "state.json";
 
 /// `state.json`.
@@ -43,8 +47,18 @@ struct CheckpointState {
     buffer: BufferShape,
     history: Vec<EpochRecord>,
     buffer_sha256: String,
+    /// RAMBO's adversary, where the run has one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    adversary: Option<AdversaryFiles>,
     #[serde(flatten)]
     sac: SacFiles,
+}
+
+/// What [`ADVERSARY`] holds: its hash and its Adam's step count.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct AdversaryFiles {
+    sha256: String,
+    adam_time: u64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -83,9 +97,75 @@ fn write_contents(dir: &Path, training: &PolicyTraining) -> Result<(), ArtifactE
         },
         history: training.history.clone(),
         buffer_sha256: sha256_hex(&buffer_bytes),
+        adversary: write_adversary(dir, training)?,
         sac,
     };
     write_json(&dir.join(STATE), &state)
+}
+
+/// RAMBO's adversary's weights and Adam moments, where the run has one.
+fn write_adversary(
+    dir: &Path,
+    training: &PolicyTraining,
+) -> Result<Option<AdversaryFiles>, ArtifactError> {
+    let Some(adversary) = &training.adversary else {
+        return Ok(None);
+    };
+    let ensemble = &adversary.ensemble;
+    let mut tensors: NamedTensors = collect_tensors(ensemble.model())
+        .into_iter()
+        .map(|(k, v)| (format!("model.{k}"), v))
+        .collect();
+    put_moments(&mut tensors, "adam/", &ensemble.state);
+    let bytes = safetensors_bytes(&tensors, None)?;
+    write_synced(&dir.join(ADVERSARY), &bytes)?;
+    Ok(Some(AdversaryFiles {
+        sha256: sha256_hex(&bytes),
+        adam_time: ensemble.state.time,
+    }))
+}
+
+/// Restores RAMBO's adversary from `checkpoint` into `training`'s, and the
+/// dynamics its rollouts step.
+fn read_adversary(
+    checkpoint: &Path,
+    files: Option<&AdversaryFiles>,
+    training: &mut PolicyTraining,
+) -> Result<(), ArtifactError> {
+    let (Some(files), Some(adversary)) = (files, training.adversary.as_mut()) else {
+        return match (files.is_some(), training.adversary.is_some()) {
+            (false, false) => Ok(()),
+            _ => Err(ArtifactError::Invalid(format!(
+                "{}: the checkpoint and the run disagree on RAMBO's adversary",
+                checkpoint.display()
+            ))),
+        };
+    };
+    let path = checkpoint.join(ADVERSARY);
+    let mut tensors = read_checked_weights(&path, &files.sha256)?;
+    let weights: NamedTensors = tensors
+        .iter()
+        .filter_map(|(k, v)| Some((k.strip_prefix("model.")?.to_string(), v.clone())))
+        .collect();
+    tensors.retain(|k, _| !k.starts_with("model."));
+    let model = adversary.ensemble.model().clone();
+    let device = model.max_logvar.val().device();
+    let model = load_tensors(model, &weights, &device)?;
+    let moments = take_moments(&mut tensors, "adam/", |p| {
+        weights.get(p).map(|(_, v)| v.len())
+    })?;
+    if let Some(extra) = tensors.keys().next() {
+        return Err(ArtifactError::UnexpectedTensor(format!(
+            "{ADVERSARY}: {extra}"
+        )));
+    }
+    let state = AdamState {
+        time: files.adam_time,
+        moments,
+    };
+    adversary.ensemble.restore(&model, state);
+    adversary.dynamics = adversary.ensemble.dynamics(&adversary.dynamics);
+    Ok(())
 }
 
 fn buffer_tensors(buffer: &ReplayBuffer) -> NamedTensors {
@@ -128,6 +208,7 @@ pub(super) fn fill_older_loop_fields(value: &mut serde_json::Value, pointer: &st
         fields
             .entry("bellman_penalty")
             .or_insert(serde_json::Value::Null);
+        fields.entry("rambo").or_insert(serde_json::Value::Null);
         fields
             .entry("model_eval_horizon")
             .or_insert(serde_json::json!(
@@ -164,6 +245,7 @@ pub fn load_checkpoint(
     training.step = state.step;
     training.epoch = state.epoch;
     training.threshold = state.threshold;
+    read_adversary(checkpoint, state.adversary.as_ref(), training)?;
     training.history = state.history;
     Ok(())
 }

@@ -60,11 +60,22 @@ impl AdversarialSample {
 }
 
 /// One step's two terms.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct AdversarialLosses {
     /// mean(log p(x̂)·A), before w_adv.
     pub adversarial: f32,
     pub supervised: f32,
+}
+
+impl AdversarialLosses {
+    /// The mean of each term over `losses`; `None` for none.
+    pub fn mean(losses: &[AdversarialLosses]) -> Option<AdversarialLosses> {
+        let n = losses.len() as f32;
+        (!losses.is_empty()).then(|| AdversarialLosses {
+            adversarial: losses.iter().map(|l| l.adversarial).sum::<f32>() / n,
+            supervised: losses.iter().map(|l| l.supervised).sum::<f32>() / n,
+        })
+    }
 }
 
 /// The ensemble as RAMBO trains it: the same members, scaler and elites as

@@ -197,6 +197,7 @@ impl Budget {
             Method::Combo => policy_loop.apply_combo_settings(0.0),
             Method::Morel => policy_loop.apply_morel_settings(0.0),
             Method::Mobile => policy_loop.apply_mobile_settings(0.0, None),
+            Method::Rambo => policy_loop.apply_rambo_settings(0.0),
             _ => {}
         }
         if method.is_mopo() {
@@ -433,6 +434,7 @@ impl GridDataset {
                     }
                     Method::Combo => crate::agent::combo_preset(preset).err(),
                     Method::Mobile => crate::agent::mobile_preset(preset).err(),
+                    Method::Rambo => crate::agent::rambo_preset(preset).err(),
                     Method::Edac => crate::agent::edac_preset(preset).err(),
                     _ => None,
                 };

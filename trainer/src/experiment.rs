@@ -598,8 +598,8 @@ mod tests {
     /// The command lines a user would type, parsed as the trainer parses them.
     #[derive(Parser)]
     enum Typed {
-        FitModel(fit_model::Args),
-        FitPolicy(fit_policy::Args),
+        FitModel(Box<fit_model::Args>),
+        FitPolicy(Box<fit_policy::Args>),
     }
 
     /// The budget keys every method takes.

@@ -700,3 +700,65 @@ fn mobile_penalises_updates_by_the_elites_bellman_inconsistency() {
     let err = fails(&fit("mopo", "hopper-medium", &["--mobile-penalty", "1"]));
     assert!(err.contains("--mobile-penalty is MOBILE's"), "{err}");
 }
+
+/// RAMBO trains in MOPO's ensemble with its own row (hopper-medium: h 5,
+/// w_adv 3e-4), no penalty and no truncation, half the batch real, rollouts
+/// every 250 steps; its adversary's phase runs at the first step (losses in
+/// metrics.jsonl) and its checkpoint carries the adversarial ensemble, so a
+/// resumed run goes on from it; its flags without the method are refused.
+#[test]
+fn rambo_trains_its_adversary_and_resumes_with_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dataset, model, run) = (
+        tmp.path().join("hopper.hdf5"),
+        tmp.path().join("ensemble"),
+        tmp.path().join("run"),
+    );
+    generate_hopper(dataset.to_str().unwrap(), 1500, 0);
+    tiny_fit_ensemble(&dataset, &model);
+    let small = ["--adversary-steps", "3", "--bc-epochs", "2"];
+    let fit = |algo: &str, steps: usize, extra: &[&str]| {
+        tiny_fit_policy(
+            algo,
+            &model,
+            &dataset,
+            Some("hopper-medium"),
+            steps,
+            &run,
+            extra,
+        )
+    };
+    ok(&fit("rambo", 10, &small));
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("run.json")).unwrap()).unwrap();
+    let config = &record["plan"]["config"];
+    assert_eq!(config["horizon"], 5, "{config}");
+    assert_eq!(config["rambo"]["adversary"]["adv_weight"], 3e-4, "{config}");
+    assert_eq!(config["rambo"]["adversary_steps"], 3, "{config}");
+    assert_eq!(
+        (&config["penalty"], &config["truncate"]),
+        (&0.0.into(), &false.into())
+    );
+    assert_eq!(config["real_ratio"], 0.5, "{config}");
+    let first = std::fs::read_to_string(run.join("metrics.jsonl")).unwrap();
+    let r: serde_json::Value = serde_json::from_str(first.lines().next().unwrap()).unwrap();
+    assert!(
+        r["adversary"]["supervised"].as_f64().unwrap().is_finite(),
+        "{r}"
+    );
+    let checkpoints = run.join("checkpoints");
+    let latest = std::fs::read_to_string(checkpoints.join("LATEST")).unwrap();
+    assert!(
+        checkpoints
+            .join(latest.trim())
+            .join("adversary.safetensors")
+            .is_file()
+    );
+    let out = ok(&fit("rambo", 20, &[&small[..], &["--resume"]].concat()));
+    assert!(out.contains("resumed from"), "{out}");
+    let err = fails(&fit("mopo", 10, &["--rambo-weight", "1"]));
+    assert!(
+        err.contains("--rambo-weight, --adversary-steps and --bc-epochs are RAMBO's"),
+        "{err}"
+    );
+}

@@ -13,7 +13,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{
     ActionMode, AleatoricAsEta, EpochRecord, LoopContext, MOREL_PESSIMISM, Method, MopoSettings,
     PolicyLoopConfig, PolicyTraining, Preset, SacConfig, Truncation, combo_preset, mobile_preset,
-    mopo_preset, preset, run_threshold, tatu_pessimism,
+    mopo_preset, preset, rambo_preset, run_threshold, tatu_pessimism,
 };
 use nuno::artifact::{
     BEST_POLICY, LAST_POLICY, ModelFolder, PolicyProvenance, latest_checkpoint, load_checkpoint,
@@ -56,7 +56,7 @@ pub struct Args {
     #[arg(long)]
     pub preset: Option<String>,
     /// The method: nuno, nuno-r and nuno-al train in the neural SDE of fit-model,
-    /// mopo, tatu-mopo, combo, morel and mobile in the Gaussian ensemble of fit-ensemble; bc, td3-bc,
+    /// mopo, tatu-mopo, combo, morel, mobile and rambo in the Gaussian ensemble of fit-ensemble; bc, td3-bc,
     /// cql and edac on the dataset alone (no --model).
     #[arg(long, default_value_t = Method::Nuno)]
     pub algo: Method,
@@ -125,6 +125,15 @@ pub struct Args {
     /// mobile: the Bellman penalty's weight β (default: OfflineRL-Kit's for the preset's dataset).
     #[arg(long)]
     pub mobile_penalty: Option<f64>,
+    /// rambo: the adversarial term's weight w_adv (default: OfflineRL-Kit's for the preset's dataset).
+    #[arg(long)]
+    pub rambo_weight: Option<f64>,
+    /// rambo: adversarial model steps per phase (default 1000, one phase every 1000 policy steps).
+    #[arg(long)]
+    pub adversary_steps: Option<usize>,
+    /// rambo: passes of behaviour cloning over the dataset before any update (default 50).
+    #[arg(long)]
+    pub bc_epochs: Option<usize>,
     /// SAC batch size.
     #[arg(long, default_value_t = loop_defaults().sac.batch_size)]
     pub batch_size: usize,
@@ -193,8 +202,8 @@ pub struct Plan {
 #[derive(Debug, Serialize)]
 #[serde(untagged)]
 pub enum Training {
-    InModel(InModel),
-    ModelFree(model_free::ModelFreePlan),
+    InModel(Box<InModel>),
+    ModelFree(Box<model_free::ModelFreePlan>),
 }
 
 /// A model-based method's run: the model folder and the policy loop.
@@ -236,9 +245,9 @@ impl Args {
         self.check()?;
         let preset = self.preset.as_deref().map(preset).transpose()?;
         let training = if self.algo.is_model_free() {
-            Training::ModelFree(self.model_free_plan(preset)?)
+            Training::ModelFree(Box::new(self.model_free_plan(preset)?))
         } else {
-            Training::InModel(self.in_model(preset)?)
+            Training::InModel(Box::new(self.in_model(preset)?))
         };
         let kernel = self.kernel.unwrap_or(match self.device {
             ComputeDevice::Cpu => Kernel::Fused,
@@ -304,7 +313,8 @@ impl Args {
             self.halt_penalty.is_none() || self.algo == Method::Morel,
             "--halt-penalty is MOReL's κ: it needs --algo morel"
         );
-        self.apply_mobile(config)
+        self.apply_mobile(config)?;
+        self.apply_rambo(config)
     }
 
     /// MOBILE's own h, β and (hopper-medium) fixed α: its table, or
@@ -326,6 +336,34 @@ impl Args {
         };
         config.horizon = horizon;
         config.apply_mobile_settings(self.mobile_penalty.unwrap_or(beta), fixed_alpha);
+        Ok(())
+    }
+
+    /// RAMBO's own h and w_adv: its table, or --horizon and --rambo-weight.
+    fn apply_rambo(&self, config: &mut PolicyLoopConfig) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            (self.rambo_weight.or(self.adversary_steps.map(|n| n as f64)))
+                .or(self.bc_epochs.map(|n| n as f64))
+                .is_none()
+                || self.algo == Method::Rambo,
+            "--rambo-weight, --adversary-steps and --bc-epochs are RAMBO's: they need --algo rambo"
+        );
+        if self.algo != Method::Rambo {
+            return Ok(());
+        }
+        let (horizon, weight) = match (&self.preset, self.horizon, self.rambo_weight) {
+            (_, Some(h), Some(w)) => (h, w),
+            (Some(name), _, _) => rambo_preset(name)?,
+            (None, _, _) => anyhow::bail!(
+                "--algo rambo takes h and w_adv per dataset: give a --preset OfflineRL-Kit has them for, or --horizon and --rambo-weight"
+            ),
+        };
+        config.horizon = horizon;
+        config.apply_rambo_settings(self.rambo_weight.unwrap_or(weight));
+        if let Some(rambo) = config.rambo.as_mut() {
+            rambo.adversary_steps = self.adversary_steps.unwrap_or(rambo.adversary_steps);
+            rambo.bc_epochs = self.bc_epochs.unwrap_or(rambo.bc_epochs);
+        }
         Ok(())
     }
 
@@ -466,10 +504,10 @@ fn train_in_model(plan: &Plan, run: &InModel) -> anyhow::Result<()> {
     } else {
         base.as_ref()
     };
-    // MOBILE samples the ensemble's elites one by one.
+    // MOBILE samples the ensemble's elites one by one; RAMBO trains it.
     let ensemble = model
         .ensemble(plan.kernel)
-        .filter(|_| plan.method == Method::Mobile);
+        .filter(|_| matches!(plan.method, Method::Mobile | Method::Rambo));
     let ctx = LoopContext {
         dataset: &dataset,
         dynamics,
