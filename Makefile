@@ -120,9 +120,14 @@ slurm:
 ## venv: the Python side of the tests (Gymnasium parity, h5py/safetensors read-backs).
 venv: system-deps $(VENV_STAMP)
 
-$(VENV_STAMP): tests/python/requirements.txt
+# The Python package (clients/python) is installed into the same venv, whose pins
+# supply its dependencies; any change to it reinstalls it.
+PYTHON_PACKAGE := clients/python/pyproject.toml $(shell find clients/python/nuno -name '*.py' 2>/dev/null)
+
+$(VENV_STAMP): tests/python/requirements.txt $(PYTHON_PACKAGE)
 	$(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/pip install --quiet --disable-pip-version-check -r tests/python/requirements.txt
+	$(VENV)/bin/pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation ./clients/python
 	touch $@
 
 clean-runtime:

@@ -1171,6 +1171,72 @@ async fn a_client_generated_from_the_spec_calls_the_server() {
     );
 }
 
+/// The Python package (clients/python, installed into the venv by `make
+/// venv`): its generated layer is what the committed spec generates; its
+/// `step` answers with the numbers the server's own JSON gives, the same in
+/// JSON and in binary; its rollout comes back as `[starts, particles, …]`
+/// arrays; `act` as `[batch, act_dim]`; refusals raise `NunoError` with the
+/// server's status, code and message.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    not(feature = "external-tests"),
+    ignore = "needs the Python venv (`make venv`); `make test` runs it"
+)]
+async fn the_python_package_calls_the_server_with_numpy_arrays() {
+    let server = Server::listening(limits(), None).await;
+    let work = tempfile::tempdir().unwrap();
+    let (base, dir) = (server.socket().0.to_string(), work.path().to_path_buf());
+    tokio::task::spawn_blocking(move || common::run_python("nuno_package.py", &[base], &dir))
+        .await
+        .unwrap();
+    let result: Value =
+        serde_json::from_str(&std::fs::read_to_string(work.path().join("result.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        result["stale"],
+        json!([]),
+        "regenerate: python clients/python/generate.py"
+    );
+    assert_eq!(result["models"], json!([MODEL, "no-policy"]));
+    assert_eq!(result["kind"], "neural-sde");
+    let mut start = vec![0.0f32; 11];
+    start[0] = 1.25;
+    let request = json!({"states": [start, start], "actions": [[0.1, 0.2, 0.3], [0.0, 0.0, 0.0]],
+                         "particles": 2, "seed": 3});
+    let (_, direct) = server
+        .post(&format!("/v1/models/{MODEL}/step"), &request)
+        .await;
+    let direct: StepResponse = serde_json::from_value(direct).unwrap();
+    let step = &result["step_json"];
+    let next: Vec<Vec<Vec<f32>>> = serde_json::from_value(step["next_states"].clone()).unwrap();
+    let eta: Vec<f32> = serde_json::from_value(step["eta"].clone()).unwrap();
+    let terminals: Vec<Vec<bool>> = serde_json::from_value(step["terminals"].clone()).unwrap();
+    assert_eq!(
+        (next, eta, terminals),
+        (direct.next_states, direct.eta, direct.terminals)
+    );
+    assert_eq!(result["step_binary_equal"], true);
+    assert_eq!(
+        result["rollout_shapes"],
+        json!([[2, 3, 5, 11], [2, 3, 4, 3], [2, 3, 4]])
+    );
+    assert_eq!(result["act"].as_array().unwrap().len(), 2);
+    assert_eq!(result["act"][0].as_array().unwrap().len(), 3);
+    let errors = &result["errors"];
+    assert_eq!(
+        (&errors["missing"]["status"], &errors["missing"]["code"]),
+        (&json!(404), &json!("model_not_found"))
+    );
+    assert_eq!(errors["narrow"]["status"], 422, "{errors}");
+    assert!(
+        errors["narrow"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("expects 11"),
+        "{errors}"
+    );
+}
+
 /// A compute hook that holds the first computation until `release` is sent (or a
 /// minute passes, so a failing test cannot hang), and counts every computation.
 fn hold_first_computation() -> (ComputeHook, std::sync::mpsc::Sender<()>, Arc<AtomicUsize>) {
