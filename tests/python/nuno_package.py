@@ -46,7 +46,45 @@ for name, call in {
     except nuno.NunoError as e:
         errors[name] = {"status": e.status, "code": e.code, "message": e.message}
 
+# The model as a Gymnasium environment: Gymnasium's own checker, a seeded
+# episode that repeats, and a first step that is the server's step with the
+# seeds Gymnasium's generator draws (recomputed here from its seeding).
+import gymnasium  # noqa: E402
+from gymnasium.utils.env_checker import check_env  # noqa: E402
+
+from nuno.gym import ModelEnv  # noqa: E402
+
+starts = np.stack([states[0], states[0] + 0.01])
+env = ModelEnv(client, "hopper-random", start_states=starts, max_episode_steps=5, eta_budget=100.0)
+check_env(env, skip_render_check=True)
+
+
+def episode(seed):
+    env = ModelEnv(client, "hopper-random", start_states=starts, max_episode_steps=5)
+    first, _ = env.reset(seed=seed)
+    steps = [env.step(np.array([0.1, -0.2, 0.3], dtype=np.float32)) for _ in range(3)]
+    return first, steps
+
+
+first, steps = episode(5)
+again_first, again = episode(5)
+rng, _ = gymnasium.utils.seeding.np_random(5)
+start = starts[rng.integers(len(starts))]
+expected = client.step("hopper-random", start[None], np.array([[0.1, -0.2, 0.3]], dtype=np.float32),
+                       seed=int(rng.integers(2**63)), binary=False)
+gym = {
+    "action_box": [env.action_space.low.tolist(), env.action_space.high.tolist()],
+    "repeats": bool(np.array_equal(first, again_first)
+                    and all(np.array_equal(a[0], b[0]) and a[1] == b[1] for a, b in zip(steps, again))),
+    "first_step_is_the_servers": bool(np.array_equal(first, start)
+                                      and np.array_equal(steps[0][0], expected.next_states[0, 0])
+                                      and steps[0][1] == float(expected.penalized_rewards[0, 0])
+                                      and steps[0][4]["eta"] == float(expected.eta[0])),
+    "truncated_at_limit": [s[3] for s in steps],
+}
+
 (work / "result.json").write_text(json.dumps({
+    "gym": gym,
     "stale": stale,
     "models": [m.id for m in client.models()],
     "kind": str(client.model("hopper-random").kind),

@@ -31,6 +31,10 @@ pub struct ModelSummary {
     /// records sqrt(dt).
     pub sample_noise_scale: f32,
     pub has_policy: bool,
+    /// The action box's lower and upper bounds, `[act_dim]` each: actions
+    /// outside it are clipped into it (or refused with `clip: false`).
+    pub action_low: Vec<f32>,
+    pub action_high: Vec<f32>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
@@ -132,6 +136,8 @@ pub(crate) fn summary(model: &LoadedModel) -> ModelSummary {
         reward_model: model.reward_model(),
         sample_noise_scale: model.batch_dynamics().sample_noise_scale(),
         has_policy: model.policy.is_some(),
+        action_low: model.action_space.iter().map(|&(low, _)| low).collect(),
+        action_high: model.action_space.iter().map(|&(_, high)| high).collect(),
     }
 }
 

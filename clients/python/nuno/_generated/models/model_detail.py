@@ -35,6 +35,9 @@ class ModelDetail:
 
         Attributes:
             act_dim (int):
+            action_high (list[float]):
+            action_low (list[float]): The action box's lower and upper bounds, `[act_dim]` each: actions
+                outside it are clipped into it (or refused with `clip: false`).
             dt (float): Seconds of the task one model step covers.
             has_policy (bool):
             id (str):
@@ -61,6 +64,8 @@ class ModelDetail:
      """
 
     act_dim: int
+    action_high: list[float]
+    action_low: list[float]
     dt: float
     has_policy: bool
     id: str
@@ -92,6 +97,14 @@ class ModelDetail:
         from ..models.model_detail_training import ModelDetailTraining # noqa: PLC0415
         from ..models.system_description import SystemDescription # noqa: PLC0415
         act_dim = self.act_dim
+
+        action_high = self.action_high
+
+
+
+        action_low = self.action_low
+
+
 
         dt = self.dt
 
@@ -136,6 +149,8 @@ class ModelDetail:
         field_dict.update(self.additional_properties)
         field_dict.update({
             "act_dim": act_dim,
+            "action_high": action_high,
+            "action_low": action_low,
             "dt": dt,
             "has_policy": has_policy,
             "id": id,
@@ -170,6 +185,12 @@ class ModelDetail:
         from ..models.system_description import SystemDescription # noqa: PLC0415
         d = dict(src_dict)
         act_dim = d.pop("act_dim")
+
+        action_high = cast(list[float], d.pop("action_high"))
+
+
+        action_low = cast(list[float], d.pop("action_low"))
+
 
         dt = d.pop("dt")
 
@@ -244,6 +265,8 @@ class ModelDetail:
 
         model_detail = cls(
             act_dim=act_dim,
+            action_high=action_high,
+            action_low=action_low,
             dt=dt,
             has_policy=has_policy,
             id=id,

@@ -9,6 +9,7 @@ from attrs import field as _attrs_field
 from ..types import UNSET, Unset
 
 from ..models.model_kind import ModelKind
+from typing import cast
 
 
 
@@ -25,6 +26,9 @@ class ModelSummary:
 
         Attributes:
             act_dim (int):
+            action_high (list[float]):
+            action_low (list[float]): The action box's lower and upper bounds, `[act_dim]` each: actions
+                outside it are clipped into it (or refused with `clip: false`).
             dt (float): Seconds of the task one model step covers.
             has_policy (bool):
             id (str):
@@ -40,6 +44,8 @@ class ModelSummary:
      """
 
     act_dim: int
+    action_high: list[float]
+    action_low: list[float]
     dt: float
     has_policy: bool
     id: str
@@ -57,6 +63,14 @@ class ModelSummary:
 
     def to_dict(self) -> dict[str, Any]:
         act_dim = self.act_dim
+
+        action_high = self.action_high
+
+
+
+        action_low = self.action_low
+
+
 
         dt = self.dt
 
@@ -81,6 +95,8 @@ class ModelSummary:
         field_dict.update(self.additional_properties)
         field_dict.update({
             "act_dim": act_dim,
+            "action_high": action_high,
+            "action_low": action_low,
             "dt": dt,
             "has_policy": has_policy,
             "id": id,
@@ -100,6 +116,12 @@ class ModelSummary:
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
         act_dim = d.pop("act_dim")
+
+        action_high = cast(list[float], d.pop("action_high"))
+
+
+        action_low = cast(list[float], d.pop("action_low"))
+
 
         dt = d.pop("dt")
 
@@ -124,6 +146,8 @@ class ModelSummary:
 
         model_summary = cls(
             act_dim=act_dim,
+            action_high=action_high,
+            action_low=action_low,
             dt=dt,
             has_policy=has_policy,
             id=id,
