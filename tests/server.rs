@@ -1235,6 +1235,15 @@ async fn the_python_package_calls_the_server_with_numpy_arrays() {
             .contains("expects 11"),
         "{errors}"
     );
+    // nuno.gym.ModelEnv passed Gymnasium's check_env in the script.
+    let gym = &result["gym"];
+    assert_eq!(
+        gym["action_box"],
+        json!([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
+    );
+    assert_eq!(gym["repeats"], true, "a seeded episode repeats");
+    assert_eq!(gym["first_step_is_the_servers"], true);
+    assert_eq!(gym["truncated_at_limit"], json!([false, false, false]));
 }
 
 /// A compute hook that holds the first computation until `release` is sent (or a
