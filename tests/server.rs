@@ -1244,6 +1244,42 @@ async fn the_python_package_calls_the_server_with_numpy_arrays() {
     assert_eq!(gym["repeats"], true, "a seeded episode repeats");
     assert_eq!(gym["first_step_is_the_servers"], true);
     assert_eq!(gym["truncated_at_limit"], json!([false, false, false]));
+    // score: the server's own JSON answer to the same request.
+    let candidates: Vec<f32> = (0..72)
+        .map(|i| (f64::from(i) / 71.0 - 0.5) as f32)
+        .collect();
+    let nested: Vec<Vec<Vec<Vec<f32>>>> = candidates
+        .chunks(36)
+        .map(|b| {
+            b.chunks(12)
+                .map(|c| c.chunks(3).map(<[f32]>::to_vec).collect())
+                .collect()
+        })
+        .collect();
+    let request = json!({"states": [start, start], "actions": nested, "horizon": 4,
+                         "particles": 2, "seed": 4, "cvar_alpha": 0.5});
+    let (_, direct) = server
+        .post(&format!("/v1/models/{MODEL}/score"), &request)
+        .await;
+    let direct: Vec<Vec<f64>> = (direct["scores"].as_array().unwrap().iter())
+        .map(|row| {
+            row.as_array()
+                .unwrap()
+                .iter()
+                .map(|c| c["mean_return"].as_f64().unwrap())
+                .collect()
+        })
+        .collect();
+    let ours: Vec<Vec<f64>> = serde_json::from_value(result["score_mean_return"].clone()).unwrap();
+    for (a, b) in ours.iter().flatten().zip(direct.iter().flatten()) {
+        assert!(
+            (a - b).abs() <= 1e-6 * b.abs().max(1.0),
+            "{ours:?} vs {direct:?}"
+        );
+    }
+    assert_eq!(result["score_shape"], json!([2, 3]));
+    assert_eq!(result["plan_actions"], json!([3, 3]));
+    assert_eq!(result["plan_first_is_first"], true);
 }
 
 /// A compute hook that holds the first computation until `release` is sent (or a

@@ -83,8 +83,16 @@ gym = {
     "truncated_at_limit": [s[3] for s in steps],
 }
 
+candidates = (np.arange(72) / 71.0 - 0.5).astype(np.float32).reshape(2, 3, 4, 3)
+scores = client.score("hopper-random", states, candidates, particles=2, seed=4, cvar_alpha=0.5)
+plan = client.plan("hopper-random", states[0], planner="cem", horizon=3, population=8, iterations=1)
+
 (work / "result.json").write_text(json.dumps({
     "gym": gym,
+    "score_mean_return": scores.mean_return.tolist(),
+    "score_shape": list(scores.max_eta.shape),
+    "plan_actions": np.asarray(plan.actions).shape,
+    "plan_first_is_first": plan.first_action == plan.actions[0],
     "stale": stale,
     "models": [m.id for m in client.models()],
     "kind": str(client.model("hopper-random").kind),

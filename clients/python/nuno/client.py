@@ -26,6 +26,7 @@ from ._generated.models import (
     EvaluateResponse,
     ModelDetail,
     ModelSummary,
+    PlanResponse,
     RolloutRequest,
 )
 from ._generated.types import UNSET
@@ -49,6 +50,24 @@ class Step:
     rewards: Array
     penalized_rewards: Array
     terminals: NDArray[np.bool_]
+    noise_scale: float
+    clipped_rows: int
+
+
+@dataclass(frozen=True)
+class Scores:
+    """Each candidate's score, `[batch, candidates]`: returns (mean, penalised,
+    CVaR over particles), η (accumulated, largest), the share of particles that
+    terminated or diverged, and the step truncation cut it at (-1: never)."""
+
+    mean_return: Array
+    penalized_return: Array
+    cvar_return: Array
+    accumulated_eta: Array
+    max_eta: Array
+    terminated: Array
+    diverged: Array
+    truncated_at: NDArray[np.int64]
     noise_scale: float
     clipped_rows: int
 
@@ -232,6 +251,81 @@ class Client:
             noise_scale=float(meta["noise_scale"]),
             clipped_rows=int(meta["clipped_rows"]),
         )
+
+    def score(
+        self,
+        model: str,
+        states: ArrayLike,
+        actions: ArrayLike,
+        *,
+        particles: int = 1,
+        seed: int = 0,
+        **options: Any,
+    ) -> Scores:
+        """Scores candidate action sequences `actions` `[batch, candidates,
+        horizon, act_dim]` from each start state in the model; `options` are
+        the route's own (`discount`, `cvar_alpha`, `penalty`, `threshold`,
+        `alpha`, `cost`, `noise_scale`, `clip`)."""
+        s = _matrix(states, "states")
+        candidates = np.asarray(actions, dtype=np.float32)
+        if candidates.ndim != 4:
+            raise ValueError(
+                f"`actions` must be [batch, candidates, horizon, act_dim], got shape {candidates.shape}"
+            )
+        request = {
+            "states": s.tolist(),
+            "actions": candidates.tolist(),
+            "horizon": candidates.shape[2],
+            "particles": particles,
+            "seed": seed,
+            **options,
+        }
+        answer = self._post(f"/v1/models/{model}/score", json=request).json()
+        rows = answer["scores"]
+
+        def field(name: str, missing: float = np.nan) -> Array:
+            return np.asarray(
+                [[missing if c.get(name) is None else c[name] for c in row] for row in rows],
+                dtype=np.float32,
+            )
+
+        return Scores(
+            mean_return=field("mean_return"),
+            penalized_return=field("penalized_return"),
+            cvar_return=field("cvar_return"),
+            accumulated_eta=field("accumulated_eta"),
+            max_eta=field("max_eta"),
+            terminated=field("terminated"),
+            diverged=field("diverged"),
+            truncated_at=field("truncated_at", -1).astype(np.int64),
+            noise_scale=float(answer["noise_scale"]),
+            clipped_rows=int(answer["clipped_rows"]),
+        )
+
+    def plan(
+        self,
+        model: str,
+        state: ArrayLike,
+        *,
+        planner: str = "cem",
+        horizon: int = 10,
+        population: int = 64,
+        iterations: int = 3,
+        **options: Any,
+    ) -> PlanResponse:
+        """One plan from `state` by `planner` (cem, icem, mppi) in the model:
+        its action sequence, first action, score and objective; `options` are
+        the route's own (`particles`, `seed`, `session`, `open_session`, ...)."""
+        request = {
+            "state": np.asarray(state, dtype=np.float32).reshape(-1).tolist(),
+            "planner": planner,
+            "horizon": horizon,
+            "population": population,
+            "iterations": iterations,
+            **options,
+        }
+        answer = self._post(f"/v1/models/{model}/plan", json=request).json()
+        return PlanResponse.from_dict(answer)
 
     def act(self, model: str, states: ArrayLike, *, mode: str = "deterministic", seed: int = 0) -> Array:
         """The model's policy's actions `[batch, act_dim]`."""
