@@ -201,18 +201,8 @@ impl OnlineSac {
         let steps_before = self.step;
         while self.step < end {
             let acting = Instant::now();
-            let (action, log_prob) = if self.step < self.config.start_steps {
-                let action: Vec<f32> = low
-                    .iter()
-                    .zip(&high)
-                    .map(|(&l, &h)| self.rng.random_range(l..h) as f32)
-                    .collect();
-                (action, uniform_log_prob as f32)
-            } else {
-                let logged = fused.act_logged(&obs, &mut self.rng);
-                let log_prob = logged.log_probs.map_or(f32::NAN, |l| l[0]);
-                (logged.actions, log_prob)
-            };
+            let (action, log_prob) =
+                self.act(&mut fused, &obs, (&low, &high), uniform_log_prob as f32);
             let state = (env.qpos().to_vec(), env.qvel().to_vec());
             let step = env.step(&action.iter().map(|&a| f64::from(a)).collect::<Vec<_>>())?;
             let next = to_f32(&step.observation);
@@ -235,13 +225,7 @@ impl OnlineSac {
 
             if self.step > self.updates_after {
                 let updating = Instant::now();
-                for _ in 0..self.config.updates_per_step {
-                    let batch = self
-                        .buffer
-                        .sample(self.config.sac.batch_size, &mut self.rng);
-                    losses.push(fused.update(&batch, &mut self.rng));
-                    self.updates += 1;
-                }
+                self.update(&mut fused, &mut losses);
                 seconds.updates += updating.elapsed().as_secs_f64();
             }
         }
@@ -272,6 +256,39 @@ impl OnlineSac {
         };
         self.history.push(record.clone());
         Ok(record)
+    }
+
+    /// The step's action and its log-density: uniform on the box `bounds`
+    /// during the warm-up, then a ~ π(·|s).
+    fn act(
+        &mut self,
+        fused: &mut FusedSac,
+        obs: &[f32],
+        (low, high): (&[f64], &[f64]),
+        uniform_log_prob: f32,
+    ) -> (Vec<f32>, f32) {
+        if self.step < self.config.start_steps {
+            let action = low
+                .iter()
+                .zip(high)
+                .map(|(&l, &h)| self.rng.random_range(l..h) as f32)
+                .collect();
+            return (action, uniform_log_prob);
+        }
+        let logged = fused.act_logged(obs, &mut self.rng);
+        let log_prob = logged.log_probs.map_or(f32::NAN, |l| l[0]);
+        (logged.actions, log_prob)
+    }
+
+    /// `updates_per_step` SAC updates on batches from the replay buffer.
+    fn update(&mut self, fused: &mut FusedSac, losses: &mut Vec<SacLosses>) {
+        for _ in 0..self.config.updates_per_step {
+            let batch = self
+                .buffer
+                .sample(self.config.sac.batch_size, &mut self.rng);
+            losses.push(fused.update(&batch, &mut self.rng));
+            self.updates += 1;
+        }
     }
 
     /// The current actor, choosing actions by `mode`.

@@ -21,7 +21,7 @@ use rand::Rng;
 use super::dynamics::EnsembleDynamics;
 use super::fit::Scaler;
 use super::model::GaussianEnsemble;
-use super::trainer::{bounds_loss, member_nll, weight_decay};
+use super::trainer::{ADAM_EPSILON, bounds_loss, member_nll, weight_decay};
 use crate::nn::{Adam, AdamState, assign_params, fill_standard_normal, seeded_init, to_f32_vec};
 use crate::shared::BatchDynamics;
 
@@ -91,9 +91,6 @@ pub struct AdversarialEnsemble {
     adam: Adam,
     pub state: AdamState,
 }
-
-/// Adam's ε in OfflineRL-Kit (PyTorch's default).
-const ADAM_EPSILON: f32 = 1e-8;
 
 impl AdversarialEnsemble {
     /// `dynamics`' ensemble, trainable on `device`'s autodiff form.
