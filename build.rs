@@ -1,7 +1,8 @@
 //! Build script shared by `nuno` and `nuno-trainer`: bakes the directory of the
 //! fetched libmujoco into the rpath so binaries and tests run without
 //! LD_LIBRARY_PATH, and fails early with the make target to run when the MuJoCo
-//! runtime has not been fetched.
+//! runtime has not been fetched; for `nuno` itself, generates the ONNX
+//! messages (`export/`) from the vendored `proto/onnx/onnx.proto`.
 
 use std::path::Path;
 
@@ -32,4 +33,20 @@ fn main() {
     }
     println!("cargo::rerun-if-changed={}", lib.display());
     println!("cargo::rustc-link-arg=-Wl,-rpath,{lib_dir}");
+    if std::env::var("CARGO_PKG_NAME").as_deref() == Ok("nuno") {
+        generate_onnx_messages();
+    }
+}
+
+/// `onnx.rs` in OUT_DIR: prost's types for ONNX's `ModelProto` and the rest,
+/// compiled by protox (no protoc needed).
+fn generate_onnx_messages() {
+    let manifest = std::env::var("CARGO_MANIFEST_DIR").unwrap_or_default();
+    let proto = Path::new(&manifest).join("proto/onnx");
+    println!("cargo::rerun-if-changed={}", proto.display());
+    let descriptors = protox::compile([proto.join("onnx.proto")], [&proto])
+        .unwrap_or_else(|e| panic!("proto/onnx/onnx.proto does not compile: {e}"));
+    prost_build::Config::new()
+        .compile_fds(descriptors)
+        .unwrap_or_else(|e| panic!("generating the ONNX messages failed: {e}"));
 }

@@ -30,6 +30,7 @@ pub mod data;
 pub mod ensemble;
 pub mod envs;
 pub mod experiment;
+pub mod export;
 pub mod infer;
 pub mod nn;
 pub mod planning;

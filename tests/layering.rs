@@ -31,6 +31,13 @@ const LAYERS: &[(&str, &[&str])] = &[
         ],
     ),
     (
+        "export",
+        &[
+            "shared", "nn", "infer", "envs", "data", "sde", "ensemble", "agent", "planning",
+            "artifact",
+        ],
+    ),
+    (
         "experiment",
         &[
             "shared", "nn", "infer", "envs", "data", "sde", "ensemble", "agent", "planning",

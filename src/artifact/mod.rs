@@ -52,7 +52,7 @@ pub use online_run::{
 };
 pub use policy::{
     BEST_POLICY, LAST_POLICY, POLICY_SCHEMA_VERSION, PolicyMetadata, PolicyProvenance, has_policy,
-    load_policy, save_policy,
+    load_model_policy, load_policy, save_policy,
 };
 pub use sac_state::latest_checkpoint;
 pub use safetensors_file::{parse_safetensors, parse_safetensors_with_metadata, safetensors_bytes};

@@ -117,6 +117,27 @@ pub fn has_policy(dir: &Path, stem: &str) -> bool {
     dir.join(format!("{stem}.json")).is_file()
 }
 
+/// The policy saved beside the model in `dir` (`policy.safetensors`, where
+/// there is one), checked to act on the model's `obs_dim` → `act_dim`.
+pub fn load_model_policy(
+    dir: &Path,
+    obs_dim: usize,
+    act_dim: usize,
+    device: &Device,
+) -> Result<Option<(Actor, PolicyMetadata)>, ArtifactError> {
+    if !has_policy(dir, BEST_POLICY) {
+        return Ok(None);
+    }
+    let (actor, metadata) = load_policy(dir, BEST_POLICY, device)?;
+    if actor.config.obs_dim != obs_dim || actor.config.act_dim != act_dim {
+        return Err(ArtifactError::Invalid(format!(
+            "{BEST_POLICY}.json: the policy acts on {}→{}, the model beside it on {obs_dim}→{act_dim}",
+            actor.config.obs_dim, actor.config.act_dim
+        )));
+    }
+    Ok(Some((actor, metadata)))
+}
+
 /// Loads the policy `{stem}` in `dir` onto `device`, validating everything.
 pub fn load_policy(
     dir: &Path,

@@ -12,7 +12,7 @@ use std::sync::Arc;
 use super::EnvError;
 use super::mujoco_task::{MujocoTask, TaskConfig};
 use super::system::{SystemReward, SystemSpec};
-use super::task::Task;
+use super::task::{HealthRule, Task};
 
 /// Which observed root x velocity stands in for the forward velocity where the
 /// observations omit root x (D4RL's layout).
@@ -100,6 +100,51 @@ impl TaskRules {
     pub fn terminal(&self, next_obs: &[f32]) -> bool {
         !self.task.spec().health.is_healthy(next_obs, self.qpos_from)
     }
+
+    /// What [`reward`](Self::reward) and [`terminal`](Self::terminal) compute,
+    /// as data: for writing the same rules in another form (the ONNX export).
+    pub fn terms(&self) -> RuleTerms {
+        let spec = self.task.spec();
+        let x_velocity = self.x_velocity;
+        RuleTerms {
+            forward: match (self.root_x, self.forward_velocity) {
+                (Some(root_x), _) => ForwardTerm::Difference {
+                    root_x,
+                    dt: self.dt,
+                },
+                (None, ForwardVelocity::Next) => ForwardTerm::Next { x_velocity },
+                (None, ForwardVelocity::Mean) => ForwardTerm::Mean { x_velocity },
+            },
+            forward_reward_weight: spec.forward_reward_weight,
+            healthy_reward: spec.healthy_reward,
+            ctrl_cost_weight: spec.ctrl_cost_weight,
+            health: spec.health,
+            qpos_from: self.qpos_from,
+        }
+    }
+}
+
+/// A task's rules as data: `r = w·v + healthy − c·|a|²`, terminal where
+/// `health` fails on the observation (whose entry 0 is qpos[`qpos_from`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RuleTerms {
+    pub forward: ForwardTerm,
+    pub forward_reward_weight: f64,
+    pub healthy_reward: f64,
+    pub ctrl_cost_weight: f64,
+    pub health: HealthRule,
+    pub qpos_from: usize,
+}
+
+/// Where the forward velocity v of the reward is read, by observation index.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ForwardTerm {
+    /// `(x' − x)/dt` of the observed root x.
+    Difference { root_x: usize, dt: f64 },
+    /// The root x velocity after the step.
+    Next { x_velocity: usize },
+    /// The mean of the root x velocities before and after the step.
+    Mean { x_velocity: usize },
 }
 
 /// Reward and termination on observations, of a built-in task or of a

@@ -39,16 +39,16 @@ crate::shared::named_enum!(DriftInputs, "drift inputs", DriftInputs::ZScores => 
 pub(crate) struct DriftFeatures {
     /// Observation indices entering as z-scores, in φ's order: the positions
     /// that are not angles, then (after the angle features) the velocities.
-    positions: Vec<usize>,
-    velocities: Vec<usize>,
+    pub(crate) positions: Vec<usize>,
+    pub(crate) velocities: Vec<usize>,
     /// Observation indices entering as cos and sin, and cos m, sin m of each.
-    angles: Vec<usize>,
-    cos_mean: Vec<f32>,
-    sin_mean: Vec<f32>,
-    mean: Vec<f32>,
-    std: Vec<f32>,
+    pub(crate) angles: Vec<usize>,
+    pub(crate) cos_mean: Vec<f32>,
+    pub(crate) sin_mean: Vec<f32>,
+    pub(crate) mean: Vec<f32>,
+    pub(crate) std: Vec<f32>,
     /// The columns of φ that G reads.
-    g_columns: Range<usize>,
+    pub(crate) g_columns: Range<usize>,
 }
 
 impl DriftFeatures {

@@ -30,6 +30,7 @@ pub use config::{
     EtaLossForm, FitConfig, LikelihoodPath, LossConfig, MuForm, SCALAR_MU_FACTOR, SdeConfig,
 };
 pub use device::ComputeDevice;
+pub(crate) use drift_inputs::DriftFeatures;
 pub use drift_inputs::DriftInputs;
 pub use eta::{DistanceAware, EtaLosses, FarField};
 pub use eta_report::{EtaComparison, EtaReport, EtaReportConfig, auroc, eta_report};

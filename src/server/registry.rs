@@ -17,9 +17,7 @@ use utoipa::ToSchema;
 
 use crate::agent::FusedActor;
 use crate::agent::{ActionMode, Actor, ActorPolicy};
-use crate::artifact::{
-    ArtifactError, BEST_POLICY, ModelFolder, PolicyMetadata, has_policy, load_policy,
-};
+use crate::artifact::{ArtifactError, ModelFolder, PolicyMetadata, load_model_policy};
 use crate::envs::{Rules, System};
 use crate::infer::Kernel;
 use crate::sde::ThresholdTable;
@@ -251,7 +249,8 @@ fn load_model(id: &str, dir: &Path, kernel: Kernel) -> Result<LoadedModel, LoadE
     let fused = kernel == Kernel::Fused;
     let dynamics = folder.burn_dynamics();
     let (obs_dim, act_dim, step_seconds) = (dynamics.obs_dim(), dynamics.act_dim(), rules.dt());
-    let policy = load_served_policy(dir, obs_dim, act_dim, &device).map_err(LoadError::Invalid)?;
+    let policy = load_model_policy(dir, obs_dim, act_dim, &device)
+        .map_err(|e| LoadError::Invalid(format!("policy: {e}")))?;
     let fused_actor = policy.as_ref().filter(|_| fused).map(|(actor, _)| {
         FusedActor::new(&ActorPolicy {
             actor: actor.clone(),
@@ -269,25 +268,4 @@ fn load_model(id: &str, dir: &Path, kernel: Kernel) -> Result<LoadedModel, LoadE
         step_seconds,
         fused_actor,
     })
-}
-
-/// The policy saved beside the model in `dir`, checked to act on its dimensions.
-fn load_served_policy(
-    dir: &Path,
-    obs_dim: usize,
-    act_dim: usize,
-    device: &Device,
-) -> Result<Option<(Actor, PolicyMetadata)>, String> {
-    if !has_policy(dir, BEST_POLICY) {
-        return Ok(None);
-    }
-    let (actor, metadata) =
-        load_policy(dir, BEST_POLICY, device).map_err(|e| format!("policy: {e}"))?;
-    if actor.config.obs_dim != obs_dim || actor.config.act_dim != act_dim {
-        return Err(format!(
-            "policy: acts on {}→{}, the dynamics on {obs_dim}→{act_dim}",
-            actor.config.obs_dim, actor.config.act_dim
-        ));
-    }
-    Ok(Some((actor, metadata)))
 }

@@ -13,6 +13,7 @@ mod dataset_check;
 mod eta_report;
 mod evaluate;
 mod experiment;
+mod export;
 mod fit_ensemble;
 mod fit_model;
 mod fit_policy;
@@ -56,6 +57,8 @@ enum Command {
     Experiment(experiment::Command),
     /// Run a policy in the real MuJoCo task and print returns and D4RL normalised scores.
     Evaluate(evaluate::Args),
+    /// Write a model folder's SDE step and policy as ONNX graphs with their contract.
+    Export(export::Args),
     /// How well a model's η separates a dataset from random actions and perturbed data.
     EtaReport(eta_report::Args),
 }
@@ -67,6 +70,7 @@ fn main() -> ExitCode {
         Command::Collect(command) => collect::run(command),
         Command::Dataset(command) => dataset::run(command),
         Command::Evaluate(args) => evaluate::run(args),
+        Command::Export(args) => export::run(args),
         Command::Experiment(command) => experiment::run(command),
         Command::EtaReport(args) => eta_report::run(args),
         Command::FitEnsemble(args) => fit_ensemble::run(args),
