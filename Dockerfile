@@ -36,7 +36,8 @@ COPY --from=builder /opt/nuno/models /opt/nuno/models
 # Host-built binaries carry the host's rpath; this one holds in the image.
 ENV LD_LIBRARY_PATH=/opt/nuno/.mujoco/lib
 USER nuno
-EXPOSE 8080
+# REST on 8080; the Open Inference Protocol over gRPC on 8081.
+EXPOSE 8080 8081
 HEALTHCHECK --interval=30s --timeout=5s --start-period=20s CMD ["curl", "-fsS", "http://127.0.0.1:8080/healthz"]
 # SIGTERM shuts down gracefully; SIGHUP (docker kill -s HUP) reloads the models.
-CMD ["nuno-server", "--models", "/opt/nuno/models", "--addr", "0.0.0.0:8080"]
+CMD ["nuno-server", "--models", "/opt/nuno/models", "--addr", "0.0.0.0:8080", "--grpc-addr", "0.0.0.0:8081"]

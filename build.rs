@@ -2,7 +2,8 @@
 //! fetched libmujoco into the rpath so binaries and tests run without
 //! LD_LIBRARY_PATH, and fails early with the make target to run when the MuJoCo
 //! runtime has not been fetched; for `nuno` itself, generates the ONNX
-//! messages (`export/`) from the vendored `proto/onnx/onnx.proto`.
+//! messages (`export/`) from the vendored `proto/onnx/onnx.proto` and, with the
+//! server, the Open Inference Protocol's gRPC service from `proto/oip/`.
 
 use std::path::Path;
 
@@ -35,7 +36,27 @@ fn main() {
     println!("cargo::rustc-link-arg=-Wl,-rpath,{lib_dir}");
     if std::env::var("CARGO_PKG_NAME").as_deref() == Ok("nuno") {
         generate_onnx_messages();
+        if std::env::var_os("CARGO_FEATURE_SERVER").is_some() {
+            generate_inference_service();
+        }
     }
+}
+
+/// `inference.rs` in OUT_DIR: the messages and tonic's server trait of
+/// `inference.GRPCInferenceService`, from KServe's compiled
+/// `grpc_predict_v2.proto` (`proto/oip/extract.py` says where it comes from).
+fn generate_inference_service() {
+    use prost::Message;
+    let manifest = std::env::var("CARGO_MANIFEST_DIR").unwrap_or_default();
+    let file = Path::new(&manifest).join("proto/oip/grpc_predict_v2.binpb");
+    println!("cargo::rerun-if-changed={}", file.display());
+    let bytes = std::fs::read(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+    let descriptors = prost_types::FileDescriptorSet::decode(bytes.as_slice())
+        .unwrap_or_else(|e| panic!("{} is not a FileDescriptorSet: {e}", file.display()));
+    tonic_prost_build::configure()
+        .build_client(false)
+        .compile_fds(descriptors)
+        .unwrap_or_else(|e| panic!("generating the inference service failed: {e}"));
 }
 
 /// `onnx.rs` in OUT_DIR: prost's types for ONNX's `ModelProto` and the rest,

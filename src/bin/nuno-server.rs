@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use nuno::infer::Kernel;
-use nuno::server::{AppState, Limits, ServerConfig, openapi_json, serve};
+use nuno::server::{AppState, Limits, ServerConfig, openapi_json, serve, serve_grpc};
 
 #[derive(Debug, Parser)]
 #[command(name = "nuno-server", version, about)]
@@ -17,7 +17,10 @@ struct Args {
     /// Address to listen on.
     #[arg(long, default_value = "127.0.0.1:8080", env = "NUNO_ADDR")]
     addr: SocketAddr,
-    /// Bearer token required on every route except health.
+    /// Also serve the Open Inference Protocol over gRPC here (`inference.GRPCInferenceService`).
+    #[arg(long, env = "NUNO_GRPC_ADDR")]
+    grpc_addr: Option<SocketAddr>,
+    /// Bearer token required on every route except health (gRPC: `authorization` metadata).
     #[arg(long, env = "NUNO_TOKEN", hide_env_values = true)]
     token: Option<String>,
     #[arg(long, default_value_t = Limits::default().max_batch)]
@@ -118,7 +121,12 @@ fn main() -> ExitCode {
             report.loaded,
             listener.local_addr()?
         );
-        serve(state, listener).await
+        let Some(grpc_addr) = args.grpc_addr else {
+            return serve(state, listener).await;
+        };
+        let grpc = tokio::net::TcpListener::bind(grpc_addr).await?;
+        tracing::info!("gRPC (Open Inference Protocol) on {}", grpc.local_addr()?);
+        tokio::try_join!(serve(state.clone(), listener), serve_grpc(state, grpc)).map(|_| ())
     });
     match result {
         Ok(()) => {

@@ -70,6 +70,29 @@ impl ApiError {
     }
 }
 
+impl ApiError {
+    /// The answer over gRPC (the Open Inference Protocol's service): the status
+    /// code of the same kind as the HTTP one, the same message.
+    pub fn into_grpc_status(self) -> tonic::Status {
+        use tonic::Code;
+        let code = match &self {
+            ApiError::UnknownModel(_) | ApiError::NoRoute(_) | ApiError::UnknownSession(_) => {
+                Code::NotFound
+            }
+            ApiError::NoPolicy(_) | ApiError::NoSimulator { .. } => Code::FailedPrecondition,
+            ApiError::Malformed(_)
+            | ApiError::Invalid(_)
+            | ApiError::UnsupportedMediaType { .. } => Code::InvalidArgument,
+            ApiError::OverLimit(_) | ApiError::TooLarge(_) => Code::ResourceExhausted,
+            ApiError::Unauthorized => Code::Unauthenticated,
+            ApiError::Timeout(_) => Code::DeadlineExceeded,
+            ApiError::Cancelled => Code::Cancelled,
+            ApiError::Internal(_) => Code::Internal,
+        };
+        tonic::Status::new(code, self.client_message())
+    }
+}
+
 impl From<crate::shared::cancel::Cancelled> for ApiError {
     fn from(_: crate::shared::cancel::Cancelled) -> Self {
         ApiError::Cancelled

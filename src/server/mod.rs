@@ -13,6 +13,7 @@
 mod batcher;
 mod body;
 mod error;
+mod grpc;
 mod metrics;
 mod openapi;
 mod plan_sessions;
@@ -41,6 +42,7 @@ use crate::shared::cancel::Cancel;
 
 pub use body::{BINARY, TensorBytes};
 pub use error::{ApiError, ErrorBody, ErrorDetail, V2ErrorBody};
+pub use grpc::serve_grpc;
 pub use metrics::Metrics;
 pub use openapi::{document as openapi_document, openapi_json};
 pub use registry::{

@@ -18,7 +18,7 @@ use super::kserve_binary::{OutputData, binary_response, binary_size, decode_fp32
 use crate::agent::{ParticleConfig, ParticleStep, step_particles};
 use crate::server::body::{Format, INFERENCE_HEADER_LENGTH, RawBody, TensorBytes, json_response};
 use crate::server::validate::{clip_actions, flat, within};
-use crate::server::{ApiError, AppState};
+use crate::server::{ApiError, AppState, LoadedModel};
 
 /// v2's error shape.
 pub struct V2Error(ApiError);
@@ -112,8 +112,13 @@ pub async fn v2_model_metadata(
     Path(id): Path<String>,
 ) -> Result<Json<V2ModelMetadata>, V2Error> {
     let model = state.model(&id)?;
+    Ok(Json(model_metadata(&model)))
+}
+
+/// What `infer` takes and answers for `model` (v2's model metadata, both transports).
+pub(in crate::server) fn model_metadata(model: &LoadedModel) -> V2ModelMetadata {
     let (d, a) = (model.obs_dim() as i64, model.act_dim() as i64);
-    Ok(Json(V2ModelMetadata {
+    V2ModelMetadata {
         name: model.id.clone(),
         versions: vec!["1".into()],
         platform: "nuno-neural-sde".into(),
@@ -131,7 +136,7 @@ pub async fn v2_model_metadata(
             tensor("penalized_rewards", "FP32", vec![-1]),
             tensor("terminals", "BOOL", vec![-1]),
         ],
-    }))
+    }
 }
 
 /// One v2 tensor: its data inline (`data`, flattened row-major), or with the
@@ -265,48 +270,88 @@ pub async fn infer(
     let header_length = header_length(&body)?;
     let mut r: InferRequest = body.json_prefix(header_length).await?;
     let model = state.model(&id)?;
-    let (obs_dim, act_dim) = (model.obs_dim(), model.act_dim());
-    let mut inputs = split_binary_tail(&mut r.inputs, &body.bytes[header_length..])?;
-    let max_batch = state.config.limits.max_batch;
-    let states = input_values(&mut inputs, "states", obs_dim, max_batch)?;
-    let mut actions = input_values(&mut inputs, "actions", act_dim, max_batch)?;
-    let batch = states.len() / obs_dim;
-    if actions.len() / act_dim != batch {
-        return Err(ApiError::Invalid("`states` and `actions` differ in rows".into()).into());
-    }
-    // `clip: false` asks for a 422 where an action leaves the box.
-    let clip = flag_parameter(Some(&r.parameters), "clip")?.unwrap_or(true);
-    let clipped_rows = clip_actions("actions", &mut actions, &model.action_space, clip)?;
-    let wanted = wanted_outputs(&r)?;
-    let number = |key: &str, default: f64| number_parameter(&r.parameters, key, default);
-    let seed = number("seed", 0.0)? as u64;
-    let config = ParticleConfig {
-        particles: 1,
-        penalty: number("penalty", 1.0)?,
-        noise_scale: number(
-            "noise_scale",
-            f64::from(model.batch_dynamics().sample_noise_scale()),
-        )? as f32,
-    };
-    state.metrics.batch("infer", &id, batch);
-    let worker = model.clone();
+    let mut tensors = std::mem::take(&mut r.inputs);
+    let mut inputs = split_binary_tail(&mut tensors, &body.bytes[header_length..])?;
+    let checked = check_infer(&state, &model, &r, &mut inputs)?;
+    state.metrics.batch("infer", &id, checked.batch);
     let request_id = r.id.clone();
     // The answer is built in the compute work too: it is batch-sized.
     let response = state
         .compute(move |_| {
-            let mut rng = ChaCha8Rng::seed_from_u64(seed);
-            let s = step_particles(
-                worker.batch_dynamics(),
-                &worker.rules,
-                &states,
-                &actions,
-                config,
-                &mut rng,
-            );
-            infer_response(&id, request_id, &s, &wanted, clipped_rows)
+            let s = checked.run(&model);
+            infer_response(&id, request_id, &s, &checked.wanted, checked.clipped_rows)
         })
         .await?;
     Ok(response)
+}
+
+/// An infer request checked against its model, over either transport (REST's
+/// JSON or binary body, gRPC's messages): its rows, how to step them, what to
+/// answer.
+pub(in crate::server) struct CheckedInfer {
+    pub batch: usize,
+    states: Vec<f32>,
+    actions: Vec<f32>,
+    seed: u64,
+    config: ParticleConfig,
+    /// (name, binary?) of each output to answer, in order.
+    pub wanted: Vec<(String, bool)>,
+    /// Rows whose action was clipped into the model's action box.
+    pub clipped_rows: usize,
+}
+
+impl CheckedInfer {
+    /// One EM step per row, one particle each.
+    pub fn run(&self, model: &LoadedModel) -> ParticleStep {
+        let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
+        let (dynamics, rules) = (model.batch_dynamics(), &model.rules);
+        step_particles(
+            dynamics,
+            rules,
+            &self.states,
+            &self.actions,
+            self.config,
+            &mut rng,
+        )
+    }
+}
+
+/// `r`'s inputs (each with its raw bytes, if sent so), parameters and outputs,
+/// checked against `model` and the server's limits.
+pub(in crate::server) fn check_infer(
+    state: &AppState,
+    model: &LoadedModel,
+    r: &InferRequest,
+    inputs: &mut [InputWithBytes],
+) -> Result<CheckedInfer, ApiError> {
+    let (obs_dim, act_dim) = (model.obs_dim(), model.act_dim());
+    let max_batch = state.config.limits.max_batch;
+    let states = input_values(inputs, "states", obs_dim, max_batch)?;
+    let mut actions = input_values(inputs, "actions", act_dim, max_batch)?;
+    let batch = states.len() / obs_dim;
+    if actions.len() / act_dim != batch {
+        return Err(ApiError::Invalid(
+            "`states` and `actions` differ in rows".into(),
+        ));
+    }
+    // `clip: false` asks for a 422 where an action leaves the box.
+    let clip = flag_parameter(Some(&r.parameters), "clip")?.unwrap_or(true);
+    let clipped_rows = clip_actions("actions", &mut actions, &model.action_space, clip)?;
+    let number = |key: &str, default: f64| number_parameter(&r.parameters, key, default);
+    let default_noise = f64::from(model.batch_dynamics().sample_noise_scale());
+    Ok(CheckedInfer {
+        batch,
+        states,
+        actions,
+        seed: number("seed", 0.0)? as u64,
+        config: ParticleConfig {
+            particles: 1,
+            penalty: number("penalty", 1.0)?,
+            noise_scale: number("noise_scale", default_noise)? as f32,
+        },
+        wanted: wanted_outputs(r)?,
+        clipped_rows,
+    })
 }
 
 /// Where the JSON header ends: the whole body for JSON, the binary extension's
@@ -322,8 +367,8 @@ fn header_length(body: &RawBody) -> Result<usize, ApiError> {
     }
 }
 
-/// An input and its slice of the binary tail (none: its values are inline JSON).
-type InputWithBytes<'a> = (&'a mut InferInput, Option<&'a [u8]>);
+/// An input and its raw bytes (none: its values are inline).
+pub(in crate::server) type InputWithBytes<'a> = (&'a mut InferInput, Option<&'a [u8]>);
 
 /// Each input with its slice of the binary tail (in order, by its
 /// `binary_data_size`); the tail must be used up exactly.
@@ -387,7 +432,7 @@ fn input_values(
         (None, Some(InputData(values))) => values,
         (None, None) => {
             return Err(ApiError::Invalid(format!(
-                "input `{name}` has neither `data` nor parameters.binary_data_size"
+                "input `{name}` has no values: give `data` or parameters.binary_data_size (gRPC: fp32_contents or raw_input_contents)"
             )));
         }
     };
@@ -469,6 +514,24 @@ pub(in crate::server) const OUTPUTS: [&str; 8] = [
     "terminals",
 ];
 
+/// Output `name` of a step (one of [`OUTPUTS`]): its shape and values.
+pub(in crate::server) fn output<'a>(
+    s: &'a ParticleStep,
+    name: &str,
+) -> (Vec<usize>, OutputData<'a>) {
+    let (b, d) = (s.batch, s.obs_dim);
+    match name {
+        "next_states" => (vec![b, d], OutputData::Fp32(&s.next_states)),
+        "mean" => (vec![b, d], OutputData::Fp32(&s.mean)),
+        "sigma" => (vec![b, d], OutputData::Fp32(&s.sigma)),
+        "h_eta" => (vec![b, d], OutputData::Fp32(&s.h_eta)),
+        "eta" => (vec![b], OutputData::Fp32(&s.eta)),
+        "rewards" => (vec![b], OutputData::Fp32(&s.rewards)),
+        "penalized_rewards" => (vec![b], OutputData::Fp32(&s.penalized_rewards)),
+        _ => (vec![b], OutputData::Bool(&s.terminals)),
+    }
+}
+
 /// The answer with `wanted` outputs, each inline or in binary.
 fn infer_response(
     id: &str,
@@ -477,24 +540,11 @@ fn infer_response(
     wanted: &[(String, bool)],
     clipped_rows: usize,
 ) -> Result<Response, ApiError> {
-    let (b, d) = (s.batch, s.obs_dim);
-    let output = |name: &str| -> (Vec<usize>, OutputData<'_>) {
-        match name {
-            "next_states" => (vec![b, d], OutputData::Fp32(&s.next_states)),
-            "mean" => (vec![b, d], OutputData::Fp32(&s.mean)),
-            "sigma" => (vec![b, d], OutputData::Fp32(&s.sigma)),
-            "h_eta" => (vec![b, d], OutputData::Fp32(&s.h_eta)),
-            "eta" => (vec![b], OutputData::Fp32(&s.eta)),
-            "rewards" => (vec![b], OutputData::Fp32(&s.rewards)),
-            "penalized_rewards" => (vec![b], OutputData::Fp32(&s.penalized_rewards)),
-            _ => (vec![b], OutputData::Bool(&s.terminals)),
-        }
-    };
     let mut tails = Vec::new();
     let outputs = wanted
         .iter()
         .map(|(name, binary)| {
-            let (shape, data) = output(name);
+            let (shape, data) = output(s, name);
             let mut tensor = InferTensor {
                 name: name.clone(),
                 shape,
