@@ -1325,6 +1325,13 @@ async fn the_python_package_calls_the_server_with_numpy_arrays() {
     assert_eq!(gym["repeats"], true, "a seeded episode repeats");
     assert_eq!(gym["first_step_is_the_servers"], true);
     assert_eq!(gym["truncated_at_limit"], json!([false, false, false]));
+    // nuno.gym.ModelVectorEnv: batched spaces, one server step per vector step,
+    // every episode ended at the limit, then Gymnasium's NEXT_STEP autoreset.
+    let vector = &result["vector"];
+    assert_eq!(vector["spaces"], json!([[3, 11], [3, 3]]));
+    assert_eq!(vector["first_step_is_the_servers"], true);
+    assert_eq!(vector["ended_at_limit"], json!([true, true, true]));
+    assert_eq!(vector["autoreset"], true);
     // score: the server's own JSON answer to the same request.
     let candidates: Vec<f32> = (0..72)
         .map(|i| (f64::from(i) / 71.0 - 0.5) as f32)

@@ -83,12 +83,41 @@ gym = {
     "truncated_at_limit": [s[3] for s in steps],
 }
 
+# The batched variant: one server step per vector step, the same draws as the
+# server's step of the batch with the seed Gymnasium's generator gives, and
+# Gymnasium's NEXT_STEP autoreset after the episodes' limit.
+from nuno.gym import ModelVectorEnv  # noqa: E402
+
+venv = ModelVectorEnv(client, "hopper-random", 3, start_states=starts, max_episode_steps=2)
+push = np.tile(np.array([0.1, -0.2, 0.3], dtype=np.float32), (3, 1))
+v_first, _ = venv.reset(seed=7)
+v_steps = [venv.step(push) for _ in range(3)]
+rng, _ = gymnasium.utils.seeding.np_random(7)
+v_start = starts[rng.integers(len(starts), size=3)]
+v_expected = client.step("hopper-random", v_start, push, seed=int(rng.integers(2**63)))
+second = client.step("hopper-random", v_expected.next_states[:, 0], push, seed=int(rng.integers(2**63)))
+rng.integers(2**63)  # the third step's seed, whose rows the autoreset replaces
+v_restart = starts[rng.integers(len(starts), size=3)]
+vector = {
+    "spaces": [list(venv.observation_space.shape), list(venv.action_space.shape)],
+    "first_step_is_the_servers": bool(
+        np.array_equal(v_first, v_start)
+        and np.array_equal(v_steps[0][0], v_expected.next_states[:, 0])
+        and np.array_equal(v_steps[0][1], v_expected.penalized_rewards[:, 0].astype(np.float64))
+        and np.array_equal(v_steps[0][4]["eta"], v_expected.eta.astype(np.float64))
+        and np.array_equal(v_steps[1][0], second.next_states[:, 0])),
+    "ended_at_limit": (v_steps[1][2] | v_steps[1][3]).tolist(),
+    "autoreset": bool(np.array_equal(v_steps[2][0], v_restart) and not v_steps[2][1].any()
+                      and not (v_steps[2][2] | v_steps[2][3]).any()),
+}
+
 candidates = (np.arange(72) / 71.0 - 0.5).astype(np.float32).reshape(2, 3, 4, 3)
 scores = client.score("hopper-random", states, candidates, particles=2, seed=4, cvar_alpha=0.5)
 plan = client.plan("hopper-random", states[0], planner="cem", horizon=3, population=8, iterations=1)
 
 (work / "result.json").write_text(json.dumps({
     "gym": gym,
+    "vector": vector,
     "score_mean_return": scores.mean_return.tolist(),
     "score_shape": list(scores.max_eta.shape),
     "plan_actions": np.asarray(plan.actions).shape,
