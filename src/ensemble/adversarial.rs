@@ -19,7 +19,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand::Rng;
 
 use super::dynamics::EnsembleDynamics;
-use super::fit::Scaler;
+use super::fit::{Scaler, push_target};
 use super::model::GaussianEnsemble;
 use super::trainer::{ADAM_EPSILON, bounds_loss, member_nll, weight_decay};
 use crate::nn::{Adam, AdamState, assign_params, fill_standard_normal, seeded_init, to_f32_vec};
@@ -145,17 +145,9 @@ impl AdversarialEnsemble {
     fn inputs(&self, observations: &[f32], actions: &[f32]) -> Tensor<2> {
         let (o, a) = (self.obs_dim, self.act_dim);
         let rows = observations.len() / o;
-        let mut x = Vec::with_capacity(rows * (o + a));
-        for r in 0..rows {
-            let row = observations[r * o..(r + 1) * o]
-                .iter()
-                .chain(&actions[r * a..(r + 1) * a]);
-            x.extend(
-                row.zip(&self.scaler.mean)
-                    .zip(&self.scaler.std)
-                    .map(|((v, m), d)| (v - m) / d),
-            );
-        }
+        let x = self
+            .scaler
+            .inputs((observations, o), &actions[..rows * a], a);
         let device = self.model.max_logvar.val().device();
         Tensor::from_data(TensorData::new(x, [rows, o + a]), &device)
     }
@@ -283,8 +275,7 @@ impl AdversarialEnsemble {
         let x = self.inputs(obs, actions);
         let mut y = Vec::with_capacity(rows * d);
         for ((next, obs), &reward) in next.chunks_exact(o).zip(obs.chunks_exact(o)).zip(rewards) {
-            y.extend(next.iter().zip(obs).map(|(n, s)| n - s));
-            y.push(reward);
+            push_target(&mut y, obs, next, reward);
         }
         let y = Tensor::<2>::from_data(TensorData::new(y, [rows, d]), &x.device());
         let model = &self.model;

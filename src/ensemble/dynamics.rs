@@ -220,17 +220,7 @@ impl EnsembleDynamics {
         batch: usize,
     ) -> (Vec<Vec<f32>>, Vec<Vec<f32>>) {
         let (o, a, s) = (self.obs_dim, self.act_dim, self.state_dim());
-        let mut x = Vec::with_capacity(batch * (o + a));
-        for r in 0..batch {
-            let row = states[r * s..r * s + o]
-                .iter()
-                .chain(&actions[r * a..(r + 1) * a]);
-            x.extend(
-                row.zip(&self.scaler.mean)
-                    .zip(&self.scaler.std)
-                    .map(|((v, m), d)| (v - m) / d),
-            );
-        }
+        let x = self.scaler.inputs((states, s), &actions[..batch * a], a);
         if let Some(fused) = &self.fused {
             return fused.predict(&x, o + a, batch);
         }

@@ -42,9 +42,12 @@ impl Rows {
             let obs = dataset.observations.row(i);
             inputs.extend(obs.iter());
             inputs.extend(dataset.actions.row(i).iter());
-            let next = dataset.next_observations.row(i);
-            targets.extend(next.iter().zip(obs.iter()).map(|(n, s)| n - s));
-            targets.push(dataset.rewards[i]);
+            push_target(
+                &mut targets,
+                obs,
+                dataset.next_observations.row(i),
+                dataset.rewards[i],
+            );
         }
         Self {
             inputs,
@@ -106,6 +109,42 @@ impl Scaler {
             std,
         }
     }
+
+    /// The members' `[rows, obs_dim + act_dim]` inputs, standardised: each
+    /// row's observation (the first `obs_dim` of every `stride` entries of
+    /// `states`) then its action (`act_dim` entries of `actions`).
+    pub fn inputs(
+        &self,
+        (states, stride): (&[f32], usize),
+        actions: &[f32],
+        act_dim: usize,
+    ) -> Vec<f32> {
+        let obs_dim = self.mean.len() - act_dim;
+        let rows = actions.len() / act_dim.max(1);
+        let mut x = Vec::with_capacity(rows * self.mean.len());
+        for r in 0..rows {
+            let row = states[r * stride..r * stride + obs_dim]
+                .iter()
+                .chain(&actions[r * act_dim..(r + 1) * act_dim]);
+            x.extend(
+                row.zip(&self.mean)
+                    .zip(&self.std)
+                    .map(|((v, m), d)| (v - m) / d),
+            );
+        }
+        x
+    }
+}
+
+/// The members' target for one transition, appended: (s' − s, r).
+pub(super) fn push_target<'a>(
+    targets: &mut Vec<f32>,
+    obs: impl IntoIterator<Item = &'a f32>,
+    next: impl IntoIterator<Item = &'a f32>,
+    reward: f32,
+) {
+    targets.extend(next.into_iter().zip(obs).map(|(n, s)| n - s));
+    targets.push(reward);
 }
 
 /// One epoch of the fit.

@@ -77,7 +77,7 @@ impl Cost {
 }
 
 /// One candidate's score, over its particles.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "server", derive(utoipa::ToSchema))]
 pub struct CandidateScore {
     /// Mean over particles of Σ γ^t r_t.

@@ -49,6 +49,7 @@ pub use registry::{
     LoadFailure, LoadedModel, ModelKind, ModelRegistry, ReloadReport, valid_model_id,
 };
 pub use routes::*;
+pub use rows::Rows;
 
 /// What a client may ask for at most, and how long the server waits.
 #[derive(Debug, Clone, Serialize, ToSchema)]

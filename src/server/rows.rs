@@ -6,7 +6,8 @@
 use std::fmt;
 
 use serde::de::{DeserializeSeed, SeqAccess, Visitor};
-use serde::{Deserialize, Deserializer};
+use serde::ser::SerializeSeq;
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use super::ApiError;
 use super::validate::flat;
@@ -24,6 +25,30 @@ pub struct Rows {
 }
 
 impl Rows {
+    /// `values` as rows of `width` (a client's request; a last partial row is
+    /// kept as the ragged row it is, for the server to name).
+    pub fn new(values: Vec<f32>, width: usize) -> Self {
+        let width = width.max(1);
+        let count = values.len().div_ceil(width);
+        let last = values.len() - (count.saturating_sub(1)) * width;
+        Self {
+            count,
+            first_width: if count == 1 { last } else { width },
+            ragged: (count > 1 && last != width).then_some((count - 1, last)),
+            values,
+        }
+    }
+
+    /// The values, row-major.
+    pub fn values(&self) -> &[f32] {
+        &self.values
+    }
+
+    /// Entries of the first row.
+    pub fn width(&self) -> usize {
+        self.first_width
+    }
+
     /// Rows read.
     pub fn len(&self) -> usize {
         self.count
@@ -59,6 +84,25 @@ impl Rows {
 /// A row-major buffer as the `[[f32]]` rows JSON answers carry.
 pub fn split_rows(values: &[f32], width: usize) -> Vec<Vec<f32>> {
     values.chunks(width.max(1)).map(<[f32]>::to_vec).collect()
+}
+
+/// As JSON rows: the rows of [`Rows::new`] (and of a request read, when it
+/// was rectangular or ragged in one row).
+impl Serialize for Rows {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        let mut seq = serializer.serialize_seq(Some(self.count))?;
+        let mut start = 0;
+        for i in 0..self.count {
+            let width = match self.ragged {
+                Some((at, entries)) if at == i => entries,
+                _ => self.first_width,
+            };
+            let end = (start + width).min(self.values.len());
+            seq.serialize_element(&self.values[start..end])?;
+            start = end;
+        }
+        seq.end()
+    }
 }
 
 impl<'de> Deserialize<'de> for Rows {

@@ -15,7 +15,7 @@ use crate::server::rows::{Rows, split_rows};
 use crate::server::validate::within;
 use crate::server::{ApiError, AppState};
 
-#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ActRequest {
     /// Observations, `[batch][obs_dim]` (obs_dim: the model's).
@@ -28,6 +28,17 @@ pub struct ActRequest {
     #[serde(default)]
     #[serde(deserialize_with = "integer")]
     pub seed: u64,
+}
+
+impl ActRequest {
+    /// The policy's deterministic actions in `states`.
+    pub fn new(states: Rows) -> Self {
+        Self {
+            states,
+            mode: ActionMode::default(),
+            seed: 0,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]

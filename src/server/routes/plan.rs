@@ -20,7 +20,7 @@ use crate::server::plan_sessions::{KeptPlan, PlanSessions};
 use crate::server::validate::within;
 use crate::server::{ApiError, AppState};
 
-#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PlanRequest {
     /// The state to plan from, `[obs_dim]` (the model's).
@@ -115,7 +115,46 @@ pub struct PlanRequest {
     pub cost: Option<CostRequest>,
 }
 
-#[derive(Debug, Clone, Serialize, ToSchema)]
+impl PlanRequest {
+    /// `planner` over `horizon` steps from `state`, `population` candidates and
+    /// `iterations` rounds, one particle, every other field its default.
+    pub fn new(
+        state: Vec<f32>,
+        planner: Planner,
+        horizon: usize,
+        population: usize,
+        iterations: usize,
+    ) -> Self {
+        Self {
+            state,
+            planner,
+            horizon,
+            population,
+            iterations,
+            particles: one(),
+            temperature: None,
+            smoothing: None,
+            elites: None,
+            momentum: None,
+            decay: None,
+            colored_noise: None,
+            keep_elites: None,
+            noise: None,
+            discount: unit(),
+            penalty: unit(),
+            cvar_alpha: None,
+            alpha: None,
+            threshold: None,
+            seed: 0,
+            noise_scale: None,
+            session: None,
+            open_session: false,
+            cost: None,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 pub struct PlanResponse {
     pub model: String,
     pub planner: Planner,

@@ -25,7 +25,7 @@ use crate::server::rows::{Rows, split_rows};
 use crate::server::validate::{answer_within, clip_actions, non_negative, within};
 use crate::server::{ApiError, AppState, Limits, LoadedModel};
 
-#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RolloutRequest {
     /// Start observations, `[batch][obs_dim]` (obs_dim: the model's).
@@ -75,6 +75,26 @@ pub struct RolloutRequest {
     #[serde(default)]
     #[schema(minimum = 0)]
     pub noise_scale: Option<f32>,
+}
+
+impl RolloutRequest {
+    /// `horizon` steps from `states` with the model's policy, one particle,
+    /// every other field its default.
+    pub fn new(states: Rows, horizon: usize) -> Self {
+        Self {
+            states,
+            actions: None,
+            clip: yes(),
+            policy_mode: ActionMode::default(),
+            horizon,
+            particles: one(),
+            seed: 0,
+            penalty: unit(),
+            alpha: None,
+            threshold: None,
+            noise_scale: None,
+        }
+    }
 }
 
 /// One trajectory; arrays stop where it ended.

@@ -26,7 +26,7 @@ use crate::server::validate::{answer_within, clip_actions, flat, within};
 use crate::server::{ApiError, AppState, Limits, LoadedModel};
 use crate::shared::Cancel;
 
-#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ScoreRequest {
     /// Start observations, `[batch][obs_dim]` (obs_dim: the model's).
@@ -87,7 +87,30 @@ pub struct ScoreRequest {
     pub cost: Option<CostRequest>,
 }
 
-#[derive(Debug, Clone, Serialize, ToSchema)]
+impl ScoreRequest {
+    /// `actions` (`[batch][candidates]` sequences of `horizon` rows) scored from
+    /// `states`, one particle, every other field its default.
+    pub fn new(states: Rows, actions: Vec<Vec<Rows>>, horizon: usize) -> Self {
+        Self {
+            states,
+            actions: Some(actions),
+            shared_actions: None,
+            horizon,
+            particles: one(),
+            discount: unit(),
+            penalty: unit(),
+            cvar_alpha: None,
+            alpha: None,
+            threshold: None,
+            seed: 0,
+            noise_scale: None,
+            clip: yes(),
+            cost: None,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 pub struct ScoreResponse {
     pub model: String,
     pub batch: usize,

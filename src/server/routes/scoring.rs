@@ -2,7 +2,7 @@
 //! against the model and the server's limits in one place, and the caller's
 //! cost terms on named observations.
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::fields::integer;
@@ -12,7 +12,7 @@ use crate::server::validate::non_negative;
 use crate::server::{ApiError, LoadedModel};
 
 /// A request's quadratic costs on the observations its candidates reach.
-#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CostRequest {
     /// Each kept step's reward becomes r − Σ weight·(s′[observation] − target)².
@@ -23,7 +23,7 @@ pub struct CostRequest {
     pub replace_reward: bool,
 }
 
-#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CostTermRequest {
     /// The observation: its name in the model's system file, or its 0-based index.
@@ -36,7 +36,7 @@ pub struct CostTermRequest {
 }
 
 /// An observation by name or by index.
-#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(untagged)]
 pub enum ObservationRef {
     Name(String),

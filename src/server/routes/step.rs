@@ -23,7 +23,7 @@ use crate::server::{ApiError, AppState};
 use crate::shared::ModelStep;
 
 /// A batch of observations and actions to step.
-#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct StepRequest {
     /// Observations, `[batch][obs_dim]` (obs_dim: the model's).
@@ -58,6 +58,21 @@ pub struct StepRequest {
     pub clip: bool,
 }
 
+impl StepRequest {
+    /// `actions` taken in `states`, one particle, every other field its default.
+    pub fn new(states: Rows, actions: Rows) -> Self {
+        Self {
+            states,
+            actions,
+            particles: one(),
+            seed: 0,
+            penalty: unit(),
+            noise_scale: None,
+            clip: yes(),
+        }
+    }
+}
+
 /// Per item: the SDE's terms; per item and particle: the sampled step.
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 pub struct StepResponse {
@@ -85,6 +100,38 @@ pub struct StepResponse {
     pub penalized_rewards: Vec<Vec<f32>>,
     /// The task's termination rule on the next observation: `[batch][particles]`.
     pub terminals: Vec<Vec<bool>>,
+}
+
+impl StepResponse {
+    /// The JSON answer of model `id`'s step `s` (what a binary answer's tensors
+    /// hold too, as a client reads them back).
+    pub fn from_particles(
+        id: &str,
+        s: &ParticleStep,
+        noise_scale: f32,
+        clipped_rows: usize,
+    ) -> Self {
+        let (p, d) = (s.particles, s.obs_dim);
+        Self {
+            model: id.to_string(),
+            batch: s.batch,
+            particles: p,
+            noise_scale,
+            clipped_rows,
+            mean: rows(&s.mean, d),
+            sigma: rows(&s.sigma, d),
+            h_eta: rows(&s.h_eta, d),
+            eta: s.eta.clone(),
+            next_states: s
+                .next_states
+                .chunks(p * d)
+                .map(|item| rows(item, d))
+                .collect(),
+            rewards: rows(&s.rewards, p),
+            penalized_rewards: rows(&s.penalized_rewards, p),
+            terminals: s.terminals.chunks(p).map(<[bool]>::to_vec).collect(),
+        }
+    }
 }
 
 /// Samples one EM step. Binary bodies: a safetensors file with `states`
@@ -164,7 +211,12 @@ pub async fn step(
         let items = (observations, actions);
         let result = sample_particles(dynamics, &worker.rules, items, terms, config, &mut rng);
         match format {
-            Format::Json => json_response(&step_response(&id, &result, noise_scale, clipped_rows)),
+            Format::Json => json_response(&StepResponse::from_particles(
+                &id,
+                &result,
+                noise_scale,
+                clipped_rows,
+            )),
             Format::Binary => tensors_response(&binary_response(result), noise_scale, clipped_rows),
         }
     };
@@ -221,34 +273,6 @@ fn binary_request(
         clip: metadata_option(&metadata, "clip", true)?,
     };
     Ok((states, actions, request))
-}
-
-fn step_response(
-    id: &str,
-    s: &ParticleStep,
-    noise_scale: f32,
-    clipped_rows: usize,
-) -> StepResponse {
-    let (p, d) = (s.particles, s.obs_dim);
-    StepResponse {
-        model: id.to_string(),
-        batch: s.batch,
-        particles: p,
-        noise_scale,
-        clipped_rows,
-        mean: rows(&s.mean, d),
-        sigma: rows(&s.sigma, d),
-        h_eta: rows(&s.h_eta, d),
-        eta: s.eta.clone(),
-        next_states: s
-            .next_states
-            .chunks(p * d)
-            .map(|item| rows(item, d))
-            .collect(),
-        rewards: rows(&s.rewards, p),
-        penalized_rewards: rows(&s.penalized_rewards, p),
-        terminals: s.terminals.chunks(p).map(<[bool]>::to_vec).collect(),
-    }
 }
 
 /// The answer's tensors, moved out of `s` (at the largest accepted batch a
