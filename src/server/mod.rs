@@ -317,6 +317,12 @@ pub async fn serve(state: AppState, listener: tokio::net::TcpListener) -> std::i
             }
         });
     }
+    use axum::serve::ListenerExt;
+    // Small answers leave at once: Nagle's algorithm would hold a batch-1
+    // answer for the client's delayed ACK.
+    let listener = listener.tap_io(|tcp| {
+        let _ = tcp.set_nodelay(true);
+    });
     axum::serve(
         listener,
         app(state).into_make_service_with_connect_info::<SocketAddr>(),

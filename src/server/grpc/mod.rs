@@ -166,7 +166,7 @@ pub async fn serve_grpc(state: AppState, listener: tokio::net::TcpListener) -> s
         .concurrency_limit_per_connection(limits.concurrency.max(1))
         .add_service(service)
         .serve_with_incoming_shutdown(
-            tonic::transport::server::TcpIncoming::from(listener),
+            tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true)),
             crate::server::shutdown_signal(),
         )
         .await
