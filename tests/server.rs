@@ -19,7 +19,7 @@ use nuno::infer::Kernel;
 use nuno::sde::FusedSde;
 use nuno::server::{
     ActResponse, AppState, BINARY, ComputeHook, EvaluateResponse, Limits, ModelDetail, ModelList,
-    RolloutResponse, ServerConfig, StepResponse, ValidateResponse, app, openapi_json, serve,
+    RolloutResponse, Rows, ServerConfig, StepResponse, ValidateResponse, app, openapi_json, serve,
     serve_grpc,
 };
 use nuno::shared::{BatchDynamics, BatchPolicy};
@@ -1069,17 +1069,12 @@ async fn tritons_grpc_client_infers_what_rest_steps() {
     )
     .await;
     let (states, acts) = (upright(5), actions(5));
-    let body = json!({"states": states, "actions": acts, "seed": 3, "penalty": 0.5});
     let (base, client) = server.socket();
-    let step = client
-        .post(format!("{base}/v1/models/{MODEL}/step"))
-        .bearer_auth(token)
-        .json(&body)
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(step.status(), StatusCode::OK);
-    let step: StepResponse = step.json().await.unwrap();
+    let typed = nuno_client::Client::new(base).with_token(token);
+    let mut request =
+        nuno_client::StepRequest::new(Rows::new(states.concat(), 11), Rows::new(acts.concat(), 3));
+    (request.seed, request.penalty) = (3, 0.5);
+    let step = typed.step(MODEL, &request).await.unwrap();
     // One particle per row: the step's first draw of each.
     let first = |rows: &Vec<Vec<f32>>| -> Vec<f32> { rows.iter().map(|p| p[0]).collect() };
     let expected = json!({
