@@ -4,6 +4,10 @@
 //! Swish, 5 elites): MOBILE's update is SAC's plus its Bellman penalty on the
 //! batch's 244 model rows (5 elites × 10 sampled next states each through the
 //! ensemble, the actor and both target critics), all on the fused kernels.
+//! RAMBO's adversarial model step (burn's autodiff through the ensemble):
+//! x̂ drawn from the elites for 256 (s, a), its advantage under the critics,
+//! and one Adam step on w_adv·mean(log p(x̂)·A) + L_sl on 256 real rows; one
+//! policy epoch of RAMBO takes `adversary_steps` × h of them.
 //! (COMBO's update is CQL's term on burn: `cargo bench --bench model_free`.)
 //!
 //! Run: `cargo bench --bench ensemble_methods`.
@@ -11,9 +15,12 @@
 use std::time::Instant;
 
 use burn::tensor::Device;
-use nuno::agent::{ActorConfig, BellmanPenalty, FusedSac, Sac, SacConfig};
+use nuno::agent::{
+    ActorConfig, BellmanPenalty, FusedSac, RAMBO_PRESETS, Sac, SacConfig, advantages, standardise,
+};
 use nuno::ensemble::{
-    EnsembleDynamics, EnsembleFit, EnsembleUncertainty, GaussianEnsemble, Scaler,
+    AdversarialConfig, AdversarialEnsemble, EnsembleDynamics, EnsembleFit, EnsembleUncertainty,
+    GaussianEnsemble, Scaler,
 };
 use nuno::nn::seeded_init;
 use nuno::shared::TransitionBatch;
@@ -118,4 +125,28 @@ fn main() {
         fused.update(&penalised, &mut rng);
     });
     row("MOBILE (penalty + SAC)", mobile_seconds);
+
+    // hopper-medium's w_adv (the weight does not change the work).
+    let adv_weight = RAMBO_PRESETS[1].2;
+    let mut adversary =
+        AdversarialEnsemble::new(&ensemble, AdversarialConfig::new(adv_weight), &device);
+    let no_terminals = vec![0.0; BATCH];
+    let real = (
+        &batch.observations[..],
+        &batch.actions[..],
+        &batch.next_observations[..],
+        &batch.rewards[..],
+    );
+    let rambo_seconds = time(10, || {
+        let sample = adversary.sample(&batch.observations, &batch.actions, &mut rng);
+        let drawn = (
+            &sample.next_observations[..],
+            &sample.rewards[..],
+            &no_terminals[..],
+        );
+        let mut advantage = advantages(&sac, (&batch.observations, &batch.actions), drawn);
+        standardise(&mut advantage);
+        adversary.step(sample, &advantage, real);
+    });
+    row("RAMBO's adversarial model step", rambo_seconds);
 }

@@ -6,7 +6,8 @@
 //!
 //! ```text
 //! before any update: the actor cloned on the data (MSE of sampled actions), bc_epochs passes
-//! every adversary_every steps, adversary_steps times: 256 dataset states, then h times:
+//! every adversary_every steps, adversary_steps model steps in all, along chains of
+//! 256 dataset states, then up to h times:
 //!     a ~ π(·|s); x̂ = (ŝ', r̂) from a random elite; d from the task's termination rule
 //!     A = r̂ + γ(1 − d)·min_j Q_j(ŝ', π_det(ŝ')) − min_j Q_j(s, a), standardised
 //!     one Adam step on w_adv·mean(log p(x̂)·A) + L_sl; s ← ŝ' where not terminal
@@ -89,8 +90,10 @@ pub fn advantages(
         .collect()
 }
 
-/// One adversarial phase: `adversary_steps` chains of up to `horizon` steps
-/// from dataset states, the ensemble stepped at each; the mean losses.
+/// One adversarial phase: `adversary_steps` model steps in all, taken along
+/// chains of up to `horizon` steps from dataset states (OfflineRL-Kit counts
+/// every step of a chain, and stops mid-chain at the count), the ensemble
+/// stepped at each; the mean losses.
 pub fn adversarial_phase(
     adversary: &mut AdversarialEnsemble,
     sac: &Sac,
@@ -102,11 +105,12 @@ pub fn adversarial_phase(
     let actor = sac.actor.valid();
     let device = sac.device().clone().inner();
     let mut losses = Vec::new();
-    for _ in 0..config.adversary_steps {
+    // A chain of no states takes no step: nothing to count towards the phase.
+    while losses.len() < config.adversary_steps && config.adversary_batch > 0 {
         let mut obs = StartStateSampler::new(dataset).sample(config.adversary_batch, rng);
         for _ in 0..horizon {
             let rows = obs.len() / o;
-            if rows == 0 {
+            if rows == 0 || losses.len() == config.adversary_steps {
                 break;
             }
             let states = Tensor::<2>::from_data(TensorData::new(obs.clone(), [rows, o]), &device);

@@ -704,7 +704,8 @@ fn mobile_penalises_updates_by_the_elites_bellman_inconsistency() {
 /// RAMBO trains in MOPO's ensemble with its own row (hopper-medium: h 5,
 /// w_adv 3e-4), no penalty and no truncation, half the batch real, rollouts
 /// every 250 steps; its adversary's phase runs at the first step (losses in
-/// metrics.jsonl) and its checkpoint carries the adversarial ensemble, so a
+/// metrics.jsonl), `--adversary-steps` model steps in all, and its checkpoint
+/// carries the adversarial ensemble, so a
 /// resumed run goes on from it; its flags without the method are refused.
 #[test]
 fn rambo_trains_its_adversary_and_resumes_with_it() {
@@ -754,6 +755,13 @@ fn rambo_trains_its_adversary_and_resumes_with_it() {
             .join("adversary.safetensors")
             .is_file()
     );
+    // One phase of --adversary-steps 3 model steps in all (chains of up to h = 5
+    // count each step, as OfflineRL-Kit's), so the adversary's Adam stepped 3 times.
+    let state: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(checkpoints.join(latest.trim()).join("state.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(state["adversary"]["adam_time"], 3, "{}", state["adversary"]);
     let out = ok(&fit("rambo", 20, &[&small[..], &["--resume"]].concat()));
     assert!(out.contains("resumed from"), "{out}");
     let err = fails(&fit("mopo", 10, &["--rambo-weight", "1"]));
