@@ -58,14 +58,14 @@ fn dimensions(tensor: &str, shape: &[i64]) -> Result<Vec<usize>, ApiError> {
 
 /// An input as the REST body's, its `fp32_contents` as inline data (an input
 /// with other contents then has no data, which the checks name).
-fn input(tensor: &InferInputTensor) -> Result<InferInput, ApiError> {
-    let contents = tensor.contents.as_ref();
-    let fp32 = contents.filter(|c| !c.fp32_contents.is_empty());
+fn input(tensor: &mut InferInputTensor) -> Result<InferInput, ApiError> {
+    // Moved out, not copied: a batch's values are the request's bulk.
+    let fp32 = (tensor.contents.as_mut()).map(|c| std::mem::take(&mut c.fp32_contents));
     Ok(InferInput {
         name: tensor.name.clone(),
         shape: dimensions(&tensor.name, &tensor.shape)?,
         datatype: tensor.datatype.clone(),
-        data: fp32.map(|c| InputData(c.fp32_contents.clone())),
+        data: fp32.filter(|v| !v.is_empty()).map(InputData),
         parameters: None,
     })
 }
@@ -83,7 +83,7 @@ fn requested(output: &InferRequestedOutputTensor) -> Result<RequestedOutput, Api
 pub fn check(
     state: &AppState,
     model: &LoadedModel,
-    request: &ModelInferRequest,
+    request: &mut ModelInferRequest,
 ) -> Result<CheckedInfer, ApiError> {
     let raw = &request.raw_input_contents;
     if !raw.is_empty() && raw.len() != request.inputs.len() {
@@ -109,7 +109,7 @@ pub fn check(
     };
     let mut inputs = request
         .inputs
-        .iter()
+        .iter_mut()
         .map(input)
         .collect::<Result<Vec<_>, _>>()?;
     let mut with_bytes: Vec<InputWithBytes> = inputs

@@ -53,9 +53,9 @@ impl InferenceService {
         (self.state.metrics).request(&route, status, started.elapsed().as_secs_f64());
     }
 
-    async fn infer(&self, request: ModelInferRequest) -> Result<ModelInferResponse, ApiError> {
+    async fn infer(&self, mut request: ModelInferRequest) -> Result<ModelInferResponse, ApiError> {
         let model = self.state.model(&request.model_name)?;
-        let checked = infer::check(&self.state, &model, &request)?;
+        let checked = infer::check(&self.state, &model, &mut request)?;
         (self.state.metrics).batch("infer", &model.id, checked.batch);
         let id = request.id;
         self.state

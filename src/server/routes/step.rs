@@ -162,22 +162,8 @@ pub async fn step(
     // Said before the body is parsed, so a batch waits for this request.
     let arrival = (state.batcher.enabled()).then(|| state.batcher.arrival());
     let (obs_dim, act_dim) = (model.obs_dim(), model.act_dim());
-    let (observations, mut actions, request) = match body.format {
-        Format::Json => {
-            let mut r: StepRequest = body.json().await?;
-            let states = std::mem::take(&mut r.states).into_matrix("states", obs_dim)?;
-            let actions = std::mem::take(&mut r.actions).into_matrix("actions", act_dim)?;
-            (states, actions, r)
-        }
-        Format::Binary => binary_request(&body, obs_dim, act_dim)?,
-    };
+    let (observations, mut actions, request) = read_request(&body, obs_dim, act_dim).await?;
     let batch = observations.len() / obs_dim;
-    if actions.len() / act_dim != batch {
-        return Err(ApiError::Invalid(format!(
-            "`states` has {batch} rows but `actions` has {}",
-            actions.len() / act_dim
-        )));
-    }
     let clipped_rows = clip_actions("actions", &mut actions, &model.action_space, request.clip)?;
     let limits = &state.config.limits;
     within("batch (rows of states)", batch, limits.max_batch)?;
@@ -234,6 +220,32 @@ pub async fn step(
             finish(&observations, &actions, &terms)
         })
         .await
+}
+
+/// The request's states and actions (row-major, of the model's widths and
+/// as many rows each) and its options, from either body format.
+async fn read_request(
+    body: &RawBody,
+    obs_dim: usize,
+    act_dim: usize,
+) -> Result<(Vec<f32>, Vec<f32>, StepRequest), ApiError> {
+    let (states, actions, request) = match body.format {
+        Format::Json => {
+            let mut r: StepRequest = body.json().await?;
+            let states = std::mem::take(&mut r.states).into_matrix("states", obs_dim)?;
+            let actions = std::mem::take(&mut r.actions).into_matrix("actions", act_dim)?;
+            (states, actions, r)
+        }
+        Format::Binary => binary_request(body, obs_dim, act_dim)?,
+    };
+    let batch = states.len() / obs_dim;
+    if actions.len() / act_dim != batch {
+        return Err(ApiError::Invalid(format!(
+            "`states` has {batch} rows but `actions` has {}",
+            actions.len() / act_dim
+        )));
+    }
+    Ok((states, actions, request))
 }
 
 fn binary_request(
