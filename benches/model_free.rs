@@ -1,14 +1,15 @@
 //! Update speed of the model-free baselines (BC, TD3+BC, CQL, EDAC with 10 and
 //! 50 critics) at hopper's shape (obs 11, act 3), batch 256, each at its
-//! reference settings, beside SAC's burn update on the same shape: all of them
-//! run on burn's kernels (no fused path yet).
+//! reference settings, beside SAC's burn update on the same shape: on burn's
+//! kernels, and CQL's also on the fused kernel (`FusedSac::update_conservative`).
 //!
 //! Run: `cargo bench --bench model_free`.
 
 use std::time::Instant;
 
 use burn::tensor::Device;
-use nuno::agent::{ActorConfig, Learner, LearnerConfig, Method, Sac, SacConfig};
+use nuno::agent::{ActorConfig, FusedSac, Learner, LearnerConfig, Method, Sac, SacConfig};
+use nuno::infer::Kernel;
 use nuno::nn::seeded_init;
 use nuno::shared::TransitionBatch;
 use rand::{Rng, SeedableRng};
@@ -64,18 +65,50 @@ fn main() {
         );
     };
     row("SAC (burn)", "2×256, 2 critics", sac_seconds);
+    let mut fused_sac = FusedSac::from_sac(&sac);
+    let fused_seconds = time(50, || {
+        fused_sac.update(&batch, &mut rng);
+    });
+    row("SAC (fused)", "2×256, 2 critics", fused_seconds);
     let learners = [
-        ("BC", LearnerConfig::for_method(Method::Bc), 50),
-        ("TD3+BC", LearnerConfig::for_method(Method::Td3Bc), 50),
-        ("CQL", LearnerConfig::for_method(Method::Cql), 10),
-        ("EDAC, N = 10", LearnerConfig::for_method(Method::Edac), 10),
+        (
+            "BC",
+            LearnerConfig::for_method(Method::Bc),
+            50,
+            Kernel::Burn,
+        ),
+        (
+            "TD3+BC",
+            LearnerConfig::for_method(Method::Td3Bc),
+            50,
+            Kernel::Burn,
+        ),
+        (
+            "CQL",
+            LearnerConfig::for_method(Method::Cql),
+            10,
+            Kernel::Burn,
+        ),
+        (
+            "CQL (fused)",
+            LearnerConfig::for_method(Method::Cql),
+            20,
+            Kernel::Fused,
+        ),
+        (
+            "EDAC, N = 10",
+            LearnerConfig::for_method(Method::Edac),
+            10,
+            Kernel::Burn,
+        ),
         (
             "EDAC, N = 50 (hopper)",
             LearnerConfig::for_dataset(Method::Edac, "hopper-medium"),
             3,
+            Kernel::Burn,
         ),
     ];
-    for (name, config, n) in learners {
+    for (name, config, n, kernel) in learners {
         let config = config.expect("a model-free method");
         let hidden = config.hidden();
         let critics = match &config {
@@ -84,8 +117,9 @@ fn main() {
             _ => 2,
         };
         let mut learner = seeded_init(&device, 0, || Learner::new(actor(), &config, &device));
+        let mut fused = learner.fused(kernel);
         let seconds = time(n, || {
-            learner.update(&batch, &mut rng);
+            learner.update(fused.as_mut(), &batch, &mut rng);
         });
         row(
             name,

@@ -7,7 +7,9 @@ use std::collections::BTreeMap;
 use burn::module::Module;
 use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
-use nuno::agent::{ActorConfig, CriticBackup, FusedSac, Sac, SacConfig, SacLosses};
+use nuno::agent::{
+    ActorConfig, ConservativeTerm, CriticBackup, FusedSac, Sac, SacConfig, SacLosses,
+};
 use nuno::artifact::collect_tensors;
 use nuno::infer::TrainableMlp;
 use nuno::nn::{gradients_by_path, normal, seeded_init};
@@ -311,4 +313,55 @@ fn mobiles_backup_and_target_values_match_a_hand_computation_on_both_kernels() {
     let fused_values = FusedSac::from_sac(&reference)
         .target_values(&data.observations, &mut ChaCha8Rng::seed_from_u64(25));
     assert_close("target values", &fused_values, &values, 1e-5, 1e-5);
+}
+
+/// A CQL-shaped agent (three hidden layers, 32 wide to stay quick).
+fn cql_agent(seed: u64) -> Sac {
+    let device = Device::flex();
+    let actor = ActorConfig::new(OBS, ACT, vec![-1.0; ACT], vec![1.0; ACT]);
+    let config = SacConfig::new()
+        .with_actor_hidden(vec![32, 32, 32])
+        .with_critic_hidden(vec![32, 32, 32])
+        .with_initial_alpha(0.7);
+    seeded_init(&device, seed, || Sac::new(actor, config, &device))
+}
+
+/// CQL's and COMBO's update (actor, α, critics with the conservative term,
+/// targets) on the fused kernel equals burn's autodiff of the same losses: on
+/// a batch all real (CQL) and on one whose second half is model rows (COMBO's
+/// data term on the first half), with a temperature other than 1.
+#[test]
+fn the_conservative_update_equals_burns() {
+    let term = ConservativeTerm::new()
+        .with_cql_weight(5.0)
+        .with_temperature(2.0)
+        .with_num_repeat_actions(4);
+    let rows = 64;
+    let data = batch(rows, &mut ChaCha8Rng::seed_from_u64(30));
+    for (case, data_rows) in [("CQL", rows), ("COMBO", rows / 2)] {
+        let mut reference = cql_agent(31);
+        let mut fused = FusedSac::from_sac(&reference);
+        let rng = || ChaCha8Rng::seed_from_u64(32);
+        let burn_losses = term.update(&mut reference, &data, data_rows, &mut rng());
+        let fused_losses = fused.update_conservative(&term, &data, data_rows, &mut rng());
+        let mut ours = cql_agent(33);
+        fused.write_to(&mut ours);
+        let (expected, got) = (all_tensors(&reference), all_tensors(&ours));
+        for (name, values) in &expected {
+            assert_close(&format!("{case} {name}"), &got[name], values, 1e-5, 1e-6);
+        }
+        let fields = |l: &SacLosses| {
+            [
+                l.qf1_values,
+                l.qf1_loss,
+                l.qf2_loss,
+                l.actor_loss,
+                l.alpha,
+                l.alpha_loss,
+                l.entropy,
+            ]
+        };
+        let (f, b) = (fields(&fused_losses), fields(&burn_losses));
+        assert_close(case, &f, &b, 1e-5, 1e-6);
+    }
 }

@@ -14,6 +14,8 @@ use crate::nn::{Adam, AdamState, AdamStep, fill_standard_normal, to_f32_vec};
 use crate::shared::LoggedActions;
 use crate::shared::TransitionBatch;
 
+mod conservative;
+
 /// The agent's networks, temperature and Adam state as host buffers.
 pub struct FusedSac {
     obs_dim: usize,
@@ -58,6 +60,9 @@ struct Workspace {
     grad_input2: Vec<f32>,
     grad_action: Vec<f32>,
     grad_actor: Vec<f32>,
+    /// The conservative term's states repeated N times ([s; s']) and its uniform actions.
+    repeated: Vec<f32>,
+    uniform: Vec<f32>,
 }
 
 /// ã ~ π(·|s) for a batch, and what its gradient needs.
@@ -109,6 +114,8 @@ impl FusedSac {
             grad_input2: Vec::new(),
             grad_action: Vec::new(),
             grad_actor: Vec::new(),
+            repeated: Vec::new(),
+            uniform: Vec::new(),
         };
         Self {
             obs_dim: c.obs_dim,
@@ -167,37 +174,43 @@ impl FusedSac {
         let b = batch.rewards.len();
         let alpha = self.log_alpha.exp();
         fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
-        self.critic_target(batch, alpha);
-
-        // Critic step.
+        self.critic_target(batch, alpha, self.backup);
         let critic = self.critic_gradients(batch);
-        let step = self.adam.begin(&mut self.state.critic, self.lr.0);
-        let critic_state = &mut self.state.critic;
-        step_network(
-            &self.adam,
-            step,
-            critic_state,
-            "q1",
-            &mut self.q1,
-            &self.work.q1_grads,
-        );
-        step_network(
-            &self.adam,
-            step,
-            critic_state,
-            "q2",
-            &mut self.q2,
-            &self.work.q2_grads,
-        );
+        self.step_critics();
 
-        // Actor step, through the updated critics.
+        // Actor step, through the updated critics, then the temperature's.
         fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
         let actor_loss = self.actor_gradients(&batch.observations, alpha);
+        self.step_actor();
+        let (alpha_loss, entropy) = self.step_alpha();
+        self.update_targets();
+        SacLosses {
+            actor_loss,
+            alpha,
+            alpha_loss,
+            entropy,
+            ..critic
+        }
+    }
+
+    /// One Adam step of both critics on `work.q*_grads`.
+    fn step_critics(&mut self) {
+        let step = self.adam.begin(&mut self.state.critic, self.lr.0);
+        let state = &mut self.state.critic;
+        let w = &self.work;
+        step_network(&self.adam, step, state, "q1", &mut self.q1, &w.q1_grads);
+        step_network(&self.adam, step, state, "q2", &mut self.q2, &w.q2_grads);
+    }
+
+    /// One Adam step of the actor on `work.actor_grads`.
+    fn step_actor(&mut self) {
         let step = self.adam.begin(&mut self.state.actor, self.lr.1);
         let (actor, grads) = (&mut self.actor, &self.work.actor_grads);
         step_network(&self.adam, step, &mut self.state.actor, "net", actor, grads);
+    }
 
-        // Temperature step.
+    /// One Adam step of log α on the actor step's sample; returns (L_α, the entropy estimate).
+    fn step_alpha(&mut self) -> (f32, f32) {
         let (alpha_loss, alpha_grad, entropy) = self.alpha_gradient();
         let mut log_alpha = [self.log_alpha];
         let step = self.adam.begin(&mut self.state.alpha, self.lr.2);
@@ -210,8 +223,11 @@ impl FusedSac {
         self.adam
             .update(step, &mut log_alpha, &[alpha_grad], moments);
         self.log_alpha = log_alpha[0];
+        (alpha_loss, entropy)
+    }
 
-        // Targets: Q̄ ← τ·Q + (1 − τ)·Q̄, with burn's f32 factors.
+    /// Targets: Q̄ ← τ·Q + (1 − τ)·Q̄, with burn's f32 factors.
+    fn update_targets(&mut self) {
         let (tau, keep) = (self.tau as f32, (1.0 - self.tau) as f32);
         for (target, online) in [
             (&mut self.target_q1, &self.q1),
@@ -223,14 +239,6 @@ impl FusedSac {
                 }
             }
         }
-
-        SacLosses {
-            actor_loss,
-            alpha,
-            alpha_loss,
-            entropy,
-            ..critic
-        }
     }
 
     /// Every gradient of one update's three losses at the current weights
@@ -241,7 +249,7 @@ impl FusedSac {
         let b = batch.rewards.len();
         let alpha = self.log_alpha.exp();
         fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
-        self.critic_target(batch, alpha);
+        self.critic_target(batch, alpha, self.backup);
         self.critic_gradients(batch);
         fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
         self.actor_gradients(&batch.observations, alpha);
@@ -299,8 +307,8 @@ impl FusedSac {
 
     /// y = r + γ(1 − d)(min_i Q̄_i(s', ã') − α·log π(ã'|s')), ã' drawn with
     /// `work.noise`, into `work.y` (as [`Sac::critic_target`]: without the
-    /// entropy term under a deterministic backup, at least the floor).
-    fn critic_target(&mut self, batch: &TransitionBatch, alpha: f32) {
+    /// entropy term under a deterministic `backup`, at least its floor).
+    fn critic_target(&mut self, batch: &TransitionBatch, alpha: f32, backup: Option<CriticBackup>) {
         let b = batch.rewards.len();
         self.act_into_critic_input(&batch.next_observations);
         let w = &mut self.work;
@@ -312,14 +320,14 @@ impl FusedSac {
         w.y.clear();
         for r in 0..b {
             let min_q = w.q1_tape.output[r].min(w.q2_tape.output[r]);
-            let next_value = if self.backup.is_some_and(|b| b.deterministic) {
+            let next_value = if backup.is_some_and(|b| b.deterministic) {
                 min_q
             } else {
                 min_q - w.sample.log_prob[r] * alpha
             };
             let not_done = -batch.terminals[r] + 1.0;
             let y = batch.rewards[r] + not_done * next_value * self.gamma;
-            let floor = self.backup.and_then(|b| b.floor);
+            let floor = backup.and_then(|b| b.floor);
             w.y.push(floor.map_or(y, |floor| y.max(floor)));
         }
     }

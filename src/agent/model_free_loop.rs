@@ -25,6 +25,7 @@ use super::actor::{ActionMode, Actor, ActorConfig, ActorPolicy};
 use super::bc::{Bc, BcConfig};
 use super::cql::{Cql, CqlConfig};
 use super::edac::{Edac, EdacConfig};
+use super::fused_sac::FusedSac;
 use super::method::Method;
 use super::policy_loop::{EpochRecord, EvalSummary, PhaseSeconds};
 use super::presets::edac_preset;
@@ -188,17 +189,38 @@ impl Learner {
         }
     }
 
-    /// One update on `batch` (states as the learner sees them).
+    /// One update on `batch` (states as the learner sees them), on `fused`
+    /// where the epoch has the fused kernel's copy ([`Learner::fused`]).
     pub fn update(
         &mut self,
+        fused: Option<&mut FusedSac>,
         batch: &crate::shared::TransitionBatch,
         rng: &mut ChaCha8Rng,
     ) -> SacLosses {
-        match self {
-            Self::Bc(bc) => bc.update(batch),
-            Self::Td3Bc(td3) => td3.update(batch, rng),
-            Self::Cql(cql) => cql.update(batch, rng),
-            Self::Edac(edac) => edac.update(batch, rng),
+        match (self, fused) {
+            (Self::Cql(cql), Some(fused)) => {
+                fused.update_conservative(&cql.config.term, batch, batch.len(), rng)
+            }
+            (Self::Bc(bc), _) => bc.update(batch),
+            (Self::Td3Bc(td3), _) => td3.update(batch, rng),
+            (Self::Cql(cql), None) => cql.update(batch, rng),
+            (Self::Edac(edac), _) => edac.update(batch, rng),
+        }
+    }
+
+    /// The agent on the fused kernel's host buffers for an epoch of updates,
+    /// where `kernel` is fused and the method has it there (CQL).
+    pub fn fused(&self, kernel: Kernel) -> Option<FusedSac> {
+        match (self, kernel) {
+            (Self::Cql(cql), Kernel::Fused) => Some(FusedSac::from_sac(&cql.sac)),
+            _ => None,
+        }
+    }
+
+    /// Takes back the agent an epoch trained on the fused kernel.
+    pub fn write_back(&mut self, fused: FusedSac) {
+        if let Self::Cql(cql) = self {
+            fused.write_to(&mut cql.sac);
         }
     }
 }
@@ -289,14 +311,18 @@ impl ModelFreeTraining {
         let sampler = TransitionSampler::new(dataset);
         let batch_size = self.config.learner.batch_size();
         let mut losses = Vec::with_capacity(self.config.steps_per_epoch);
+        let mut fused = self.learner.fused(kernel);
         for _ in 0..self.config.steps_per_epoch {
             let mut batch = sampler.sample(batch_size, &mut self.rng);
             if let Some(stats) = &self.state_stats {
                 stats.normalize(&mut batch.observations);
                 stats.normalize(&mut batch.next_observations);
             }
-            losses.push(self.learner.update(&batch, &mut self.rng));
+            losses.push(self.learner.update(fused.as_mut(), &batch, &mut self.rng));
             self.step += 1;
+        }
+        if let Some(fused) = fused {
+            self.learner.write_back(fused);
         }
         let updates = started.elapsed().as_secs_f64();
         self.epoch += 1;

@@ -539,8 +539,7 @@ impl PolicyTraining {
         if let (Some(rambo), 0) = (&self.config.rambo, self.step) {
             behaviour_clone(&mut self.sac, ctx.dataset, rambo, &mut self.rng);
         }
-        // The fused kernel has no conservative term: COMBO updates on burn's.
-        let fused_updates = ctx.kernel == Kernel::Fused && self.config.conservative.is_none();
+        let fused_updates = ctx.kernel == Kernel::Fused;
         let mut fused = fused_updates.then(|| FusedSac::from_sac(&self.sac));
         for _ in 0..self.config.steps_per_epoch {
             if let Some(losses) = self.adversary_turn(ctx, fused.as_ref()) {
@@ -560,7 +559,10 @@ impl PolicyTraining {
                 penalties.push(u);
             }
             losses.push(match (fused.as_mut(), &self.config.conservative) {
-                (Some(fused), _) => fused.update(&batch, &mut self.rng),
+                (Some(fused), Some(term)) => {
+                    fused.update_conservative(term, &batch, real_rows, &mut self.rng)
+                }
+                (Some(fused), None) => fused.update(&batch, &mut self.rng),
                 (None, Some(term)) => term.update(&mut self.sac, &batch, real_rows, &mut self.rng),
                 (None, None) => self.sac.update(&batch, &mut self.rng),
             });
