@@ -149,49 +149,96 @@ pub fn rollout_model_or_cancel(
     rng: &mut ChaCha8Rng,
     cancel: &Cancel,
 ) -> Result<ModelRollout, Cancelled> {
-    let (obs_dim, act_dim) = (dynamics.obs_dim(), dynamics.act_dim());
-    let rows = starts.len() / obs_dim * config.particles;
-    let mut observations: Vec<f32> = starts
-        .chunks_exact(obs_dim)
-        .flat_map(|row| {
-            std::iter::repeat_n(row, config.particles)
-                .flatten()
-                .copied()
-        })
-        .collect();
-    let mut trace = RolloutTrace {
-        rows,
-        horizon: config.horizon,
-        kept: vec![0; rows],
-        observations: observations
-            .chunks_exact(obs_dim)
-            .map(|o| o.to_vec())
-            .collect(),
-        actions: vec![Vec::new(); rows],
-        eta: vec![Vec::new(); rows],
-        accumulated_eta: vec![Vec::new(); rows],
-        rewards: vec![Vec::new(); rows],
-        outcome: vec![StepOutcome::Continued; rows],
-    };
-    // Grown as steps are kept: sized for every step, it would reserve the
-    // largest rollout a server accepts (hundreds of MB) for runs that truncate early.
-    let mut transitions = TransitionBatch::with_capacity(0, obs_dim, act_dim);
-    let mut accumulated = vec![0.0f32; rows];
-    let mut active: Vec<usize> = (0..rows).collect();
-
+    let mut rollout = Rollout::start(dynamics, starts, config);
     for k in 0..config.horizon {
-        if active.is_empty() {
+        if rollout.active.is_empty() {
             break;
         }
         cancel.check()?;
-        let obs: Vec<f32> = active
-            .iter()
-            .flat_map(|&r| observations[r * obs_dim..(r + 1) * obs_dim].iter().copied())
+        rollout.step(dynamics, (source, k), rules, config, rng);
+    }
+    let stats = summarize(&rollout.trace, &rollout.transitions);
+    Ok(ModelRollout {
+        transitions: rollout.transitions,
+        trace: rollout.trace,
+        stats,
+    })
+}
+
+/// A batch of rollouts in progress.
+struct Rollout {
+    obs_dim: usize,
+    act_dim: usize,
+    /// Each row's current observation, `[rows, obs_dim]`.
+    observations: Vec<f32>,
+    trace: RolloutTrace,
+    transitions: TransitionBatch,
+    /// Each row's accumulated truncation signal.
+    accumulated: Vec<f32>,
+    /// The rows still running.
+    active: Vec<usize>,
+}
+
+impl Rollout {
+    /// Every start state repeated `config.particles` times, nothing taken yet.
+    fn start(dynamics: &dyn BatchDynamics, starts: &[f32], config: &RolloutConfig) -> Self {
+        let (obs_dim, act_dim) = (dynamics.obs_dim(), dynamics.act_dim());
+        let rows = starts.len() / obs_dim * config.particles;
+        let observations: Vec<f32> = starts
+            .chunks_exact(obs_dim)
+            .flat_map(|row| {
+                std::iter::repeat_n(row, config.particles)
+                    .flatten()
+                    .copied()
+            })
+            .collect();
+        let trace = RolloutTrace {
+            rows,
+            horizon: config.horizon,
+            kept: vec![0; rows],
+            observations: observations
+                .chunks_exact(obs_dim)
+                .map(|o| o.to_vec())
+                .collect(),
+            actions: vec![Vec::new(); rows],
+            eta: vec![Vec::new(); rows],
+            accumulated_eta: vec![Vec::new(); rows],
+            rewards: vec![Vec::new(); rows],
+            outcome: vec![StepOutcome::Continued; rows],
+        };
+        Self {
+            obs_dim,
+            act_dim,
+            observations,
+            trace,
+            // Grown as steps are kept: sized for every step, it would reserve the
+            // largest rollout a server accepts (hundreds of MB) for runs that truncate early.
+            transitions: TransitionBatch::with_capacity(0, obs_dim, act_dim),
+            accumulated: vec![0.0; rows],
+            active: (0..rows).collect(),
+        }
+    }
+
+    /// Step `k` of every active row: act, step the model, judge and keep each row.
+    fn step(
+        &mut self,
+        dynamics: &dyn BatchDynamics,
+        (source, k): (RolloutActions, usize),
+        rules: &Rules,
+        config: &RolloutConfig,
+        rng: &mut ChaCha8Rng,
+    ) {
+        let (obs_dim, act_dim) = (self.obs_dim, self.act_dim);
+        let obs: Vec<f32> = (self.active.iter())
+            .flat_map(|&r| {
+                self.observations[r * obs_dim..(r + 1) * obs_dim]
+                    .iter()
+                    .copied()
+            })
             .collect();
         let actions = match source {
             RolloutActions::Policy(policy) => policy.act(&obs, rng),
-            RolloutActions::Sequence(sequence) => active
-                .iter()
+            RolloutActions::Sequence(sequence) => (self.active.iter())
                 .flat_map(|&r| {
                     let at = ((r / config.particles) * config.horizon + k) * act_dim;
                     sequence[at..at + act_dim].iter().copied()
@@ -199,10 +246,14 @@ pub fn rollout_model_or_cancel(
                 .collect(),
         };
         let states = dynamics.states_from_observations(&obs);
-        let noise = scaled_noise(active.len() * dynamics.noise_dim(), config.noise_scale, rng);
+        let noise = scaled_noise(
+            self.active.len() * dynamics.noise_dim(),
+            config.noise_scale,
+            rng,
+        );
         let step = dynamics.step(&states, &actions, &noise);
 
-        let mut still_active = Vec::with_capacity(active.len());
+        let active = std::mem::take(&mut self.active);
         for (i, &r) in active.iter().enumerate() {
             let from = &obs[i * obs_dim..(i + 1) * obs_dim];
             let action = &actions[i * act_dim..(i + 1) * act_dim];
@@ -212,47 +263,51 @@ pub fn rollout_model_or_cancel(
                 &step,
                 i,
                 (from, action),
-                &mut accumulated[r],
+                &mut self.accumulated[r],
                 (config.threshold, config.halt),
             );
-            trace.actions[r].extend_from_slice(action);
-            trace.outcome[r] = row.fate;
-            if row.fate == StepOutcome::Diverged {
-                continue;
-            }
-            trace.eta[r].push(row.eta);
-            trace.accumulated_eta[r].push(accumulated[r]);
-            trace.rewards[r].push(row.reward);
-            if row.fate == StepOutcome::Truncated {
-                continue;
-            }
-            let terminal = matches!(row.fate, StepOutcome::Terminal | StepOutcome::Halted);
-            transitions.observations.extend_from_slice(from);
-            transitions.actions.extend_from_slice(action);
-            // Penalised reward r − λ_pen·η(s, a).
-            transitions
-                .rewards
-                .push(penalized_reward(row.reward, config.penalty, row.eta));
-            transitions
-                .next_observations
-                .extend_from_slice(row.next_obs);
-            transitions.terminals.push(if terminal { 1.0 } else { 0.0 });
-            trace.kept[r] += 1;
-            trace.observations[r].extend_from_slice(row.next_obs);
-            observations[r * obs_dim..(r + 1) * obs_dim].copy_from_slice(row.next_obs);
-            if !terminal {
-                still_active.push(r);
+            if self.record(r, (from, action), &row, config.penalty) {
+                self.active.push(r);
             }
         }
-        active = still_active;
     }
 
-    let stats = summarize(&trace, &transitions);
-    Ok(ModelRollout {
-        transitions,
-        trace,
-        stats,
-    })
+    /// Records row `r`'s judged step in its trace and, where the step is kept,
+    /// as a transition (reward penalised); returns whether the row goes on.
+    fn record(
+        &mut self,
+        r: usize,
+        (from, action): (&[f32], &[f32]),
+        row: &JudgedRow,
+        penalty: f64,
+    ) -> bool {
+        let trace = &mut self.trace;
+        trace.actions[r].extend_from_slice(action);
+        trace.outcome[r] = row.fate;
+        if row.fate == StepOutcome::Diverged {
+            return false;
+        }
+        trace.eta[r].push(row.eta);
+        trace.accumulated_eta[r].push(self.accumulated[r]);
+        trace.rewards[r].push(row.reward);
+        if row.fate == StepOutcome::Truncated {
+            return false;
+        }
+        let terminal = matches!(row.fate, StepOutcome::Terminal | StepOutcome::Halted);
+        let t = &mut self.transitions;
+        t.observations.extend_from_slice(from);
+        t.actions.extend_from_slice(action);
+        // Penalised reward r − λ_pen·η(s, a).
+        t.rewards
+            .push(penalized_reward(row.reward, penalty, row.eta));
+        t.next_observations.extend_from_slice(row.next_obs);
+        t.terminals.push(if terminal { 1.0 } else { 0.0 });
+        trace.kept[r] += 1;
+        trace.observations[r].extend_from_slice(row.next_obs);
+        let obs_dim = self.obs_dim;
+        self.observations[r * obs_dim..(r + 1) * obs_dim].copy_from_slice(row.next_obs);
+        !terminal
+    }
 }
 
 /// One row of a model step as NUNO's rollouts take it (Section 4.3).

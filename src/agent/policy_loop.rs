@@ -555,7 +555,8 @@ impl PolicyTraining {
             }
             let mut batch = self.mixed_batch(ctx.dataset);
             let real_rows = self.real_rows();
-            if let Some(u) = self.penalize_model_rows(ctx, &mut batch, fused.as_mut()) {
+            if let Some(u) = self.penalize_model_rows(ctx, (&mut batch, real_rows), fused.as_mut())
+            {
                 penalties.push(u);
             }
             losses.push(match (fused.as_mut(), &self.config.conservative) {
@@ -600,13 +601,13 @@ impl PolicyTraining {
         Ok(record)
     }
 
-    /// MOBILE: the batch's model rows rewarded r − β·u(s, a), u from the
-    /// target critics of the kernel that trains; returns the mean u where the
-    /// batch has model rows (nothing for other methods).
+    /// MOBILE: the batch's model rows (from `first_model_row` on) rewarded
+    /// r − β·u(s, a), u from the target critics of the kernel that trains;
+    /// returns the mean u where the batch has model rows (nothing for other methods).
     fn penalize_model_rows(
         &mut self,
         ctx: &LoopContext,
-        batch: &mut TransitionBatch,
+        (batch, first_model_row): (&mut TransitionBatch, usize),
         mut fused: Option<&mut FusedSac>,
     ) -> Option<f32> {
         let (Some(term), Some(ensemble)) = (&self.config.bellman_penalty, ctx.ensemble) else {
@@ -617,7 +618,6 @@ impl PolicyTraining {
             Some(fused) => fused.target_values(obs, rng),
             None => sac.target_values(obs, rng),
         };
-        let first_model_row = self.real_rows();
         (first_model_row < batch.rewards.len()).then(|| {
             term.penalize(
                 batch,
