@@ -6,11 +6,11 @@
 
 use burn::config::Config;
 use burn::optim::GradientsParams;
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Tensor};
 
 use super::actor::{Actor, ActorConfig};
 use super::sac::SacLosses;
-use crate::nn::{Adam, AdamState, Initialised};
+use crate::nn::{Adam, AdamState, Initialised, rows_tensor};
 use crate::shared::TransitionBatch;
 
 /// BC's hyperparameters (OfflineRL-Kit's `run_bc.py`).
@@ -73,13 +73,9 @@ impl Bc {
     /// One Adam step on `batch`; the loss is reported as the actor's.
     pub fn update(&mut self, batch: &TransitionBatch) -> SacLosses {
         let c = &self.actor.config;
-        let b = batch.rewards.len();
-        let tensor = |values: &[f32], width: usize| {
-            Tensor::<2>::from_data(TensorData::new(values.to_vec(), [b, width]), &self.device)
-        };
         let loss = self.loss(
-            tensor(&batch.observations, c.obs_dim),
-            tensor(&batch.actions, c.act_dim),
+            rows_tensor(&batch.observations, c.obs_dim, &self.device),
+            rows_tensor(&batch.actions, c.act_dim, &self.device),
         );
         let actor_loss = loss.clone().into_scalar();
         let grads = GradientsParams::from_grads(loss.backward(), &self.actor);

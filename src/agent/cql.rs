@@ -23,7 +23,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::actor::ActorConfig;
 use super::sac::{Sac, SacConfig, SacLosses};
-use crate::nn::{Initialised, normal, polyak_update};
+use crate::nn::{Initialised, normal, polyak_update, rows_tensor};
 use crate::shared::TransitionBatch;
 
 /// CQL's hyperparameters (OfflineRL-Kit's `run_cql.py`).
@@ -199,12 +199,9 @@ impl ConservativeTerm {
         let b = batch.rewards.len();
         let device = sac.device().clone();
         let plain = device.clone().inner();
-        let tensor = |values: &[f32], width: usize, device: &Device| {
-            Tensor::<2>::from_data(TensorData::new(values.to_vec(), [b, width]), device)
-        };
-        let obs = tensor(&batch.observations, obs_dim, &device);
-        let actions = tensor(&batch.actions, act_dim, &device);
-        let next_obs = tensor(&batch.next_observations, obs_dim, &device);
+        let obs = rows_tensor(&batch.observations, obs_dim, &device);
+        let actions = rows_tensor(&batch.actions, act_dim, &device);
+        let next_obs = rows_tensor(&batch.next_observations, obs_dim, &device);
         let adam = sac.optimizer();
         let config = sac.config.clone();
 
@@ -239,9 +236,9 @@ impl ConservativeTerm {
         let next_value = sac
             .target_critic
             .min_q(next_obs.clone().inner(), next.action);
-        let terminals = tensor(&batch.terminals, 1, &plain);
-        let y =
-            tensor(&batch.rewards, 1, &plain) + (terminals.neg() + 1.0) * next_value * config.gamma;
+        let terminals = rows_tensor(&batch.terminals, 1, &plain);
+        let y = rows_tensor(&batch.rewards, 1, &plain)
+            + (terminals.neg() + 1.0) * next_value * config.gamma;
         let (_, qf1_loss, qf2_loss, qf1_values) = sac.critic_loss(obs.clone(), actions.clone(), y);
         let samples = self.draw_samples(act_dim, b, rng, &device);
         let (term1, term2) = self.terms(sac, obs, next_obs, actions, samples, data_rows);

@@ -12,13 +12,15 @@
 use burn::config::Config;
 use burn::module::{Module, Param};
 use burn::optim::GradientsParams;
-use burn::tensor::{Device, Distribution, Tensor, TensorData};
+use burn::tensor::{Device, Distribution, Tensor};
 use rand_chacha::ChaCha8Rng;
 
 use super::actor::{Actor, ActorConfig};
 use super::critic::Temperature;
 use super::sac::{SacAdam, SacConfig, SacLosses};
-use crate::nn::{Activation, Adam, Initialised, Mlp, MlpConfig, normal, polyak_update};
+use crate::nn::{
+    Activation, Adam, Initialised, Mlp, MlpConfig, normal, polyak_update, rows_tensor,
+};
 use crate::shared::TransitionBatch;
 
 /// EDAC's initial bias of every critic layer (OfflineRL-Kit's `VectorizedLinear`).
@@ -204,15 +206,12 @@ impl Edac {
     ) -> Tensor<2> {
         let (obs_dim, act_dim) = (self.actor.config.obs_dim, self.actor.config.act_dim);
         let b = batch.rewards.len();
-        let tensor = |values: &[f32], width: usize| {
-            Tensor::<2>::from_data(TensorData::new(values.to_vec(), [b, width]), plain)
-        };
-        let next_obs = tensor(&batch.next_observations, obs_dim);
+        let next_obs = rows_tensor(&batch.next_observations, obs_dim, plain);
         let next = (self.actor.valid()).sample(next_obs.clone(), normal([b, act_dim], rng, plain));
         let next_value =
             self.target_critics.min_q(next_obs, next.action) - next.log_prob * self.alpha();
-        let not_done = tensor(&batch.terminals, 1).neg() + 1.0;
-        tensor(&batch.rewards, 1) + not_done * next_value * self.config.sac.gamma
+        let not_done = rows_tensor(&batch.terminals, 1, plain).neg() + 1.0;
+        rows_tensor(&batch.rewards, 1, plain) + not_done * next_value * self.config.sac.gamma
     }
 
     /// One update on `batch`: actor, α, then the critics with the diversity
@@ -222,11 +221,8 @@ impl Edac {
         let (obs_dim, act_dim) = (c.obs_dim, c.act_dim);
         let b = batch.rewards.len();
         let device = self.device.clone();
-        let tensor = |values: &[f32], width: usize| {
-            Tensor::<2>::from_data(TensorData::new(values.to_vec(), [b, width]), &device)
-        };
-        let obs = tensor(&batch.observations, obs_dim);
-        let actions = tensor(&batch.actions, act_dim);
+        let obs = rows_tensor(&batch.observations, obs_dim, &device);
+        let actions = rows_tensor(&batch.actions, act_dim, &device);
         let sac = self.config.sac.clone();
         let adam = Adam::new(sac.adam_epsilon.unwrap_or(1e-8));
 

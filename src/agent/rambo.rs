@@ -27,7 +27,7 @@ use super::sac::Sac;
 use crate::data::{Dataset, StartStateSampler, TransitionSampler};
 use crate::ensemble::{AdversarialConfig, AdversarialEnsemble, AdversarialLosses};
 use crate::envs::Rules;
-use crate::nn::{AdamState, normal, to_f32_vec};
+use crate::nn::{AdamState, normal, rows_tensor, to_f32_vec};
 
 /// RAMBO's knobs beyond the loop's (OfflineRL-Kit's `run_rambo.py`).
 #[derive(Config, Debug, PartialEq)]
@@ -77,13 +77,13 @@ pub fn advantages(
     let c = &sac.actor.config;
     let rows = rewards.len();
     let device = sac.device().clone().inner();
-    let tensor = |v: &[f32], w: usize| {
-        Tensor::<2>::from_data(TensorData::new(v.to_vec(), [rows, w]), &device)
-    };
     let (actor, critic) = (sac.actor.valid(), sac.critic.valid());
-    let next = tensor(next, c.obs_dim);
+    let next = rows_tensor(next, c.obs_dim, &device);
     let next_q = to_f32_vec(critic.min_q(next.clone(), actor.mean_action(next)));
-    let baseline = to_f32_vec(critic.min_q(tensor(obs, c.obs_dim), tensor(actions, c.act_dim)));
+    let baseline = to_f32_vec(critic.min_q(
+        rows_tensor(obs, c.obs_dim, &device),
+        rows_tensor(actions, c.act_dim, &device),
+    ));
     let gamma = sac.config.gamma as f32;
     (0..rows)
         .map(|r| rewards[r] + (1.0 - terminals[r]) * gamma * next_q[r] - baseline[r])

@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use super::actor::{Actor, ActorConfig};
 use super::critic::{Temperature, TwinCritic};
-use crate::nn::{Adam, AdamState, Initialised, normal, polyak_update};
+use crate::nn::{Adam, AdamState, Initialised, normal, polyak_update, rows_tensor};
 use crate::shared::TransitionBatch;
 
 /// SAC's hyperparameters.
@@ -272,18 +272,15 @@ impl Sac {
         let b = batch.rewards.len();
         let device = self.device.clone();
         let plain = device.clone().inner();
-        let tensor = |values: &[f32], width: usize, device: &Device| {
-            Tensor::<2>::from_data(TensorData::new(values.to_vec(), [b, width]), device)
-        };
-        let obs = tensor(&batch.observations, obs_dim, &device);
-        let actions = tensor(&batch.actions, act_dim, &device);
+        let obs = rows_tensor(&batch.observations, obs_dim, &device);
+        let actions = rows_tensor(&batch.actions, act_dim, &device);
         let adam = self.optimizer();
 
-        let next_obs = tensor(&batch.next_observations, obs_dim, &plain);
+        let next_obs = rows_tensor(&batch.next_observations, obs_dim, &plain);
         let y = self.critic_target(
             next_obs,
-            tensor(&batch.rewards, 1, &plain),
-            tensor(&batch.terminals, 1, &plain),
+            rows_tensor(&batch.rewards, 1, &plain),
+            rows_tensor(&batch.terminals, 1, &plain),
             normal([b, act_dim], rng, &plain),
         );
         let alpha = self.temperature.alpha().inner();

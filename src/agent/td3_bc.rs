@@ -17,7 +17,7 @@ use rand_chacha::ChaCha8Rng;
 use super::actor::{Actor, ActorConfig};
 use super::critic::TwinCritic;
 use super::sac::SacLosses;
-use crate::nn::{Adam, AdamState, Initialised, normal, polyak_update};
+use crate::nn::{Adam, AdamState, Initialised, normal, polyak_update, rows_tensor};
 use crate::shared::TransitionBatch;
 
 /// TD3+BC's hyperparameters (the authors' `main.py`).
@@ -172,17 +172,14 @@ impl Td3Bc {
         let b = batch.rewards.len();
         let device = self.device.clone();
         let plain = device.clone().inner();
-        let tensor = |values: &[f32], width: usize, device: &Device| {
-            Tensor::<2>::from_data(TensorData::new(values.to_vec(), [b, width]), device)
-        };
-        let obs = tensor(&batch.observations, obs_dim, &device);
-        let actions = tensor(&batch.actions, act_dim, &device);
+        let obs = rows_tensor(&batch.observations, obs_dim, &device);
+        let actions = rows_tensor(&batch.actions, act_dim, &device);
         let adam = Adam::new(self.config.adam_epsilon);
 
         let y = self.critic_target(
-            tensor(&batch.next_observations, obs_dim, &plain),
-            tensor(&batch.rewards, 1, &plain),
-            tensor(&batch.terminals, 1, &plain),
+            rows_tensor(&batch.next_observations, obs_dim, &plain),
+            rows_tensor(&batch.rewards, 1, &plain),
+            rows_tensor(&batch.terminals, 1, &plain),
             normal([b, act_dim], rng, &plain),
         );
         let (q1, q2) = self.critic.forward(obs.clone(), actions.clone());

@@ -73,6 +73,13 @@ impl<M: Module> Initialised for M {
     }
 }
 
+/// Row-major `values` as a `[values.len() / width, width]` tensor on `device`:
+/// a batch's column group (observations, actions, rewards) as the networks read it.
+pub fn rows_tensor(values: &[f32], width: usize, device: &Device) -> Tensor<2> {
+    let shape = [values.len() / width.max(1), width];
+    Tensor::from_data(TensorData::new(values.to_vec(), shape), device)
+}
+
 /// A tensor's values as f32, row-major (converting from the device's float type).
 pub fn to_f32_vec<const D: usize>(tensor: Tensor<D>) -> Vec<f32> {
     // After `convert::<f32>` the element type matches, so `to_vec` cannot fail.
