@@ -1,7 +1,8 @@
 //! Update speed of the model-free baselines (BC, TD3+BC, CQL, EDAC with 10 and
 //! 50 critics) at hopper's shape (obs 11, act 3), batch 256, each at its
 //! reference settings, beside SAC's burn update on the same shape: on burn's
-//! kernels, and CQL's also on the fused kernel (`FusedSac::update_conservative`).
+//! kernels, and CQL's and EDAC's also on the fused kernel
+//! (`FusedSac::update_conservative`, `FusedSac::update_edac`).
 //!
 //! Run: `cargo bench --bench model_free`.
 
@@ -106,6 +107,18 @@ fn main() {
             LearnerConfig::for_dataset(Method::Edac, "hopper-medium"),
             3,
             Kernel::Burn,
+        ),
+        (
+            "EDAC, N = 10 (fused)",
+            LearnerConfig::for_method(Method::Edac),
+            20,
+            Kernel::Fused,
+        ),
+        (
+            "EDAC, N = 50 (hopper, fused)",
+            LearnerConfig::for_dataset(Method::Edac, "hopper-medium"),
+            5,
+            Kernel::Fused,
         ),
     ];
     for (name, config, n, kernel) in learners {

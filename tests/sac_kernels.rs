@@ -8,7 +8,8 @@ use burn::module::Module;
 use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
 use nuno::agent::{
-    ActorConfig, ConservativeTerm, CriticBackup, FusedSac, Sac, SacConfig, SacLosses,
+    ActorConfig, ConservativeTerm, CriticBackup, Edac, EdacConfig, FusedSac, Sac, SacAdam,
+    SacConfig, SacLosses,
 };
 use nuno::artifact::collect_tensors;
 use nuno::infer::TrainableMlp;
@@ -110,8 +111,8 @@ fn every_gradient_matches_burn_autodiff() {
         &GradientsParams::from_grads(alpha_loss.backward(), &sac.temperature),
     );
 
-    let mut fused_critic = fused_named("q1.", &ours.q1);
-    fused_critic.extend(fused_named("q2.", &ours.q2));
+    let mut fused_critic = fused_named("q1.", &ours.critics[0]);
+    fused_critic.extend(fused_named("q2.", &ours.critics[1]));
     let fused_actor = fused_named("net.", &ours.actor);
     assert_eq!(
         critic.keys().collect::<Vec<_>>(),
@@ -363,5 +364,72 @@ fn the_conservative_update_equals_burns() {
         };
         let (f, b) = (fields(&fused_losses), fields(&burn_losses));
         assert_close(case, &f, &b, 1e-5, 1e-6);
+    }
+}
+
+/// EDAC's update (actor, α read clamped, then the N critics with the
+/// ensemble-gradient diversity term, then the targets) on the fused kernel
+/// equals burn's autodiff of the same losses, with and without the term.
+#[test]
+fn edacs_update_equals_burns() {
+    let device = Device::flex();
+    let actor = ActorConfig::new(OBS, ACT, vec![-1.0; ACT], vec![1.0; ACT]);
+    let sac = SacConfig::new()
+        .with_actor_hidden(vec![32, 32, 32])
+        .with_critic_hidden(vec![32, 32, 32])
+        .with_initial_alpha(0.7);
+    let data = batch(64, &mut ChaCha8Rng::seed_from_u64(40));
+    for eta in [0.0, 3.0] {
+        let config = EdacConfig::new()
+            .with_sac(sac.clone())
+            .with_num_critics(5)
+            .with_eta(eta);
+        let edac = || {
+            seeded_init(&device, 41, || {
+                Edac::new(actor.clone(), config.clone(), &device)
+            })
+        };
+        let mut reference = edac();
+        let mut fused = FusedSac::from_edac(&reference);
+        let rng = || ChaCha8Rng::seed_from_u64(42);
+        let burn_losses = reference.update(&data, &mut rng());
+        let fused_losses = fused.update_edac(eta as f32, &data, &mut rng());
+        let mut ours = seeded_init(&device, 43, || {
+            Edac::new(actor.clone(), config.clone(), &device)
+        });
+        fused.write_to_edac(&mut ours);
+        let tensors = |e: &Edac| {
+            let mut out = BTreeMap::new();
+            for (prefix, tensors) in [
+                ("actor", collect_tensors(&e.actor)),
+                ("critics", collect_tensors(&e.critics)),
+                ("target_critics", collect_tensors(&e.target_critics)),
+                ("temperature", collect_tensors(&e.temperature)),
+            ] {
+                for (name, (_, values)) in tensors {
+                    out.insert(format!("{prefix}.{name}"), values);
+                }
+            }
+            out
+        };
+        let (expected, got) = (tensors(&reference), tensors(&ours));
+        for (name, values) in &expected {
+            assert_close(&format!("η {eta}: {name}"), &got[name], values, 1e-5, 1e-6);
+        }
+        let keys = |a: &SacAdam| a.critic.moments.keys().cloned().collect::<Vec<_>>();
+        assert_eq!(keys(&ours.adam), keys(&reference.adam));
+        let fields = |l: &SacLosses| {
+            [
+                l.qf1_values,
+                l.qf1_loss,
+                l.qf2_loss,
+                l.actor_loss,
+                l.alpha,
+                l.alpha_loss,
+                l.entropy,
+            ]
+        };
+        let (f, b) = (fields(&fused_losses), fields(&burn_losses));
+        assert_close(&format!("η {eta}"), &f, &b, 1e-5, 1e-6);
     }
 }

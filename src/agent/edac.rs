@@ -28,7 +28,7 @@ const CRITIC_BIAS_INIT: f32 = 0.1;
 /// The last critic layer's weights and bias are drawn from U(±this).
 const CRITIC_LAST_LAYER_INIT: f64 = 3e-3;
 /// ε in the gradients' normalisation.
-const GRADIENT_NORM_EPSILON: f32 = 1e-10;
+pub(crate) const GRADIENT_NORM_EPSILON: f32 = 1e-10;
 
 /// EDAC's hyperparameters (OfflineRL-Kit's `run_edac.py`).
 #[derive(Config, Debug, PartialEq)]

@@ -1,20 +1,24 @@
 //! SAC's update, the same as [`Sac::update`], on plain `f32` buffers: the actor
-//! and the twin critics as [`TrainableMlp`]s (each product one `gemm` over the batch
-//! on all cores), the tanh-Gaussian's gradient written out, and Adam from
+//! and the critics (SAC's twin, EDAC's N) as [`TrainableMlp`]s (each product one
+//! `gemm` over the batch, the critics side by side on the cores), the
+//! tanh-Gaussian's gradient written out, and Adam from
 //! [`crate::nn::Adam`], the one both kernels step with. A [`FusedSac`] starts
 //! from a burn [`Sac`] and writes back into it, so the policy loop, evaluation
 //! and checkpoints see one agent whichever kernel trains it.
 
 use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 
-use super::actor::tanh_gaussian_log_density;
-use super::sac::{CriticBackup, Sac, SacAdam, SacLosses};
+use super::actor::{Actor, tanh_gaussian_log_density};
+use super::critic::Temperature;
+use super::sac::{CriticBackup, Sac, SacAdam, SacConfig, SacLosses};
 use crate::infer::{MlpTape, TrainableMlp};
-use crate::nn::{Adam, AdamState, AdamStep, fill_standard_normal, to_f32_vec};
+use crate::nn::{Adam, AdamState, AdamStep, Mlp, fill_standard_normal, to_f32_vec};
 use crate::shared::LoggedActions;
 use crate::shared::TransitionBatch;
 
 mod conservative;
+mod diversity;
 
 /// The agent's networks, temperature and Adam state as host buffers.
 pub struct FusedSac {
@@ -33,31 +37,61 @@ pub struct FusedSac {
     log_half_sum: f32,
     adam: Adam,
     actor: TrainableMlp,
-    q1: TrainableMlp,
-    q2: TrainableMlp,
-    target_q1: TrainableMlp,
-    target_q2: TrainableMlp,
+    critics: Vec<Critic>,
     log_alpha: f32,
     state: SacAdam,
     work: Workspace,
 }
 
+/// What [`FusedSac::from_parts`] reads of a burn agent besides its critics.
+struct Agent<'a> {
+    actor: &'a Actor,
+    config: &'a SacConfig,
+    target_entropy: f64,
+    temperature: &'a Temperature,
+    /// The optimiser with the agent's ε, and its state.
+    adam: (Adam, &'a SacAdam),
+}
+
+/// One critic Q_j, its target Q̄_j and the buffers its passes reuse.
+struct Critic {
+    /// Its burn module's path (`q1`, `q2`; EDAC's `members.j`): its Adam moments' prefix.
+    path: String,
+    net: TrainableMlp,
+    target: TrainableMlp,
+    tape: MlpTape,
+    grads: TrainableMlp,
+    /// ∂L/∂Q per row, and ∂L/∂[s, a] where a pass wants it.
+    grad_q: Vec<f32>,
+    grad_input: Vec<f32>,
+}
+
+impl Critic {
+    /// `(path, Q_j, Q̄_j)` of every critic, the cores shared out among them.
+    fn all(nets: Vec<(String, TrainableMlp, TrainableMlp)>) -> Vec<Self> {
+        let (cores, n) = (rayon::current_num_threads(), nets.len().max(1));
+        (nets.into_iter().enumerate())
+            .map(|(j, (path, net, target))| Self {
+                path,
+                tape: MlpTape::on_cores((cores / n + usize::from(j < cores % n)).max(1)),
+                grads: net.zeros_like(),
+                net,
+                target,
+                grad_q: Vec::new(),
+                grad_input: Vec::new(),
+            })
+            .collect()
+    }
+}
+
 /// Buffers reused by every update.
 struct Workspace {
     actor_tape: MlpTape,
-    q1_tape: MlpTape,
-    q2_tape: MlpTape,
     actor_grads: TrainableMlp,
-    q1_grads: TrainableMlp,
-    q2_grads: TrainableMlp,
     noise: Vec<f32>,
     sample: Sample,
     critic_input: Vec<f32>,
     y: Vec<f32>,
-    grad_q1: Vec<f32>,
-    grad_q2: Vec<f32>,
-    grad_input1: Vec<f32>,
-    grad_input2: Vec<f32>,
     grad_action: Vec<f32>,
     grad_actor: Vec<f32>,
     /// The conservative term's states repeated N times ([s; s']) and its uniform actions.
@@ -81,8 +115,8 @@ struct Sample {
 /// Gradients of one loss, by network, as [`FusedSac::gradients`] returns them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FusedGradients {
-    pub q1: TrainableMlp,
-    pub q2: TrainableMlp,
+    /// Each critic's, in order (SAC: Q₁, Q₂).
+    pub critics: Vec<TrainableMlp>,
     pub actor: TrainableMlp,
     pub log_alpha: f32,
 }
@@ -90,28 +124,33 @@ pub struct FusedGradients {
 impl FusedSac {
     /// The state of `sac` (networks, temperature, Adam) on host buffers.
     pub fn from_sac(sac: &Sac) -> Self {
-        let c = &sac.actor.config;
+        let critics = vec![
+            critic_pair("q1", &sac.critic.q1, &sac.target_critic.q1),
+            critic_pair("q2", &sac.critic.q2, &sac.target_critic.q2),
+        ];
+        let agent = Agent {
+            actor: &sac.actor,
+            config: &sac.config,
+            target_entropy: sac.target_entropy,
+            temperature: &sac.temperature,
+            adam: (sac.optimizer(), &sac.adam),
+        };
+        Self::from_parts(agent, critics)
+    }
+
+    /// The host buffers of `agent` with `critics`' `(path, Q_j, Q̄_j)`.
+    fn from_parts(agent: Agent, critics: Vec<(String, TrainableMlp, TrainableMlp)>) -> Self {
+        let (config, c) = (agent.config, &agent.actor.config);
         let (half, center) = c.box_half_center();
-        let actor = TrainableMlp::from_burn(&sac.actor.net);
-        let q1 = TrainableMlp::from_burn(&sac.critic.q1);
-        let q2 = TrainableMlp::from_burn(&sac.critic.q2);
-        let cores = rayon::current_num_threads();
+        let actor = TrainableMlp::from_burn(&agent.actor.net);
         let work = Workspace {
-            // The actor runs alone, the twin critics side by side.
-            actor_tape: MlpTape::on_cores(cores),
-            q1_tape: MlpTape::on_cores(cores / 2),
-            q2_tape: MlpTape::on_cores(cores - cores / 2),
+            // The actor runs alone on every core, the critics side by side.
+            actor_tape: MlpTape::on_cores(rayon::current_num_threads()),
             actor_grads: actor.zeros_like(),
-            q1_grads: q1.zeros_like(),
-            q2_grads: q2.zeros_like(),
             noise: Vec::new(),
             sample: Sample::default(),
             critic_input: Vec::new(),
             y: Vec::new(),
-            grad_q1: Vec::new(),
-            grad_q2: Vec::new(),
-            grad_input1: Vec::new(),
-            grad_input2: Vec::new(),
             grad_action: Vec::new(),
             grad_actor: Vec::new(),
             repeated: Vec::new(),
@@ -120,27 +159,20 @@ impl FusedSac {
         Self {
             obs_dim: c.obs_dim,
             act_dim: c.act_dim,
-            gamma: sac.config.gamma as f32,
-            backup: sac.config.backup,
-            tau: sac.config.tau,
-            lr: (
-                sac.config.critic_lr,
-                sac.config.actor_lr,
-                sac.config.alpha_lr,
-            ),
-            target_entropy: sac.target_entropy as f32,
+            gamma: config.gamma as f32,
+            backup: config.backup,
+            tau: config.tau,
+            lr: (config.critic_lr, config.actor_lr, config.alpha_lr),
+            target_entropy: agent.target_entropy as f32,
             log_std: (c.log_std_min, c.log_std_max),
             log_half_sum: half.iter().map(|h| h.ln()).sum(),
             half,
             center,
-            adam: sac.optimizer(),
+            adam: agent.adam.0,
             actor,
-            q1,
-            q2,
-            target_q1: TrainableMlp::from_burn(&sac.target_critic.q1),
-            target_q2: TrainableMlp::from_burn(&sac.target_critic.q2),
-            log_alpha: to_f32_vec(sac.temperature.log_alpha.val())[0],
-            state: sac.adam.clone(),
+            critics: Critic::all(critics),
+            log_alpha: to_f32_vec(agent.temperature.log_alpha.val())[0],
+            state: agent.adam.1.clone(),
             work,
         }
     }
@@ -148,10 +180,11 @@ impl FusedSac {
     /// Writes every network, the temperature and the Adam state into `sac`.
     pub fn write_to(&self, sac: &mut Sac) {
         self.write_actor_to(sac);
-        sac.critic.q1 = self.q1.write_to(sac.critic.q1.clone());
-        sac.critic.q2 = self.q2.write_to(sac.critic.q2.clone());
-        sac.target_critic.q1 = self.target_q1.write_to(sac.target_critic.q1.clone());
-        sac.target_critic.q2 = self.target_q2.write_to(sac.target_critic.q2.clone());
+        let [q1, q2] = [&self.critics[0], &self.critics[1]];
+        sac.critic.q1 = q1.net.write_to(sac.critic.q1.clone());
+        sac.critic.q2 = q2.net.write_to(sac.critic.q2.clone());
+        sac.target_critic.q1 = q1.target.write_to(sac.target_critic.q1.clone());
+        sac.target_critic.q2 = q2.target.write_to(sac.target_critic.q2.clone());
         sac.temperature = sac.temperature.with_log_alpha(self.log_alpha);
         sac.adam = self.state.clone();
     }
@@ -193,13 +226,13 @@ impl FusedSac {
         }
     }
 
-    /// One Adam step of both critics on `work.q*_grads`.
+    /// One Adam step of every critic on its `grads`.
     fn step_critics(&mut self) {
         let step = self.adam.begin(&mut self.state.critic, self.lr.0);
         let state = &mut self.state.critic;
-        let w = &self.work;
-        step_network(&self.adam, step, state, "q1", &mut self.q1, &w.q1_grads);
-        step_network(&self.adam, step, state, "q2", &mut self.q2, &w.q2_grads);
+        for c in &mut self.critics {
+            step_network(&self.adam, step, state, &c.path, &mut c.net, &c.grads);
+        }
     }
 
     /// One Adam step of the actor on `work.actor_grads`.
@@ -229,11 +262,8 @@ impl FusedSac {
     /// Targets: Q̄ ← τ·Q + (1 − τ)·Q̄, with burn's f32 factors.
     fn update_targets(&mut self) {
         let (tau, keep) = (self.tau as f32, (1.0 - self.tau) as f32);
-        for (target, online) in [
-            (&mut self.target_q1, &self.q1),
-            (&mut self.target_q2, &self.q2),
-        ] {
-            for (_, target, online) in target.params_with(online) {
+        for c in &mut self.critics {
+            for (_, target, online) in c.target.params_with(&c.net) {
                 for (t, o) in target.iter_mut().zip(online) {
                     *t = o * tau + *t * keep;
                 }
@@ -255,8 +285,7 @@ impl FusedSac {
         self.actor_gradients(&batch.observations, alpha);
         let (_, log_alpha, _) = self.alpha_gradient();
         FusedGradients {
-            q1: self.work.q1_grads.clone(),
-            q2: self.work.q2_grads.clone(),
+            critics: self.critics.iter().map(|c| c.grads.clone()).collect(),
             actor: self.work.actor_grads.clone(),
             log_alpha,
         }
@@ -311,15 +340,10 @@ impl FusedSac {
     fn critic_target(&mut self, batch: &TransitionBatch, alpha: f32, backup: Option<CriticBackup>) {
         let b = batch.rewards.len();
         self.act_into_critic_input(&batch.next_observations);
+        let min_q = self.target_minimum(b);
         let w = &mut self.work;
-        let input = &w.critic_input;
-        rayon::join(
-            || self.target_q1.forward(input, b, &mut w.q1_tape),
-            || self.target_q2.forward(input, b, &mut w.q2_tape),
-        );
         w.y.clear();
-        for r in 0..b {
-            let min_q = w.q1_tape.output[r].min(w.q2_tape.output[r]);
+        for (r, min_q) in min_q.into_iter().enumerate() {
             let next_value = if backup.is_some_and(|b| b.deterministic) {
                 min_q
             } else {
@@ -332,6 +356,15 @@ impl FusedSac {
         }
     }
 
+    /// min_j Q̄_j on the `rows` rows of `work.critic_input`, the targets side by side.
+    fn target_minimum(&mut self, rows: usize) -> Vec<f32> {
+        let input = &self.work.critic_input;
+        (self.critics.par_iter_mut()).for_each(|c| c.target.forward(input, rows, &mut c.tape));
+        (0..rows)
+            .map(|r| (self.critics.iter()).fold(f32::INFINITY, |m, c| m.min(c.tape.output[r])))
+            .collect()
+    }
+
     /// min_i Q̄_i(s, ã) at ã ~ π(·|s) for every row of `observations`, ε from
     /// `rng` (as [`Sac::target_values`]): MOBILE's penalty samples.
     pub fn target_values(&mut self, observations: &[f32], rng: &mut ChaCha8Rng) -> Vec<f32> {
@@ -339,19 +372,12 @@ impl FusedSac {
         fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
         rayon::scope(|_| {
             self.act_into_critic_input(observations);
-            let w = &mut self.work;
-            let input = &w.critic_input;
-            rayon::join(
-                || self.target_q1.forward(input, b, &mut w.q1_tape),
-                || self.target_q2.forward(input, b, &mut w.q2_tape),
-            );
-            (0..b)
-                .map(|r| w.q1_tape.output[r].min(w.q2_tape.output[r]))
-                .collect()
+            self.target_minimum(b)
         })
     }
 
-    /// ∂L_Q/∂θ of both critics into `work.q*_grads`; returns the critic's losses.
+    /// ∂L_Q/∂θ of every critic into its `grads`; returns the critics' losses
+    /// (the first two's: SAC's Q₁ and Q₂).
     fn critic_gradients(&mut self, batch: &TransitionBatch) -> SacLosses {
         let b = batch.rewards.len();
         let w = &mut self.work;
@@ -362,33 +388,34 @@ impl FusedSac {
             self.act_dim,
             &mut w.critic_input,
         );
-        // Each critic on its own core: forward, (Q − y)², backward.
+        // Each critic on its share of the cores: forward, (Q − y)², backward.
         let (input, y) = (&w.critic_input, &w.y);
-        let step = |net: &TrainableMlp,
-                    tape: &mut MlpTape,
-                    grads: &mut TrainableMlp,
-                    grad_q: &mut Vec<f32>| {
-            net.forward(input, b, tape);
-            grad_q.clear();
-            let mut squares = 0.0;
-            for (q, y) in tape.output.iter().zip(y) {
-                squares += (q - y) * (q - y);
-                grad_q.push(2.0 * (q - y) / b as f32);
-            }
-            net.backward(tape, grad_q, Some(grads), None);
-            squares / b as f32
-        };
-        let (qf1_loss, qf2_loss) = rayon::join(
-            || step(&self.q1, &mut w.q1_tape, &mut w.q1_grads, &mut w.grad_q1),
-            || step(&self.q2, &mut w.q2_tape, &mut w.q2_grads, &mut w.grad_q2),
-        );
-        let mut losses = SacLosses {
-            qf1_loss,
-            qf2_loss,
+        let losses: Vec<f32> = (self.critics.par_iter_mut())
+            .map(|c| {
+                c.net.forward(input, b, &mut c.tape);
+                c.grad_q.clear();
+                let mut squares = 0.0;
+                for (q, y) in c.tape.output.iter().zip(y) {
+                    squares += (q - y) * (q - y);
+                    c.grad_q.push(2.0 * (q - y) / b as f32);
+                }
+                c.net
+                    .backward(&mut c.tape, &c.grad_q, Some(&mut c.grads), None);
+                squares / b as f32
+            })
+            .collect();
+        self.critic_losses(&losses, b)
+    }
+
+    /// SAC's loss fields from each critic's squared error (Q₁'s and Q₂'s),
+    /// with mean Q₁ over the first `b` rows of its last forward pass.
+    fn critic_losses(&self, losses: &[f32], b: usize) -> SacLosses {
+        SacLosses {
+            qf1_loss: losses[0],
+            qf2_loss: losses.get(1).copied().unwrap_or(0.0),
+            qf1_values: mean(&self.critics[0].tape.output[..b]),
             ..SacLosses::default()
-        };
-        losses.qf1_values = mean(&w.q1_tape.output);
-        losses
+        }
     }
 
     /// ∂L_π/∂θ of the actor into `work.actor_grads`, ã drawn with
@@ -399,42 +426,36 @@ impl FusedSac {
         self.act_into_critic_input(observations);
         let w = &mut self.work;
         let input = &w.critic_input;
-        rayon::join(
-            || self.q1.forward(input, b, &mut w.q1_tape),
-            || self.q2.forward(input, b, &mut w.q2_tape),
-        );
+        (self.critics.par_iter_mut()).for_each(|c| c.net.forward(input, b, &mut c.tape));
 
-        // min(Q₁, Q₂) passes −1/B to the smaller critic of each row.
+        // min_j Q_j passes −1/B to the smallest critic of each row (the first on ties).
         let mut loss = 0.0;
-        w.grad_q1.clear();
-        w.grad_q2.clear();
-        for r in 0..b {
-            let (q1, q2) = (w.q1_tape.output[r], w.q2_tape.output[r]);
-            loss += w.sample.log_prob[r] * alpha - q1.min(q2);
-            let first = q1 <= q2;
-            w.grad_q1.push(if first { -1.0 / b as f32 } else { 0.0 });
-            w.grad_q2.push(if first { 0.0 } else { -1.0 / b as f32 });
+        for c in &mut self.critics {
+            c.grad_q.clear();
+            c.grad_q.resize(b, 0.0);
         }
-        // ∂L/∂ã through both critics, each on its own core (inputs only; the
-        // critics do not learn here).
-        rayon::join(
-            || {
-                self.q1
-                    .backward(&mut w.q1_tape, &w.grad_q1, None, Some(&mut w.grad_input1))
-            },
-            || {
-                self.q2
-                    .backward(&mut w.q2_tape, &w.grad_q2, None, Some(&mut w.grad_input2))
-            },
-        );
+        for r in 0..b {
+            let (smallest, min_q) = (self.critics.iter().enumerate())
+                .map(|(j, c)| (j, c.tape.output[r]))
+                .fold(
+                    (0, f32::INFINITY),
+                    |m, (j, q)| if q < m.1 { (j, q) } else { m },
+                );
+            loss += w.sample.log_prob[r] * alpha - min_q;
+            self.critics[smallest].grad_q[r] = -1.0 / b as f32;
+        }
+        // ∂L/∂ã through every critic, side by side (inputs only; the critics
+        // do not learn here).
+        (self.critics.par_iter_mut())
+            .for_each(|c| (c.net).backward(&mut c.tape, &c.grad_q, None, Some(&mut c.grad_input)));
         w.grad_action.clear();
-        for (row1, row2) in w
-            .grad_input1
-            .chunks_exact(o + a)
-            .zip(w.grad_input2.chunks_exact(o + a))
-        {
-            w.grad_action
-                .extend(row1[o..].iter().zip(&row2[o..]).map(|(x, y)| x + y));
+        w.grad_action.resize(b * a, 0.0);
+        for c in &self.critics {
+            for (sum, row) in
+                (w.grad_action.chunks_exact_mut(a)).zip(c.grad_input.chunks_exact(o + a))
+            {
+                sum.iter_mut().zip(&row[o..]).for_each(|(s, g)| *s += g);
+            }
         }
         // Through ã = centre + half·tanh(u), u = μ + σ·ε, and log π's own terms:
         // ∂log π/∂u = 2·tanh(u) (from −log(1 − tanh²u)), ∂log π/∂log σ = −1.
@@ -471,6 +492,15 @@ impl FusedSac {
         let grad = -(mean_log_prob + self.target_entropy);
         (self.log_alpha * grad, grad, -mean_log_prob)
     }
+}
+
+/// `(path, Q_j, Q̄_j)` of a burn critic and its target.
+fn critic_pair(path: &str, net: &Mlp, target: &Mlp) -> (String, TrainableMlp, TrainableMlp) {
+    let (net, target) = (
+        TrainableMlp::from_burn(net),
+        TrainableMlp::from_burn(target),
+    );
+    (path.to_string(), net, target)
 }
 
 /// One Adam step of every parameter of `net`, its moments under `prefix.` + the

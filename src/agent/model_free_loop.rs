@@ -201,26 +201,32 @@ impl Learner {
             (Self::Cql(cql), Some(fused)) => {
                 fused.update_conservative(&cql.config.term, batch, batch.len(), rng)
             }
+            (Self::Edac(edac), Some(fused)) => {
+                fused.update_edac(edac.config.eta as f32, batch, rng)
+            }
             (Self::Bc(bc), _) => bc.update(batch),
             (Self::Td3Bc(td3), _) => td3.update(batch, rng),
             (Self::Cql(cql), None) => cql.update(batch, rng),
-            (Self::Edac(edac), _) => edac.update(batch, rng),
+            (Self::Edac(edac), None) => edac.update(batch, rng),
         }
     }
 
     /// The agent on the fused kernel's host buffers for an epoch of updates,
-    /// where `kernel` is fused and the method has it there (CQL).
+    /// where `kernel` is fused and the method has it there (CQL, EDAC).
     pub fn fused(&self, kernel: Kernel) -> Option<FusedSac> {
         match (self, kernel) {
             (Self::Cql(cql), Kernel::Fused) => Some(FusedSac::from_sac(&cql.sac)),
+            (Self::Edac(edac), Kernel::Fused) => Some(FusedSac::from_edac(edac)),
             _ => None,
         }
     }
 
     /// Takes back the agent an epoch trained on the fused kernel.
     pub fn write_back(&mut self, fused: FusedSac) {
-        if let Self::Cql(cql) = self {
-            fused.write_to(&mut cql.sac);
+        match self {
+            Self::Cql(cql) => fused.write_to(&mut cql.sac),
+            Self::Edac(edac) => fused.write_to_edac(edac),
+            Self::Bc(_) | Self::Td3Bc(_) => {}
         }
     }
 }

@@ -10,11 +10,11 @@
 
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 
-use super::{FusedSac, concat_rows, mean, sample};
+use super::{FusedSac, concat_rows, sample};
 use crate::agent::cql::ConservativeTerm;
 use crate::agent::sac::{CriticBackup, SacLosses};
-use crate::infer::{MlpTape, TrainableMlp};
 use crate::nn::fill_standard_normal;
 use crate::shared::TransitionBatch;
 
@@ -132,25 +132,17 @@ impl FusedSac {
             uniform_log_density: a as f32 * 0.5f32.ln(),
         };
         let (input, y, log_prob) = (&w.critic_input, &w.y, &w.sample.log_prob);
-        let step = |net: &TrainableMlp,
-                    tape: &mut MlpTape,
-                    grads: &mut TrainableMlp,
-                    grad_q: &mut Vec<f32>| {
-            net.forward(input, rows, tape);
-            let squares = term.output_gradient(&shape, &tape.output, y, log_prob, grad_q);
-            net.backward(tape, grad_q, Some(grads), None);
-            squares
-        };
-        let (qf1_loss, qf2_loss) = rayon::join(
-            || step(&self.q1, &mut w.q1_tape, &mut w.q1_grads, &mut w.grad_q1),
-            || step(&self.q2, &mut w.q2_tape, &mut w.q2_grads, &mut w.grad_q2),
-        );
-        SacLosses {
-            qf1_loss,
-            qf2_loss,
-            qf1_values: mean(&w.q1_tape.output[..b]),
-            ..SacLosses::default()
-        }
+        let losses: Vec<f32> = (self.critics.par_iter_mut())
+            .map(|c| {
+                c.net.forward(input, rows, &mut c.tape);
+                let squares =
+                    term.output_gradient(&shape, &c.tape.output, y, log_prob, &mut c.grad_q);
+                c.net
+                    .backward(&mut c.tape, &c.grad_q, Some(&mut c.grads), None);
+                squares
+            })
+            .collect();
+        self.critic_losses(&losses, b)
     }
 }
 
