@@ -269,6 +269,8 @@ pub struct RunSnapshot {
     pub step: usize,
     /// The steps whose policies were kept.
     pub policies: Vec<usize>,
+    /// The step up to which the transitions were kept (none: no transitions).
+    pub replay_until: Option<usize>,
 }
 
 /// Copies what the run in `dir` needs to go on and to have its behaviour
@@ -278,11 +280,15 @@ pub struct RunSnapshot {
 /// latest. A level's target is a fraction of the best return within a
 /// tolerance (`LEVEL_TOLERANCE`), so bands narrower than it lose no pick. The
 /// transitions stay behind: a run continued from a snapshot refills its replay
-/// buffer ([`load_online_checkpoint`]). `out` is replaced whole.
+/// buffer ([`load_online_checkpoint`]), except, with `replay_until`, the
+/// intervals up to that checkpoint step: the replay D4RL's medium-replay is
+/// ([`read_run_transitions`] reads it from the snapshot as from the run), which
+/// another kind of CPU cannot re-create bit for bit. `out` is replaced whole.
 pub fn snapshot_online_run(
     dir: &Path,
     out: &Path,
     band: f64,
+    replay_until: Option<usize>,
 ) -> Result<RunSnapshot, ArtifactError> {
     if !(band > 0.0 && band.is_finite()) {
         return Err(ArtifactError::Invalid(format!(
@@ -293,6 +299,10 @@ pub fn snapshot_online_run(
         ArtifactError::Invalid(format!("{}: the run has no checkpoint yet", dir.display()))
     })?;
     let state = read_state(&checkpoint)?;
+    let replay = match replay_until {
+        Some(to) => intervals_until(dir, &state.intervals, to)?,
+        None => &[],
+    };
     let policies = run_policies(dir)?;
     let kept = banded_policies(&policies, band);
     let name = checkpoint
@@ -311,12 +321,45 @@ pub fn snapshot_online_run(
                 copy_file(&policy.dir.join(&file), &tmp.join(POLICIES).join(&file))?;
             }
         }
+        if !replay.is_empty() {
+            std::fs::create_dir_all(tmp.join(TRANSITIONS))
+                .map_err(|e| ArtifactError::io(tmp, e))?;
+        }
+        for interval in replay {
+            copy_file(&dir.join(&interval.file), &tmp.join(&interval.file))?;
+        }
         Ok(())
     })?;
     Ok(RunSnapshot {
         step: state.step,
         policies: kept.iter().map(|p| p.step).collect(),
+        replay_until,
     })
+}
+
+/// The run's intervals from its start to checkpoint step `to`, each file present.
+fn intervals_until<'a>(
+    dir: &Path,
+    intervals: &'a [Interval],
+    to: usize,
+) -> Result<&'a [Interval], ArtifactError> {
+    let Some(last) = intervals.iter().position(|i| i.to == to) else {
+        let ends: Vec<usize> = intervals.iter().map(|i| i.to).collect();
+        return Err(ArtifactError::Invalid(format!(
+            "{}: step {to} is not a checkpoint of the run (its checkpoints end at steps {ends:?})",
+            dir.display()
+        )));
+    };
+    let kept = &intervals[..=last];
+    if let Some(missing) = kept.iter().find(|i| !dir.join(&i.file).exists()) {
+        return Err(ArtifactError::Invalid(format!(
+            "{}: the run's transitions for steps {}..{} are not there, so its replay up to step {to} cannot be kept",
+            dir.join(&missing.file).display(),
+            missing.from,
+            missing.to
+        )));
+    }
+    Ok(kept)
 }
 
 /// The first policy in each `band`-point band of normalised score, the best
@@ -399,13 +442,7 @@ pub fn read_run_transitions(dir: &Path, to: usize) -> Result<Dataset, ArtifactEr
         ArtifactError::Invalid(format!("{}: the run has no checkpoint yet", dir.display()))
     })?;
     let state = read_state(&checkpoint)?;
-    let Some(last) = state.intervals.iter().position(|i| i.to == to) else {
-        let ends: Vec<usize> = state.intervals.iter().map(|i| i.to).collect();
-        return Err(ArtifactError::Invalid(format!(
-            "{}: step {to} is not a checkpoint of the run (its checkpoints end at steps {ends:?})",
-            dir.display()
-        )));
-    };
+    let intervals = intervals_until(dir, &state.intervals, to)?;
     let task = info.system(dir)?.simulator().ok_or_else(|| {
         ArtifactError::Invalid(format!(
             "{}: the run's system has no simulator",
@@ -415,7 +452,7 @@ pub fn read_run_transitions(dir: &Path, to: usize) -> Result<Dataset, ArtifactEr
     let probe =
         crate::envs::MujocoTask::new(&task).map_err(|e| ArtifactError::Invalid(e.to_string()))?;
     let mut all = Recording::for_task(&probe);
-    for interval in &state.intervals[..=last] {
+    for interval in intervals {
         all.append(read_interval(dir, interval, &all)?);
     }
     let mut metadata = DatasetMetadata::new();

@@ -96,6 +96,10 @@ pub struct SnapshotArgs {
     /// the best and latest); narrower than `select`'s tolerance loses no pick.
     #[arg(long, default_value_t = 2.5)]
     band: f64,
+    /// Keep the run's transitions up to this checkpoint step (the medium
+    /// policy's: D4RL's medium-replay, which another kind of CPU cannot re-create).
+    #[arg(long)]
+    replay_until: Option<usize>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -247,10 +251,13 @@ fn select(args: SelectArgs) -> anyhow::Result<()> {
 }
 
 fn snapshot(args: SnapshotArgs) -> anyhow::Result<()> {
-    let kept = snapshot_online_run(&args.run, &args.out, args.band)
+    let kept = snapshot_online_run(&args.run, &args.out, args.band, args.replay_until)
         .with_context(|| format!("snapshotting the run in {}", args.run.display()))?;
+    let replay = kept.replay_until.map_or(String::new(), |to| {
+        format!(", the transitions up to step {to}")
+    });
     println!(
-        "step {}: the checkpoint and {} policies (steps {:?}) -> {}",
+        "step {}: the checkpoint and {} policies (steps {:?}){replay} -> {}",
         kept.step,
         kept.policies.len(),
         kept.policies,

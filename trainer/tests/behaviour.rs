@@ -10,7 +10,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::{copy_dir, fails, ok};
-use nuno::artifact::parse_safetensors;
+use nuno::artifact::{parse_safetensors, read_run_transitions};
 use nuno::data::{Dataset, DatasetFormat, read_dataset};
 
 /// `collect online-sac` on hopper with tiny networks: checkpoints every 300
@@ -201,6 +201,55 @@ fn a_snapshot_carries_a_run_to_another_machine() {
             std::fs::read(snapshot.join(&name)).unwrap()
         );
     }
+
+    // The replay up to a checkpoint travels with the snapshot: the same files,
+    // read back as the same transitions as the run's own.
+    let with_replay = p("with-replay");
+    let snapshot_with = |step: &str| -> Vec<String> {
+        let args = [
+            "collect",
+            "snapshot",
+            "--run",
+            &s(&run),
+            "--out",
+            &s(&with_replay),
+        ];
+        (args.iter().map(|a| a.to_string()))
+            .chain(["--replay-until".to_string(), step.to_string()])
+            .collect()
+    };
+    let error = fails(&snapshot_with("500"));
+    assert!(
+        error.contains("500") && error.contains("not a checkpoint"),
+        "{error}"
+    );
+    ok(&snapshot_with("600"));
+    let mut files: Vec<String> = std::fs::read_dir(with_replay.join("transitions"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    files.sort();
+    assert_eq!(
+        files,
+        [
+            "steps-00000000-00000300.safetensors",
+            "steps-00000300-00000600.safetensors"
+        ]
+    );
+    let (ours, theirs) = (
+        read_run_transitions(&with_replay, 600).unwrap(),
+        read_run_transitions(&run, 600).unwrap(),
+    );
+    assert_eq!(ours.len(), 600);
+    assert_eq!(ours.observations, theirs.observations);
+    assert_eq!(ours.actions, theirs.actions);
+    assert_eq!(ours.rewards, theirs.rewards);
+    assert_eq!(ours.terminals, theirs.terminals);
+    assert_eq!(ours.timeouts, theirs.timeouts);
+    let error = read_run_transitions(&with_replay, 900)
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("not there"), "{error}");
 
     // On another machine: the transitions are missing, and continuing must say how.
     copy_dir(&snapshot, &moved);
