@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from collections.abc import Mapping
 from typing import Any
 
 import httpx
@@ -33,6 +34,8 @@ from ._generated.types import UNSET
 from .errors import NunoError
 
 BINARY = "application/octet-stream"
+# A step's float arrays, by their name on the wire and in `Step`.
+_STEP_ARRAYS = ("mean", "sigma", "h_eta", "eta", "next_states", "rewards", "penalized_rewards")
 
 Array = NDArray[np.float32]
 
@@ -168,32 +171,9 @@ class Client:
             body = save_tensors({"states": s, "actions": a}, metadata=metadata)
             answer = self._post(path, content=body, headers={"content-type": BINARY})
             tensors, meta = _tensors(answer)
-            return Step(
-                mean=tensors["mean"],
-                sigma=tensors["sigma"],
-                h_eta=tensors["h_eta"],
-                eta=tensors["eta"],
-                next_states=tensors["next_states"],
-                rewards=tensors["rewards"],
-                penalized_rewards=tensors["penalized_rewards"],
-                terminals=tensors["terminals"] != 0,
-                noise_scale=float(meta["noise_scale"]),
-                clipped_rows=int(meta["clipped_rows"]),
-            )
+            return _step(tensors, meta)
         answer = self._post(path, json={"states": s.tolist(), "actions": a.tolist(), **options}).json()
-        f32 = lambda key: np.asarray(answer[key], dtype=np.float32)  # noqa: E731
-        return Step(
-            mean=f32("mean"),
-            sigma=f32("sigma"),
-            h_eta=f32("h_eta"),
-            eta=f32("eta"),
-            next_states=f32("next_states"),
-            rewards=f32("rewards"),
-            penalized_rewards=f32("penalized_rewards"),
-            terminals=np.asarray(answer["terminals"], dtype=bool),
-            noise_scale=float(answer["noise_scale"]),
-            clipped_rows=int(answer["clipped_rows"]),
-        )
+        return _step(answer, answer)
 
     def rollout(
         self,
@@ -345,6 +325,18 @@ class Client:
         if answer.status_code >= 400:
             raise _error(answer.status_code, answer.content)
         return answer
+
+
+def _step(arrays: Mapping[str, Any], scalars: Mapping[str, Any]) -> Step:
+    """A step's answer from its arrays (safetensors tensors or JSON lists) and
+    its scalars (the safetensors metadata or the JSON body)."""
+    f32 = {name: np.asarray(arrays[name], dtype=np.float32) for name in _STEP_ARRAYS}
+    return Step(
+        **f32,
+        terminals=np.asarray(arrays["terminals"]) != 0,
+        noise_scale=float(scalars["noise_scale"]),
+        clipped_rows=int(scalars["clipped_rows"]),
+    )
 
 
 def _tensors(answer: httpx.Response) -> tuple[dict[str, Array], dict[str, str]]:
