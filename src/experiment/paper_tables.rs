@@ -104,32 +104,46 @@ pub fn paper_layout_table(results: &[CellResult]) -> Result<String, ExperimentEr
         let place = PRESETS.iter().position(|p| p.name == row);
         (place.unwrap_or(PRESETS.len()), row.clone())
     });
-    let mut out = String::from(
+    let layout = (&entries, &methods[..], &rows[..]);
+    Ok(format!(
         "Best normalised score, mean ± std over seeds (runs) [the paper's figure for the same \
-         dataset and method: 1M gradient steps, 5 runs (Table 1) or 4 (Table 2)]\n\n| dataset | policy steps |",
-    );
-    for m in &methods {
+         dataset and method: 1M gradient steps, 5 runs (Table 1) or 4 (Table 2)]\n\n{}\n\
+         Final normalised score (the last evaluation), mean ± std over seeds (runs)\n\n{}",
+        score_table(layout, |r| r.best_score, true),
+        score_table(layout, |r| r.final_score, false),
+    ))
+}
+
+/// The markdown table of `score` over `rows` × `methods`, with the paper's
+/// figure beside each cell it has where `with_paper`.
+fn score_table(
+    (entries, methods, rows): (&Grouped, &[Method], &[String]),
+    score: fn(&CellResult) -> f64,
+    with_paper: bool,
+) -> String {
+    let mut out = String::from("| dataset | policy steps |");
+    for m in methods {
         out.push_str(&format!(" {m} |"));
     }
     out.push_str("\n|---|---|");
     out.push_str(&"---|".repeat(methods.len()));
     out.push('\n');
-    for row in &rows {
+    for row in rows {
         let steps = (entries.iter())
             .filter(|((r, _), _)| r == row)
             .map(|(_, runs)| runs[0].steps)
             .max()
             .unwrap_or(0);
         out.push_str(&format!("| {row} | {steps} |"));
-        for m in &methods {
+        for m in methods {
             let text = match entries.get(&(row.clone(), *m)) {
                 Some(runs) => {
-                    let (mean, std) = mean_std_sample(runs.iter().map(|r| r.best_score));
+                    let (mean, std) = mean_std_sample(runs.iter().map(|r| score(r)));
                     let ours = match runs.len() {
                         1 => format!("{mean:.1} (1)"),
                         n => format!("{mean:.1} ± {std:.1} ({n})"),
                     };
-                    match paper_score(row, *m) {
+                    match paper_score(row, *m).filter(|_| with_paper) {
                         Some(p) => format!("{ours} [{}]", paper_text(p)),
                         None => ours,
                     }
@@ -140,14 +154,15 @@ pub fn paper_layout_table(results: &[CellResult]) -> Result<String, ExperimentEr
         }
         out.push('\n');
     }
-    Ok(out)
+    out
 }
+
+/// Finished runs by (row, method).
+type Grouped<'a> = BTreeMap<(String, Method), Vec<&'a CellResult>>;
 
 /// The results by row and method, each cell once; conflicting copies and
 /// one row × method under two budgets refused.
-fn grouped(
-    results: &[CellResult],
-) -> Result<BTreeMap<(String, Method), Vec<&CellResult>>, ExperimentError> {
+fn grouped(results: &[CellResult]) -> Result<Grouped<'_>, ExperimentError> {
     let mut cells: BTreeMap<(String, Method, u64), &CellResult> = BTreeMap::new();
     for r in results {
         let key = (row_name(r), r.cell.method, r.cell.seed);
@@ -164,7 +179,7 @@ fn grouped(
             }
         }
     }
-    let mut entries: BTreeMap<(String, Method), Vec<&CellResult>> = BTreeMap::new();
+    let mut entries = Grouped::new();
     for ((row, method, _), r) in cells {
         let runs = entries.entry((row.clone(), method)).or_default();
         if let Some(first) = runs.first() {
@@ -210,10 +225,20 @@ mod tests {
     #[test]
     fn nuno_cells_are_laid_out_as_the_papers_tables() {
         let medium = test_result(0, "hm", "hopper-medium", Method::Nuno, 0, 80.0);
+        let last = |mut r: CellResult, score: f64| {
+            r.final_score = score;
+            r
+        };
         let results = vec![
             medium.clone(),
-            test_result(1, "hr", "hopper-random", Method::Nuno, 0, 40.0),
-            test_result(2, "hr", "hopper-random", Method::Nuno, 1, 60.0),
+            last(
+                test_result(1, "hr", "hopper-random", Method::Nuno, 0, 40.0),
+                2.0,
+            ),
+            last(
+                test_result(2, "hr", "hopper-random", Method::Nuno, 1, 60.0),
+                4.0,
+            ),
             test_result(3, "hr", "hopper-random", Method::Bc, 0, 5.0),
             medium.clone(),
         ];
@@ -223,6 +248,12 @@ mod tests {
         let medium_row = table.find("| hopper-medium | 1000 | 80.0 (1) [104.6 ± 0.2] | – |");
         assert!(random.is_some() && medium_row.is_some(), "{table}");
         assert!(random < medium_row, "{table}");
+        // The final scores' table follows, without the paper's figures.
+        let finals = table
+            .find("Final normalised score")
+            .expect("the final table");
+        let final_random = table.find("| hopper-random | 1000 | 3.0 ± 1.4 (2) | 0.0 (1) |");
+        assert!(final_random > Some(finals), "{table}");
 
         let mut conflicting = medium.clone();
         conflicting.best_score = 81.0;
