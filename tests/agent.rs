@@ -507,9 +507,16 @@ fn known_rules_against_the_simulator(task: TaskConfig) -> f64 {
 #[test]
 fn known_rules_agree_with_the_simulator() {
     // D4RL observations omit root x: the velocity after the step stands in for
-    // (x' − x)/dt, close on average.
-    let d4rl = known_rules_against_the_simulator(TaskConfig::d4rl(TaskName::Hopper));
-    assert!(d4rl < 0.15, "D4RL layout: mean |Δr| = {d4rl}");
+    // (x' − x)/dt, close on average (measured under random actions: hopper 0.04,
+    // walker2d 0.11, halfcheetah 0.21); the termination rule is exact in every task.
+    for (task, bound) in [
+        (TaskName::Hopper, 0.1),
+        (TaskName::Walker2d, 0.15),
+        (TaskName::HalfCheetah, 0.3),
+    ] {
+        let d4rl = known_rules_against_the_simulator(TaskConfig::d4rl(task));
+        assert!(d4rl < bound, "D4RL {task}: mean |Δr| = {d4rl}");
+    }
     // NeoRL observations hold root x: (x' − x)/dt is Gymnasium's own reward, up
     // to the f32 rounding of x; the same for every NeoRL task.
     for task in [TaskName::Hopper, TaskName::Walker2d, TaskName::HalfCheetah] {
