@@ -81,7 +81,7 @@ impl FusedSac {
         fill_standard_normal(&mut w.noise, 2 * n, rng);
     }
 
-    /// ∂(L_Q + term)/∂θ of both critics into `work.q*_grads`, the actions
+    /// ∂(L_Q + term)/∂θ of every critic into its `grads`, the actions
     /// sampled from the (stepped) actor; returns the critics' squared-error losses.
     fn conservative_critic_gradients(
         &mut self,
