@@ -67,7 +67,7 @@ openapi: mujoco
 	$(CARGO) run --release --bin nuno-server -- --print-openapi > openapi/openapi.json
 
 ## check-docker: build the image from the Dockerfile and check it runs as deployed
-## (ready, a step, SIGHUP reload, SIGTERM exit 0, non-root); prints the image size.
+## (ready, a step, gRPC live, SIGHUP reload, SIGTERM exit 0, non-root); prints the image size.
 ## Needs a docker daemon (or root and Debian's docker.io); without an image hub it
 ## makes a bookworm base with debootstrap. See deploy/docker/check.sh.
 check-docker: mujoco

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # `make check-docker`: builds the image from the Dockerfile and checks it the
-# way a deployment uses it — ready, a step, SIGHUP reload, SIGTERM exit 0
+# way a deployment uses it — ready, a step, gRPC live, SIGHUP reload, SIGTERM exit 0
 # within the grace period, a non-root uid — then prints the image size.
 #
 # With no image hub reachable (this project's machines), the base image is
@@ -15,6 +15,7 @@ DOCKER=${DOCKER:-docker}
 IMAGE=${IMAGE:-nuno:check}
 BASE=${BASE:-nuno-base:bookworm}
 PORT=${PORT:-18181}
+GRPC_PORT=${GRPC_PORT:-18182}
 GRACE_S=${GRACE_S:-10}
 NAME=nuno-check-$$
 started_daemon=""
@@ -71,9 +72,9 @@ $DOCKER build --network host "${build_args[@]}" -t "$IMAGE" . >/tmp/nuno-check-b
     || { tail -30 /tmp/nuno-check-build.log >&2; fail "docker build failed (/tmp/nuno-check-build.log)"; }
 rm -rf .docker-dist
 
-log "docker run (--network host, 127.0.0.1:$PORT)"
+log "docker run (--network host, REST on 127.0.0.1:$PORT, gRPC on 127.0.0.1:$GRPC_PORT)"
 $DOCKER run -d --name "$NAME" --network host --stop-timeout "$GRACE_S" "$IMAGE" \
-    nuno-server --models /opt/nuno/models --addr "127.0.0.1:$PORT" >/dev/null
+    nuno-server --models /opt/nuno/models --addr "127.0.0.1:$PORT" --grpc-addr "127.0.0.1:$GRPC_PORT" >/dev/null
 base="http://127.0.0.1:$PORT"
 for _ in $(seq 60); do curl -fsS "$base/readyz" >/dev/null 2>&1 && break; sleep 1; done
 curl -fsS "$base/readyz" | grep -q '"ready":true' || { $DOCKER logs "$NAME" >&2; fail "/readyz never answered ready"; }
@@ -91,6 +92,14 @@ assert len(s['next_states']) == 2 and len(s['next_states'][0]) == 3 and len(s['n
 assert len(s['eta']) == 2
 " "$step" || fail "the step answer has the wrong shape: $step"
 log "step: 2 rows x 3 particles of $obs numbers, model $model"
+
+# KServe's gRPC ServerLive, framed by hand (an empty request: five zero bytes); the
+# answer is one frame holding ServerLiveResponse{live: true} = 08 01.
+live=$(printf '\0\0\0\0\0' | curl -fsS --http2-prior-knowledge -H 'content-type: application/grpc' \
+    -H 'te: trailers' --data-binary @- \
+    "http://127.0.0.1:$GRPC_PORT/inference.GRPCInferenceService/ServerLive" | od -An -tx1 | tr -d ' \n')
+[ "$live" = "00000000020801" ] || fail "gRPC ServerLive answered '$live', not live"
+log "gRPC: ServerLive answers live"
 
 uid=$($DOCKER exec "$NAME" id -u)
 [ "$uid" != 0 ] || fail "the server runs as root"
