@@ -1365,8 +1365,25 @@ async fn the_python_package_calls_the_server_with_numpy_arrays() {
     assert_eq!(result["plan_first_is_first"], true);
 }
 
-/// A compute hook that holds the first computation until `release` is sent (or a
-/// minute passes, so a failing test cannot hang), and counts every computation.
+/// [`common::bounded::wait_until`] for a condition the test awaits (a server's
+/// metrics): panics naming `what` once HANG_BOUND has passed, never earlier.
+async fn wait_until_async<F>(what: &str, mut done: impl FnMut() -> F)
+where
+    F: std::future::Future<Output = bool>,
+{
+    let deadline = std::time::Instant::now() + common::bounded::HANG_BOUND;
+    while !done().await {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{what}: still waiting after {} min, so it is taken to hang",
+            common::bounded::HANG_BOUND.as_secs() / 60
+        );
+        tokio::time::sleep(common::bounded::POLL).await;
+    }
+}
+
+/// A compute hook that holds the first computation until `release` is sent or
+/// dropped (a failing test drops it; HANG_BOUND past that), and counts every computation.
 fn hold_first_computation() -> (ComputeHook, std::sync::mpsc::Sender<()>, Arc<AtomicUsize>) {
     let (release, released) = std::sync::mpsc::channel::<()>();
     let released = Mutex::new(released);
@@ -1377,7 +1394,7 @@ fn hold_first_computation() -> (ComputeHook, std::sync::mpsc::Sender<()>, Arc<At
             let _ = released
                 .lock()
                 .unwrap()
-                .recv_timeout(std::time::Duration::from_secs(60));
+                .recv_timeout(common::bounded::HANG_BOUND);
         }
     }));
     (hook, release, started)
@@ -1558,18 +1575,11 @@ async fn abandoned_work_is_cancelled_and_frees_its_slot() {
     release.send(()).unwrap();
     // The cancelled work returns at once; wait for it to be counted (an event,
     // not a duration: the loop ends as soon as the metric says so).
-    let mut metrics = String::new();
-    for _ in 0..600 {
-        metrics = server.metrics().await;
-        if metrics.contains("nuno_computations_cancelled_total 1") {
-            break;
-        }
-        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
-    }
-    assert!(
-        metrics.contains("nuno_computations_cancelled_total 1"),
-        "{metrics}"
-    );
+    let cancelled = "nuno_computations_cancelled_total 1";
+    wait_until_async(cancelled, || async {
+        server.metrics().await.contains(cancelled)
+    })
+    .await;
     let body = json!({"states": upright(2), "actions": actions(2)});
     let (status, answer) = server
         .post(&format!("/v1/models/{MODEL}/step"), &body)
@@ -2290,32 +2300,19 @@ async fn batched_requests_answer_what_they_answer_alone(route: &str, requests: V
         let (server, body, path) = (together.clone(), requests[i].clone(), path.clone());
         set.spawn(async move { (i, server.post_raw(&path, "application/json", body).await) });
     };
-    let until = |what: String| {
-        let server = together.clone();
-        async move {
-            for _ in 0..600 {
-                if server.metrics().await.contains(&what) {
-                    return;
-                }
-                tokio::time::sleep(std::time::Duration::from_millis(100)).await;
-            }
-            panic!("never: {what}");
-        }
-    };
     send(&mut batched, 0);
-    for _ in 0..600 {
-        if started.load(Ordering::SeqCst) == 1 {
-            break;
-        }
-        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
-    }
+    wait_until_async("the first computation", || async {
+        started.load(Ordering::SeqCst) == 1
+    })
+    .await;
     for i in 1..requests.len() {
         send(&mut batched, i);
     }
     let queued = requests.len() - 1;
-    until(format!(
-        "nuno_batch_queue_requests{{route=\"{route}\"}} {queued}\n"
-    ))
+    let waiting = format!("nuno_batch_queue_requests{{route=\"{route}\"}} {queued}\n");
+    wait_until_async(&waiting, || async {
+        together.metrics().await.contains(&waiting)
+    })
     .await;
     release.send(()).unwrap();
     let mut answers = batched.join_all().await;

@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 pub const HANG_BOUND: Duration = Duration::from_secs(30 * 60);
 
 /// Between two looks at what is awaited.
-const POLL: Duration = Duration::from_millis(100);
+pub const POLL: Duration = Duration::from_millis(100);
 
 /// Polls `done` until it holds; panics naming `what` once [`HANG_BOUND`] has passed.
 pub fn wait_until(what: &str, mut done: impl FnMut() -> bool) {
