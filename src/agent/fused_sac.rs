@@ -53,6 +53,26 @@ struct Agent<'a> {
     adam: (Adam, &'a SacAdam),
 }
 
+/// The losses of an update's actor and α steps.
+struct PolicySteps {
+    actor_loss: f32,
+    alpha_loss: f32,
+    entropy: f32,
+}
+
+impl PolicySteps {
+    /// The update's losses: these, α as the actor read it, and the critics'.
+    fn with(self, alpha: f32, critic: SacLosses) -> SacLosses {
+        SacLosses {
+            actor_loss: self.actor_loss,
+            alpha,
+            alpha_loss: self.alpha_loss,
+            entropy: self.entropy,
+            ..critic
+        }
+    }
+}
+
 /// One critic Q_j, its target Q̄_j and the buffers its passes reuse.
 struct Critic {
     /// Its burn module's path (`q1`, `q2`; EDAC's `members.j`): its Adam moments' prefix.
@@ -64,6 +84,8 @@ struct Critic {
     /// ∂L/∂Q per row, and ∂L/∂[s, a] where a pass wants it.
     grad_q: Vec<f32>,
     grad_input: Vec<f32>,
+    /// ∂L/∂(∂Q/∂[s, a]) where a loss reads the input gradient (EDAC's ES).
+    upstream: Vec<f32>,
 }
 
 impl Critic {
@@ -79,6 +101,7 @@ impl Critic {
                 target,
                 grad_q: Vec::new(),
                 grad_input: Vec::new(),
+                upstream: Vec::new(),
             })
             .collect()
     }
@@ -212,17 +235,28 @@ impl FusedSac {
         self.step_critics();
 
         // Actor step, through the updated critics, then the temperature's.
+        let policy = self.policy_steps(&batch.observations, alpha, rng);
+        self.update_targets();
+        policy.with(alpha, critic)
+    }
+
+    /// The policy's half of an update: ε from `rng`, the actor's gradient
+    /// through the critics as they are at α `alpha`, its Adam step, then α's.
+    fn policy_steps(
+        &mut self,
+        observations: &[f32],
+        alpha: f32,
+        rng: &mut ChaCha8Rng,
+    ) -> PolicySteps {
+        let b = observations.len() / self.obs_dim;
         fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
-        let actor_loss = self.actor_gradients(&batch.observations, alpha);
+        let actor_loss = self.actor_gradients(observations, alpha);
         self.step_actor();
         let (alpha_loss, entropy) = self.step_alpha();
-        self.update_targets();
-        SacLosses {
+        PolicySteps {
             actor_loss,
-            alpha,
             alpha_loss,
             entropy,
-            ..critic
         }
     }
 

@@ -50,10 +50,7 @@ impl FusedSac {
         let b = batch.rewards.len();
         let alpha = self.log_alpha.exp();
         // Actor, then α (OfflineRL-Kit's order), through the critics before their step.
-        fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
-        let actor_loss = self.actor_gradients(&batch.observations, alpha);
-        self.step_actor();
-        let (alpha_loss, entropy) = self.step_alpha();
+        let policy = self.policy_steps(&batch.observations, alpha, rng);
 
         fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
         self.critic_target(batch, alpha, Some(DETERMINISTIC));
@@ -61,13 +58,7 @@ impl FusedSac {
         let critic = self.conservative_critic_gradients(term, batch, data_rows);
         self.step_critics();
         self.update_targets();
-        SacLosses {
-            actor_loss,
-            alpha,
-            alpha_loss,
-            entropy,
-            ..critic
-        }
+        policy.with(alpha, critic)
     }
 
     /// [`ConservativeTerm::draw_samples`]'s draws, in its order: the uniform

@@ -76,10 +76,7 @@ impl FusedSac {
         let b = batch.rewards.len();
         // EDAC reads α clamped to [0, 1]; its loss steps log α unclamped.
         let alpha = self.log_alpha.exp().clamp(0.0, 1.0);
-        fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
-        let actor_loss = self.actor_gradients(&batch.observations, alpha);
-        self.step_actor();
-        let (alpha_loss, entropy) = self.step_alpha();
+        let policy = self.policy_steps(&batch.observations, alpha, rng);
 
         fill_standard_normal(&mut self.work.noise, b * self.act_dim, rng);
         let stepped_alpha = self.log_alpha.exp().clamp(0.0, 1.0);
@@ -87,13 +84,7 @@ impl FusedSac {
         let critic = self.diverse_critic_gradients(eta, batch);
         self.step_critics();
         self.update_targets();
-        SacLosses {
-            actor_loss,
-            alpha,
-            alpha_loss,
-            entropy,
-            ..critic
-        }
+        policy.with(alpha, critic)
     }
 
     /// ∂(Σⱼ mean (Qⱼ − y)² + η·ES)/∂θⱼ of every critic into its `grads` at the
@@ -135,12 +126,12 @@ impl FusedSac {
                     squares += (q - y) * (q - y);
                     c.grad_q.push(2.0 * (q - y) / b as f32);
                 }
-                let upstream = normalisation_gradient(&c.grad_input, &sum, weight, (o, a));
+                normalisation_gradient(&c.grad_input, &sum, weight, (o, a), &mut c.upstream);
                 let net: &TrainableMlp = &c.net;
                 net.backward_through_input_gradient(
                     &mut c.tape,
                     &c.grad_q,
-                    &upstream,
+                    &c.upstream,
                     &mut c.grads,
                 );
                 squares / b as f32
@@ -157,32 +148,34 @@ fn action_gradient(grad_input: &[f32], r: usize, (o, a): (usize, usize)) -> (&[f
     (g, norm)
 }
 
-/// ∂(η·ES)/∂∇ₓQⱼ for every row (zero on the state's part), from this
-/// critic's input gradient, Σₖ ĝₖ (`sum`, `[rows, a]`) and 2η/((N − 1)·B).
+/// ∂(η·ES)/∂∇ₓQⱼ for every row (zero on the state's part) into `out`, from
+/// this critic's input gradient, Σₖ ĝₖ (`sum`, `[rows, a]`) and 2η/((N − 1)·B).
 fn normalisation_gradient(
     grad_input: &[f32],
     sum: &[f32],
     weight: f32,
     (o, a): (usize, usize),
-) -> Vec<f32> {
+    out: &mut Vec<f32>,
+) {
     let rows = sum.len() / a;
-    let mut upstream = vec![0.0f32; rows * (o + a)];
+    out.clear();
+    out.resize(rows * (o + a), 0.0);
     for r in 0..rows {
         let (g, denominator) = action_gradient(grad_input, r, (o, a));
         let norm = denominator - GRADIENT_NORM_EPSILON;
-        let u: Vec<f32> = (0..a)
-            .map(|k| weight * (sum[r * a + k] - g[k] / denominator))
-            .collect();
-        let g_dot_u: f32 = g.iter().zip(&u).map(|(g, u)| g * u).sum();
+        // u = ∂(η·ES)/∂ĝⱼ first, then through the normalisation, in place.
+        let row = &mut out[r * (o + a) + o..(r + 1) * (o + a)];
+        for (k, u) in row.iter_mut().enumerate() {
+            *u = weight * (sum[r * a + k] - g[k] / denominator);
+        }
+        let g_dot_u: f32 = g.iter().zip(row.iter()).map(|(g, u)| g * u).sum();
         let radial = if norm > 0.0 {
             g_dot_u / (norm * denominator * denominator)
         } else {
             0.0
         };
-        let out = &mut upstream[r * (o + a) + o..(r + 1) * (o + a)];
-        for k in 0..a {
-            out[k] = u[k] / denominator - g[k] * radial;
+        for (u, g) in row.iter_mut().zip(g) {
+            *u = *u / denominator - g * radial;
         }
     }
-    upstream
 }
