@@ -11,7 +11,7 @@ use nuno::agent::{
     ActorConfig, ConservativeTerm, CriticBackup, Edac, EdacConfig, FusedSac, Sac, SacAdam,
     SacConfig, SacLosses,
 };
-use nuno::artifact::collect_tensors;
+use nuno::artifact::{NamedTensors, collect_tensors};
 use nuno::infer::TrainableMlp;
 use nuno::nn::{gradients_by_path, normal, seeded_init};
 use nuno::shared::TransitionBatch;
@@ -136,18 +136,36 @@ fn every_gradient_matches_burn_autodiff() {
 }
 
 fn all_tensors(sac: &Sac) -> BTreeMap<String, Vec<f32>> {
-    let mut out = BTreeMap::new();
-    for (prefix, tensors) in [
+    by_module([
         ("actor", collect_tensors(&sac.actor)),
         ("critic", collect_tensors(&sac.critic)),
         ("target_critic", collect_tensors(&sac.target_critic)),
         ("temperature", collect_tensors(&sac.temperature)),
-    ] {
+    ])
+}
+
+/// Every tensor of the modules, named `module.path`.
+fn by_module<const N: usize>(modules: [(&str, NamedTensors); N]) -> BTreeMap<String, Vec<f32>> {
+    let mut out = BTreeMap::new();
+    for (prefix, tensors) in modules {
         for (name, (_, values)) in tensors {
             out.insert(format!("{prefix}.{name}"), values);
         }
     }
     out
+}
+
+/// An update's reported losses, in one order.
+fn loss_fields(l: &SacLosses) -> [f32; 7] {
+    [
+        l.qf1_values,
+        l.qf1_loss,
+        l.qf2_loss,
+        l.actor_loss,
+        l.alpha,
+        l.alpha_loss,
+        l.entropy,
+    ]
 }
 
 #[test]
@@ -182,21 +200,10 @@ fn one_update_equals_burns_update() {
             assert_close(&what, &o.moments[path].second, &m.second, 1e-5, 1e-12);
         }
     }
-    let fields = |l: &SacLosses| {
-        [
-            l.qf1_values,
-            l.qf1_loss,
-            l.qf2_loss,
-            l.actor_loss,
-            l.alpha,
-            l.alpha_loss,
-            l.entropy,
-        ]
-    };
     assert_close(
         "losses",
-        &fields(&fused_losses),
-        &fields(&burn_losses),
+        &loss_fields(&fused_losses),
+        &loss_fields(&burn_losses),
         1e-5,
         1e-6,
     );
@@ -351,18 +358,7 @@ fn the_conservative_update_equals_burns() {
         for (name, values) in &expected {
             assert_close(&format!("{case} {name}"), &got[name], values, 1e-5, 1e-6);
         }
-        let fields = |l: &SacLosses| {
-            [
-                l.qf1_values,
-                l.qf1_loss,
-                l.qf2_loss,
-                l.actor_loss,
-                l.alpha,
-                l.alpha_loss,
-                l.entropy,
-            ]
-        };
-        let (f, b) = (fields(&fused_losses), fields(&burn_losses));
+        let (f, b) = (loss_fields(&fused_losses), loss_fields(&burn_losses));
         assert_close(case, &f, &b, 1e-5, 1e-6);
     }
 }
@@ -399,18 +395,12 @@ fn edacs_update_equals_burns() {
         });
         fused.write_to_edac(&mut ours);
         let tensors = |e: &Edac| {
-            let mut out = BTreeMap::new();
-            for (prefix, tensors) in [
+            by_module([
                 ("actor", collect_tensors(&e.actor)),
                 ("critics", collect_tensors(&e.critics)),
                 ("target_critics", collect_tensors(&e.target_critics)),
                 ("temperature", collect_tensors(&e.temperature)),
-            ] {
-                for (name, (_, values)) in tensors {
-                    out.insert(format!("{prefix}.{name}"), values);
-                }
-            }
-            out
+            ])
         };
         let (expected, got) = (tensors(&reference), tensors(&ours));
         for (name, values) in &expected {
@@ -418,18 +408,7 @@ fn edacs_update_equals_burns() {
         }
         let keys = |a: &SacAdam| a.critic.moments.keys().cloned().collect::<Vec<_>>();
         assert_eq!(keys(&ours.adam), keys(&reference.adam));
-        let fields = |l: &SacLosses| {
-            [
-                l.qf1_values,
-                l.qf1_loss,
-                l.qf2_loss,
-                l.actor_loss,
-                l.alpha,
-                l.alpha_loss,
-                l.entropy,
-            ]
-        };
-        let (f, b) = (fields(&fused_losses), fields(&burn_losses));
+        let (f, b) = (loss_fields(&fused_losses), loss_fields(&burn_losses));
         assert_close(&format!("η {eta}"), &f, &b, 1e-5, 1e-6);
     }
 }
