@@ -37,19 +37,58 @@ fn time(n: usize, mut update: impl FnMut()) -> f64 {
     best
 }
 
-fn main() {
-    let device = Device::flex();
-    let actor = || ActorConfig::new(OBS, ACT, vec![-1.0; ACT], vec![1.0; ACT]);
+/// Each baseline's row: name, method, the dataset whose per-task settings it
+/// takes (none: the method's defaults), timed updates per round, kernel.
+const BASELINES: [(&str, Method, Option<&str>, usize, Kernel); 8] = [
+    ("BC", Method::Bc, None, 50, Kernel::Burn),
+    ("TD3+BC", Method::Td3Bc, None, 50, Kernel::Burn),
+    ("CQL", Method::Cql, None, 10, Kernel::Burn),
+    ("CQL (fused)", Method::Cql, None, 20, Kernel::Fused),
+    ("EDAC, N = 10", Method::Edac, None, 10, Kernel::Burn),
+    (
+        "EDAC, N = 50 (hopper)",
+        Method::Edac,
+        Some("hopper-medium"),
+        3,
+        Kernel::Burn,
+    ),
+    (
+        "EDAC, N = 10 (fused)",
+        Method::Edac,
+        None,
+        20,
+        Kernel::Fused,
+    ),
+    (
+        "EDAC, N = 50 (hopper, fused)",
+        Method::Edac,
+        Some("hopper-medium"),
+        5,
+        Kernel::Fused,
+    ),
+];
+
+fn actor() -> ActorConfig {
+    ActorConfig::new(OBS, ACT, vec![-1.0; ACT], vec![1.0; ACT])
+}
+
+/// One fixed batch of hopper-shaped transitions.
+fn batch() -> TransitionBatch {
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let mut normal =
         |n: usize| -> Vec<f32> { (0..n).map(|_| rng.sample(StandardNormal)).collect() };
-    let batch = TransitionBatch {
+    TransitionBatch {
         observations: normal(BATCH * OBS),
         actions: normal(BATCH * ACT).iter().map(|x: &f32| x.tanh()).collect(),
         rewards: normal(BATCH),
         next_observations: normal(BATCH * OBS),
         terminals: vec![0.0; BATCH],
-    };
+    }
+}
+
+fn main() {
+    let device = Device::flex();
+    let batch = batch();
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     println!("| update, hopper's shape, batch {BATCH} | networks | updates/s | ms | × SAC's |");
     println!("|---|---|---|---|---|");
@@ -71,57 +110,11 @@ fn main() {
         fused_sac.update(&batch, &mut rng);
     });
     row("SAC (fused)", "2×256, 2 critics", fused_seconds);
-    let learners = [
-        (
-            "BC",
-            LearnerConfig::for_method(Method::Bc),
-            50,
-            Kernel::Burn,
-        ),
-        (
-            "TD3+BC",
-            LearnerConfig::for_method(Method::Td3Bc),
-            50,
-            Kernel::Burn,
-        ),
-        (
-            "CQL",
-            LearnerConfig::for_method(Method::Cql),
-            10,
-            Kernel::Burn,
-        ),
-        (
-            "CQL (fused)",
-            LearnerConfig::for_method(Method::Cql),
-            20,
-            Kernel::Fused,
-        ),
-        (
-            "EDAC, N = 10",
-            LearnerConfig::for_method(Method::Edac),
-            10,
-            Kernel::Burn,
-        ),
-        (
-            "EDAC, N = 50 (hopper)",
-            LearnerConfig::for_dataset(Method::Edac, "hopper-medium"),
-            3,
-            Kernel::Burn,
-        ),
-        (
-            "EDAC, N = 10 (fused)",
-            LearnerConfig::for_method(Method::Edac),
-            20,
-            Kernel::Fused,
-        ),
-        (
-            "EDAC, N = 50 (hopper, fused)",
-            LearnerConfig::for_dataset(Method::Edac, "hopper-medium"),
-            5,
-            Kernel::Fused,
-        ),
-    ];
-    for (name, config, n, kernel) in learners {
+    for (name, method, dataset, n, kernel) in BASELINES {
+        let config = match dataset {
+            Some(dataset) => LearnerConfig::for_dataset(method, dataset),
+            None => LearnerConfig::for_method(method),
+        };
         let config = config.expect("a model-free method");
         let hidden = config.hidden();
         let critics = match &config {
