@@ -3,6 +3,7 @@
 //! ```text
 //! run.json                                      what the run is (config, task or system file)
 //! transitions/steps-00000000-00010000.safetensors every step of one interval, as D4RL records it
+//!                                               (`.safetensors.zst` in a snapshot: zstd, the same bytes)
 //! policies/step-00010000.{safetensors,json}     the actor at each checkpoint, with its evaluation
 //! checkpoints/LATEST, checkpoints/step-00010000/ networks, Adam, generator, counters, history
 //! ```
@@ -18,12 +19,12 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::json_file::{read_checked_weights, read_versioned_json, write_json};
+use super::json_file::{read_versioned_json, write_json};
 use super::policy::{PolicyMetadata, PolicyProvenance, save_policy};
 use super::sac_state::{
     RngState, SacFiles, latest_checkpoint, read_sac, save_checkpoint_dir, write_sac, write_synced,
 };
-use super::safetensors_file::{safetensors_bytes, write_bytes};
+use super::safetensors_file::{parse_safetensors, safetensors_bytes, write_bytes};
 use super::tensors::NamedTensors;
 use super::{ArtifactError, sha256_hex};
 use crate::agent::{OnlineRecord, OnlineSac, OnlineSacConfig};
@@ -36,6 +37,11 @@ const TRANSITIONS: &str = "transitions";
 const POLICIES: &str = "policies";
 const CHECKPOINTS: &str = "checkpoints";
 const STATE: &str = "state.json";
+/// A snapshot's replay intervals are zstd-compressed: each repeats its next
+/// observations and holds qpos/qvel beside them, so level 19 (the highest
+/// before zstd's slow "ultra" levels) keeps about 40 % of the bytes.
+const REPLAY_SUFFIX: &str = ".zst";
+const REPLAY_ZSTD_LEVEL: i32 = 19;
 
 /// `run.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -225,7 +231,7 @@ pub fn load_online_checkpoint(
     let (present, missing): (Vec<&Interval>, Vec<&Interval>) = state
         .intervals
         .iter()
-        .partition(|i| dir.join(&i.file).exists());
+        .partition(|i| stored_interval(dir, i).is_some());
     if let (Some(first), None) = (missing.first(), refill) {
         return Err(ArtifactError::Invalid(format!(
             "{}: the run's transitions for steps {}..{} are not there ({} of {} intervals missing, \
@@ -281,9 +287,10 @@ pub struct RunSnapshot {
 /// tolerance (`LEVEL_TOLERANCE`), so bands narrower than it lose no pick. The
 /// transitions stay behind: a run continued from a snapshot refills its replay
 /// buffer ([`load_online_checkpoint`]), except, with `replay_until`, the
-/// intervals up to that checkpoint step: the replay D4RL's medium-replay is
-/// ([`read_run_transitions`] reads it from the snapshot as from the run), which
-/// another kind of CPU cannot re-create bit for bit. `out` is replaced whole.
+/// intervals up to that checkpoint step, zstd-compressed: the replay D4RL's
+/// medium-replay is ([`read_run_transitions`] reads it from the snapshot as
+/// from the run), which another kind of CPU cannot re-create bit for bit.
+/// `out` is replaced whole.
 pub fn snapshot_online_run(
     dir: &Path,
     out: &Path,
@@ -326,7 +333,7 @@ pub fn snapshot_online_run(
                 .map_err(|e| ArtifactError::io(tmp, e))?;
         }
         for interval in replay {
-            copy_file(&dir.join(&interval.file), &tmp.join(&interval.file))?;
+            compress_interval(dir, interval, tmp)?;
         }
         Ok(())
     })?;
@@ -351,7 +358,7 @@ fn intervals_until<'a>(
         )));
     };
     let kept = &intervals[..=last];
-    if let Some(missing) = kept.iter().find(|i| !dir.join(&i.file).exists()) {
+    if let Some(missing) = kept.iter().find(|i| stored_interval(dir, i).is_none()) {
         return Err(ArtifactError::Invalid(format!(
             "{}: the run's transitions for steps {}..{} are not there, so its replay up to step {to} cannot be kept",
             dir.join(&missing.file).display(),
@@ -415,6 +422,47 @@ fn replace_dir(
         std::fs::remove_dir_all(&old).map_err(|e| ArtifactError::io(&old, e))?;
     }
     Ok(())
+}
+
+/// Where an interval's transitions are: the run's own file, or a snapshot's
+/// compressed copy of it.
+fn stored_interval(dir: &Path, interval: &Interval) -> Option<PathBuf> {
+    let plain = dir.join(&interval.file);
+    let compressed = dir.join(format!("{}{REPLAY_SUFFIX}", interval.file));
+    [plain, compressed].into_iter().find(|p| p.is_file())
+}
+
+/// An interval's safetensors bytes from `path` ([`stored_interval`]),
+/// decompressed where compressed, and checked against the recorded hash.
+fn interval_bytes(path: &Path, interval: &Interval) -> Result<Vec<u8>, ArtifactError> {
+    let stored = std::fs::read(path).map_err(|e| ArtifactError::io(path, e))?;
+    let bytes = if path.to_string_lossy().ends_with(REPLAY_SUFFIX) {
+        zstd::decode_all(stored.as_slice()).map_err(|e| {
+            ArtifactError::Invalid(format!("{}: not a zstd stream ({e})", path.display()))
+        })?
+    } else {
+        stored
+    };
+    if sha256_hex(&bytes) != interval.sha256 {
+        return Err(ArtifactError::HashMismatch {
+            file: path.to_path_buf(),
+        });
+    }
+    Ok(bytes)
+}
+
+/// Writes run `dir`'s `interval` into the snapshot being written in `out`,
+/// compressed, after checking it against its hash.
+fn compress_interval(dir: &Path, interval: &Interval, out: &Path) -> Result<(), ArtifactError> {
+    let path = stored_interval(dir, interval)
+        .ok_or_else(|| ArtifactError::Invalid(format!("{}: missing", interval.file)))?;
+    let bytes = interval_bytes(&path, interval)?;
+    let compressed = zstd::encode_all(bytes.as_slice(), REPLAY_ZSTD_LEVEL)
+        .map_err(|e| ArtifactError::io(&path, e))?;
+    write_synced(
+        &out.join(format!("{}{REPLAY_SUFFIX}", interval.file)),
+        &compressed,
+    )
 }
 
 /// Copies a file, fsynced.
@@ -537,17 +585,16 @@ fn read_interval(
     interval: &Interval,
     like: &Recording,
 ) -> Result<Recording, ArtifactError> {
-    let path = dir.join(&interval.file);
-    if !path.exists() {
+    let Some(path) = stored_interval(dir, interval) else {
         return Err(ArtifactError::Invalid(format!(
             "{}: the run's transitions for steps {}..{} are not there (a snapshot carries none; \
              they are on the machine that ran those steps)",
-            path.display(),
+            dir.join(&interval.file).display(),
             interval.from,
             interval.to
         )));
-    }
-    let mut tensors = read_checked_weights(&path, &interval.sha256)?;
+    };
+    let mut tensors = parse_safetensors(&interval_bytes(&path, interval)?, &path)?;
     let n = interval.to - interval.from;
     // Runs record them whenever the policy has a density; present, they must fit.
     let has_log_probs = tensors.contains_key("action_log_probs");

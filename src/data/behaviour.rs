@@ -93,6 +93,10 @@ pub struct BehaviourPick {
     pub target_return: f64,
     /// The expert's return the target is a fraction of.
     pub expert_return: f64,
+    /// The episodes of the evaluations picked on, where the policies were
+    /// evaluated again (`collect select --episodes`); none: the run's own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub evaluation_episodes: Option<usize>,
 }
 
 /// How far from its target a level's checkpoint may be by default, as a
@@ -132,6 +136,7 @@ pub fn select_behaviour(
         mean_return,
         target_return,
         expert_return,
+        evaluation_episodes: None,
     };
     if level == BehaviourLevel::Expert {
         return Ok(pick(expert_step, expert_return));

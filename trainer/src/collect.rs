@@ -5,15 +5,17 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use burn::tensor::Device;
 use clap::Subcommand;
 use indicatif::{ProgressBar, ProgressStyle};
-use nuno::agent::{OnlineRecord, OnlineSac, OnlineSacConfig, SacConfig};
+use nuno::agent::{ActionMode, ActorPolicy, OnlineRecord, OnlineSac, OnlineSacConfig, SacConfig};
 use nuno::artifact::{
-    load_online_checkpoint, read_online_run, run_policies, save_behaviour, save_online_checkpoint,
-    snapshot_online_run, start_online_run,
+    RunPolicy, load_online_checkpoint, load_policy, read_online_run, run_policies, save_behaviour,
+    save_online_checkpoint, snapshot_online_run, start_online_run,
 };
-use nuno::data::{BehaviourLevel, LEVEL_TOLERANCE, select_behaviour};
-use nuno::envs::TaskName;
+use nuno::data::{BehaviourLevel, BehaviourPick, LEVEL_TOLERANCE, select_behaviour};
+use nuno::envs::{EvaluationConfig, TaskConfig, TaskName, evaluate};
+use nuno::infer::Kernel;
 use nuno::sde::ComputeDevice;
 use nuno::shared::{Metric, MetricsTable};
 
@@ -96,8 +98,9 @@ pub struct SnapshotArgs {
     /// the best and latest); narrower than `select`'s tolerance loses no pick.
     #[arg(long, default_value_t = 2.5)]
     band: f64,
-    /// Keep the run's transitions up to this checkpoint step (the medium
-    /// policy's: D4RL's medium-replay, which another kind of CPU cannot re-create).
+    /// Keep the run's transitions up to this checkpoint step, zstd-compressed
+    /// (the medium policy's: D4RL's medium-replay, which another kind of CPU
+    /// cannot re-create).
     #[arg(long)]
     replay_until: Option<usize>,
 }
@@ -117,6 +120,11 @@ pub struct SelectArgs {
     /// the expert's return.
     #[arg(long, default_value_t = LEVEL_TOLERANCE)]
     tolerance: f64,
+    /// Evaluate every policy of the run again over this many episodes (from
+    /// the run's start states, as its checkpoints were) and pick on those
+    /// returns; without it, on the run's own checkpoint evaluations.
+    #[arg(long)]
+    episodes: Option<usize>,
 }
 
 pub fn run(command: Command) -> anyhow::Result<()> {
@@ -219,15 +227,21 @@ fn select(args: SelectArgs) -> anyhow::Result<()> {
     } else {
         args.levels.clone()
     };
-    let returns: Vec<(usize, f64)> = policies
-        .iter()
-        .map(|p| {
-            (
-                p.step,
-                p.metadata.provenance.mean_return.unwrap_or(f64::NAN),
-            )
-        })
-        .collect();
+    let returns = match args.episodes {
+        Some(episodes) => {
+            let task = simulation_of(&info.system(&args.run)?)?;
+            reevaluated_returns(&policies, task, episodes, info.config.seed)?
+        }
+        None => policies
+            .iter()
+            .map(|p| {
+                (
+                    p.step,
+                    p.metadata.provenance.mean_return.unwrap_or(f64::NAN),
+                )
+            })
+            .collect(),
+    };
     // Every level is checked before anything is written.
     let picks = levels
         .iter()
@@ -238,6 +252,10 @@ fn select(args: SelectArgs) -> anyhow::Result<()> {
             .iter()
             .find(|p| p.step == pick.step)
             .context("the selected checkpoint has no policy")?;
+        let pick = BehaviourPick {
+            evaluation_episodes: args.episodes,
+            ..pick
+        };
         let written = save_behaviour(&args.out, &args.run, policy, level, &pick)?;
         println!(
             "{level}: step {} (return {:.1}, target {:.1}) -> {}",
@@ -248,6 +266,37 @@ fn select(args: SelectArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Each policy's mean return over `episodes` deterministic episodes from the
+/// start states of seed `seed`, the run's own (so every checkpoint meets the same ones).
+fn reevaluated_returns(
+    policies: &[RunPolicy],
+    task: TaskConfig,
+    episodes: usize,
+    seed: u64,
+) -> anyhow::Result<Vec<(usize, f64)>> {
+    anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
+    let config = EvaluationConfig::new(task, episodes, seed);
+    let bar = ProgressBar::new(policies.len() as u64).with_style(ProgressStyle::with_template(
+        "{bar:30} {pos}/{len} policies evaluated, eta {eta}",
+    )?);
+    let returns = policies
+        .iter()
+        .map(|p| {
+            let (actor, _) = load_policy(&p.dir, &p.stem, &Device::flex())?;
+            let policy = Kernel::Fused.policy(ActorPolicy {
+                actor,
+                mode: ActionMode::Deterministic,
+            });
+            let report = evaluate(policy.as_ref(), &config)
+                .with_context(|| format!("evaluating the policy at step {}", p.step))?;
+            bar.inc(1);
+            Ok((p.step, report.mean_return))
+        })
+        .collect();
+    bar.finish_and_clear();
+    returns
 }
 
 fn snapshot(args: SnapshotArgs) -> anyhow::Result<()> {

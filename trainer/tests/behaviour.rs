@@ -232,9 +232,18 @@ fn a_snapshot_carries_a_run_to_another_machine() {
     assert_eq!(
         files,
         [
-            "steps-00000000-00000300.safetensors",
-            "steps-00000300-00000600.safetensors"
+            "steps-00000000-00000300.safetensors.zst",
+            "steps-00000300-00000600.safetensors.zst"
         ]
+    );
+    let first = "transitions/steps-00000000-00000300.safetensors";
+    let plain = std::fs::read(run.join(first)).unwrap();
+    let kept = std::fs::read(with_replay.join(format!("{first}.zst"))).unwrap();
+    assert!(
+        kept.len() < plain.len() / 2,
+        "{} of {}",
+        kept.len(),
+        plain.len()
     );
     let (ours, theirs) = (
         read_run_transitions(&with_replay, 600).unwrap(),
@@ -250,6 +259,18 @@ fn a_snapshot_carries_a_run_to_another_machine() {
         .unwrap_err()
         .to_string();
     assert!(error.contains("not there"), "{error}");
+    // A damaged compressed interval is refused by name, never read as data.
+    let damaged = p("damaged");
+    copy_dir(&with_replay, &damaged);
+    let second = damaged.join("transitions/steps-00000300-00000600.safetensors.zst");
+    let mut bytes = std::fs::read(&second).unwrap();
+    bytes.truncate(bytes.len() / 2);
+    std::fs::write(&second, bytes).unwrap();
+    let error = read_run_transitions(&damaged, 600).unwrap_err().to_string();
+    assert!(
+        error.contains("steps-00000300-00000600.safetensors.zst"),
+        "{error}"
+    );
 
     // On another machine: the transitions are missing, and continuing must say how.
     copy_dir(&snapshot, &moved);
@@ -285,6 +306,76 @@ fn a_snapshot_carries_a_run_to_another_machine() {
         "--tolerance",
         "1",
     ]);
+}
+
+/// `select --episodes` picks on fresh evaluations from the run's start
+/// states: its expert is the policy `evaluate` rates best over as many
+/// episodes from the same seed, with that return.
+#[test]
+fn select_can_pick_on_longer_evaluations() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = |name: &str| tmp.path().join(name);
+    let s = |path: &Path| path.to_str().unwrap().to_string();
+    let (run, behaviour) = (p("run"), p("behaviour"));
+    ok(&online::<&str>(&run, 1200, 5, &[]));
+    let select = |episodes: &str| {
+        let args = [
+            "collect",
+            "select",
+            "--run",
+            &s(&run),
+            "--out",
+            &s(&behaviour),
+        ];
+        (args.iter().map(|a| a.to_string()))
+            .chain(
+                [
+                    "--levels",
+                    "expert",
+                    "--tolerance",
+                    "1",
+                    "--episodes",
+                    episodes,
+                ]
+                .map(String::from),
+            )
+            .collect::<Vec<_>>()
+    };
+    let error = fails(&select("0"));
+    assert!(error.contains("--episodes"), "{error}");
+    ok(&select("3"));
+
+    let evaluated: Vec<(u64, f64)> = (1..=4)
+        .map(|i| {
+            let step = 300 * i;
+            let out = ok(&[
+                "evaluate",
+                "--policy",
+                &s(&run.join("policies")),
+                "--policy-name",
+                &format!("step-{step:08}"),
+                "--task",
+                "hopper",
+                "--episodes",
+                "3",
+                "--seed",
+                "5",
+                "--json",
+            ]);
+            let report: serde_json::Value = serde_json::from_str(&out).unwrap();
+            (step, report["mean_return"].as_f64().unwrap())
+        })
+        .collect();
+    let best = evaluated
+        .iter()
+        .fold(evaluated[0], |b, &e| if e.1 > b.1 { e } else { b });
+    let levels: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(behaviour.join("hopper/levels.json")).unwrap())
+            .unwrap();
+    let pick = &levels["levels"]["expert"]["pick"];
+    assert_eq!(pick["step"].as_u64(), Some(best.0), "{evaluated:?}");
+    assert_eq!(pick["mean_return"].as_f64(), Some(best.1));
+    assert_eq!(pick["evaluation_episodes"].as_u64(), Some(3));
 }
 
 #[test]
