@@ -9,7 +9,7 @@ use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
 use nuno::agent::{
     ActorConfig, ConservativeTerm, CriticBackup, Edac, EdacConfig, FusedSac, Sac, SacAdam,
-    SacConfig, SacLosses,
+    SacConfig, SacLosses, actor_loss, alpha_loss,
 };
 use nuno::artifact::{NamedTensors, collect_tensors};
 use nuno::infer::TrainableMlp;
@@ -100,12 +100,13 @@ fn every_gradient_matches_burn_autodiff() {
     );
     let alpha = sac.temperature.alpha().inner();
     let noise = normal([b, ACT], &mut rng, &device);
-    let (actor_loss, log_prob) = sac.actor_loss(obs, noise, alpha);
+    let (actor_loss, log_prob) =
+        actor_loss(&sac.actor, obs, noise, alpha, |o, a| sac.critic.min_q(o, a));
     let actor = gradients_by_path(
         &sac.actor,
         &GradientsParams::from_grads(actor_loss.backward(), &sac.actor),
     );
-    let alpha_loss = sac.alpha_loss(log_prob.inner());
+    let alpha_loss = alpha_loss(&sac.temperature, log_prob.inner(), sac.target_entropy);
     let temperature = gradients_by_path(
         &sac.temperature,
         &GradientsParams::from_grads(alpha_loss.backward(), &sac.temperature),

@@ -207,28 +207,9 @@ impl ConservativeTerm {
 
         // Actor, then α (OfflineRL-Kit's order).
         let alpha = sac.temperature.alpha().inner();
-        let (actor_loss, log_prob) = sac.actor_loss(
-            obs.clone(),
-            normal([b, act_dim], rng, &device),
-            alpha.clone(),
-        );
-        let grads = GradientsParams::from_grads(actor_loss.backward(), &sac.actor);
-        sac.actor = adam.step_module(
-            config.actor_lr,
-            sac.actor.clone(),
-            grads,
-            &mut sac.adam.actor,
-        );
-        let log_prob = log_prob.inner();
-        let entropy = -log_prob.clone().mean().into_scalar::<f32>();
-        let alpha_loss = sac.alpha_loss(log_prob);
-        let grads = GradientsParams::from_grads(alpha_loss.backward(), &sac.temperature);
-        sac.temperature = adam.step_module(
-            config.alpha_lr,
-            sac.temperature.clone(),
-            grads,
-            &mut sac.adam.alpha,
-        );
+        let noise = normal([b, act_dim], rng, &device);
+        let (half, critic) = sac.policy_half();
+        let policy = half.step(obs.clone(), noise, alpha, |o, a| critic.min_q(o, a));
 
         // Critics: deterministic backup y = r + γ(1 − d)·min Q̄(s', ã'), then the term.
         let next =
@@ -251,15 +232,7 @@ impl ConservativeTerm {
             &mut sac.adam.critic,
         );
         sac.target_critic = polyak_update(sac.target_critic.clone(), &sac.critic, config.tau);
-        SacLosses {
-            qf1_values,
-            qf1_loss: qf1_loss.into_scalar(),
-            qf2_loss: qf2_loss.into_scalar(),
-            actor_loss: actor_loss.into_scalar(),
-            alpha: alpha.into_scalar(),
-            alpha_loss: alpha_loss.into_scalar(),
-            entropy,
-        }
+        policy.losses(qf1_values, qf1_loss.into_scalar(), qf2_loss.into_scalar())
     }
 }
 

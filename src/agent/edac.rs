@@ -17,7 +17,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::actor::{Actor, ActorConfig};
 use super::critic::Temperature;
-use super::sac::{SacAdam, SacConfig, SacLosses};
+use super::sac::{PolicyHalf, SacAdam, SacConfig, SacLosses};
 use crate::nn::{
     Activation, Adam, Initialised, Mlp, MlpConfig, normal, polyak_update, rows_tensor,
 };
@@ -226,34 +226,18 @@ impl Edac {
         let sac = self.config.sac.clone();
         let adam = Adam::new(sac.adam_epsilon.unwrap_or(1e-8));
 
-        // Actor: mean α·log π(ã|s) − min_j Q_j(s, ã).
+        // Actor, then α.
         let alpha = self.alpha();
-        let sample = self
-            .actor
-            .sample(obs.clone(), normal([b, act_dim], rng, &device));
-        let log_prob = sample.log_prob.clone();
-        let min_q = self.critics.min_q(obs.clone(), sample.action);
-        let actor_loss = (sample.log_prob * alpha.clone() - min_q).mean();
-        let grads = GradientsParams::from_grads(actor_loss.backward(), &self.actor);
-        self.actor = adam.step_module(
-            sac.actor_lr,
-            self.actor.clone(),
-            grads,
-            &mut self.adam.actor,
-        );
-
-        // α: mean −log α·(log π + H̄).
-        let log_prob = log_prob.inner();
-        let entropy = -log_prob.clone().mean().into_scalar::<f32>();
-        let log_alpha = self.temperature.log_alpha.val().unsqueeze::<2>();
-        let alpha_loss = (log_alpha.neg() * (log_prob + self.target_entropy)).mean();
-        let grads = GradientsParams::from_grads(alpha_loss.backward(), &self.temperature);
-        self.temperature = adam.step_module(
-            sac.alpha_lr,
-            self.temperature.clone(),
-            grads,
-            &mut self.adam.alpha,
-        );
+        let noise = normal([b, act_dim], rng, &device);
+        let policy = PolicyHalf {
+            actor: &mut self.actor,
+            temperature: &mut self.temperature,
+            adam: &mut self.adam,
+            config: &sac,
+            optimizer: adam,
+            target_entropy: self.target_entropy,
+        }
+        .step(obs.clone(), noise, alpha, |o, a| self.critics.min_q(o, a));
 
         let y = self.critic_target(batch, rng, &device.clone().inner());
         let qs = self.critics.forward(obs.clone(), actions.clone());
@@ -277,14 +261,6 @@ impl Edac {
             &mut self.adam.critic,
         );
         self.target_critics = polyak_update(self.target_critics.clone(), &self.critics, sac.tau);
-        SacLosses {
-            qf1_values,
-            qf1_loss,
-            qf2_loss,
-            actor_loss: actor_loss.into_scalar(),
-            alpha: alpha.into_scalar(),
-            alpha_loss: alpha_loss.into_scalar(),
-            entropy,
-        }
+        policy.losses(qf1_values, qf1_loss, qf2_loss)
     }
 }

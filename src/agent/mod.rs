@@ -62,7 +62,10 @@ pub use presets::{
     mobile_preset, mopo_preset, preset, rambo_preset, tatu_pessimism,
 };
 pub use rambo::{RamboConfig, advantages, adversarial_phase, behaviour_clone, standardise};
-pub use sac::{CriticBackup, Sac, SacAdam, SacConfig, SacLosses};
+pub use sac::{
+    CriticBackup, PolicyHalf, PolicyLosses, Sac, SacAdam, SacConfig, SacLosses, actor_loss,
+    alpha_loss,
+};
 pub use td3_bc::{Td3Bc, Td3BcAdam, Td3BcConfig};
 pub use uncertainty::{
     AleatoricAsEta, RunThreshold, dataset_max_threshold, rollout_threshold, run_threshold,

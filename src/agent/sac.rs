@@ -245,24 +245,18 @@ impl Sac {
         )
     }
 
-    /// L_π = mean α·log π(ã|s) − min_i Q_i(s, ã), ã ~ π(·|s) drawn with `noise`;
-    /// returns L_π and log π(ã|s) (`[batch, 1]`).
-    pub fn actor_loss(
-        &self,
-        obs: Tensor<2>,
-        noise: Tensor<2>,
-        alpha: Tensor<2>,
-    ) -> (Tensor<1>, Tensor<2>) {
-        let sample = self.actor.sample(obs.clone(), noise);
-        let log_prob = sample.log_prob.clone();
-        let min_q = self.critic.min_q(obs, sample.action);
-        ((sample.log_prob * alpha - min_q).mean(), log_prob)
-    }
-
-    /// L_α = mean −log α·(log π(ã|s) + H̄), for `log_prob` off the graph.
-    pub fn alpha_loss(&self, log_prob: Tensor<2>) -> Tensor<1> {
-        let log_alpha = self.temperature.log_alpha.val().unsqueeze::<2>();
-        (log_alpha.neg() * (log_prob + self.target_entropy)).mean()
+    /// The actor, α and their Adam state, for [`PolicyHalf::step`].
+    pub fn policy_half(&mut self) -> (PolicyHalf<'_>, &TwinCritic) {
+        let optimizer = self.optimizer();
+        let half = PolicyHalf {
+            actor: &mut self.actor,
+            temperature: &mut self.temperature,
+            adam: &mut self.adam,
+            config: &self.config,
+            optimizer,
+            target_entropy: self.target_entropy,
+        };
+        (half, &self.critic)
     }
 
     /// One SAC update on `batch`, drawing the policy's ε from `rng`.
@@ -295,41 +289,116 @@ impl Sac {
             &mut self.adam.critic,
         );
 
-        // Actor step, through the updated critics.
+        // Actor step, through the updated critics, then the temperature's.
         let noise = normal([b, act_dim], rng, &device);
-        let (actor_loss, log_prob) = self.actor_loss(obs, noise, alpha.clone());
-        let grads = GradientsParams::from_grads(actor_loss.backward(), &self.actor);
-        self.actor = adam.step_module(
-            self.config.actor_lr,
-            self.actor.clone(),
-            grads,
-            &mut self.adam.actor,
-        );
-
-        // Temperature step.
-        let log_prob = log_prob.inner();
-        let entropy = -log_prob.clone().mean().into_scalar::<f32>();
-        let alpha_loss = self.alpha_loss(log_prob);
-        let grads = GradientsParams::from_grads(alpha_loss.backward(), &self.temperature);
-        self.temperature = adam.step_module(
-            self.config.alpha_lr,
-            self.temperature.clone(),
-            grads,
-            &mut self.adam.alpha,
-        );
+        let (half, critic) = self.policy_half();
+        let policy = half.step(obs, noise, alpha.clone(), |o, a| critic.min_q(o, a));
 
         // Targets: Q̄ ← τ·Q + (1 − τ)·Q̄.
         self.target_critic =
             polyak_update(self.target_critic.clone(), &self.critic, self.config.tau);
 
+        policy.losses(qf1_values, qf1_loss.into_scalar(), qf2_loss.into_scalar())
+    }
+}
+
+/// What an update's actor and temperature steps change, borrowed from a
+/// SAC-family agent: SAC's, CQL's and EDAC's steps are these, and differ only
+/// in their critics and in whether the critics step first.
+pub struct PolicyHalf<'a> {
+    pub actor: &'a mut Actor,
+    pub temperature: &'a mut Temperature,
+    /// Only the actor's and α's moments are stepped.
+    pub adam: &'a mut SacAdam,
+    pub config: &'a SacConfig,
+    pub optimizer: Adam,
+    /// H̄
+    pub target_entropy: f64,
+}
+
+/// The actor's and α's side of an update's [`SacLosses`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PolicyLosses {
+    pub actor_loss: f32,
+    pub alpha: f32,
+    pub alpha_loss: f32,
+    pub entropy: f32,
+}
+
+impl PolicyLosses {
+    /// The update's losses, with the critics' side.
+    pub fn losses(self, qf1_values: f32, qf1_loss: f32, qf2_loss: f32) -> SacLosses {
         SacLosses {
             qf1_values,
-            qf1_loss: qf1_loss.into_scalar(),
-            qf2_loss: qf2_loss.into_scalar(),
+            qf1_loss,
+            qf2_loss,
+            actor_loss: self.actor_loss,
+            alpha: self.alpha,
+            alpha_loss: self.alpha_loss,
+            entropy: self.entropy,
+        }
+    }
+}
+
+impl PolicyHalf<'_> {
+    /// One actor step on L_π, then one temperature step on L_α, with α read
+    /// before either (`alpha`, off the graph, `[1, 1]`) and `min_q` the
+    /// critics' min_i Q_i(s, a).
+    pub fn step(
+        self,
+        obs: Tensor<2>,
+        noise: Tensor<2>,
+        alpha: Tensor<2>,
+        min_q: impl FnOnce(Tensor<2>, Tensor<2>) -> Tensor<2>,
+    ) -> PolicyLosses {
+        let (actor_loss, log_prob) = actor_loss(self.actor, obs, noise, alpha.clone(), min_q);
+        let grads = GradientsParams::from_grads(actor_loss.backward(), &*self.actor);
+        *self.actor = self.optimizer.step_module(
+            self.config.actor_lr,
+            self.actor.clone(),
+            grads,
+            &mut self.adam.actor,
+        );
+        let log_prob = log_prob.inner();
+        let entropy = -log_prob.clone().mean().into_scalar::<f32>();
+        let alpha_loss = alpha_loss(self.temperature, log_prob, self.target_entropy);
+        let grads = GradientsParams::from_grads(alpha_loss.backward(), &*self.temperature);
+        *self.temperature = self.optimizer.step_module(
+            self.config.alpha_lr,
+            self.temperature.clone(),
+            grads,
+            &mut self.adam.alpha,
+        );
+        PolicyLosses {
             actor_loss: actor_loss.into_scalar(),
             alpha: alpha.into_scalar(),
             alpha_loss: alpha_loss.into_scalar(),
             entropy,
         }
     }
+}
+
+/// L_π = mean α·log π(ã|s) − min_i Q_i(s, ã), ã ~ π(·|s) drawn with `noise`,
+/// `min_q` the critics' minimum; returns L_π and log π(ã|s) (`[batch, 1]`).
+pub fn actor_loss(
+    actor: &Actor,
+    obs: Tensor<2>,
+    noise: Tensor<2>,
+    alpha: Tensor<2>,
+    min_q: impl FnOnce(Tensor<2>, Tensor<2>) -> Tensor<2>,
+) -> (Tensor<1>, Tensor<2>) {
+    let sample = actor.sample(obs.clone(), noise);
+    let log_prob = sample.log_prob.clone();
+    let min_q = min_q(obs, sample.action);
+    ((sample.log_prob * alpha - min_q).mean(), log_prob)
+}
+
+/// L_α = mean −log α·(log π(ã|s) + H̄), for `log_prob` off the graph.
+pub fn alpha_loss(
+    temperature: &Temperature,
+    log_prob: Tensor<2>,
+    target_entropy: f64,
+) -> Tensor<1> {
+    let log_alpha = temperature.log_alpha.val().unsqueeze::<2>();
+    (log_alpha.neg() * (log_prob + target_entropy)).mean()
 }
