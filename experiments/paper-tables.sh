@@ -16,7 +16,8 @@ set -- \
     "$r/hopper-behaviour-comparison/hopper-medium-replay" \
     "$r/hopper-behaviour-comparison/hopper-medium-expert" \
     "$r/neorl-hopper-comparison" \
-    "$r/d4rl-walker2d-halfcheetah-comparison"
+    "$r/d4rl-walker2d-halfcheetah-comparison" \
+    "$r/neorl-walker2d-halfcheetah-comparison"
 args=""
 for folder in "$@"; do
     # A grid whose first cell has not finished has no folder yet.
