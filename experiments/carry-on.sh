@@ -1,0 +1,120 @@
+#!/bin/sh
+# Carries the long comparisons and online runs on from one session to the next (issues 34
+# and 35). A machine can be replaced between sessions, and runs/ and data/ go with it
+# (sessions 12, 24 and 30 found them gone), so each step here starts from what the
+# repository keeps: the grid files, the kept cells under experiments/results/, the
+# behaviour policies and run snapshots under models/behaviour/. Run from the repository root
+# after a build (`make build`, or `cargo test --no-run` as `make test` builds):
+#
+#   experiments/carry-on.sh datasets GRID...   make every missing dataset the grids read
+#   experiments/carry-on.sh start GRID...      run each grid's unfinished cells in the background
+#   experiments/carry-on.sh online TASK...     resume TASK's online SAC run from its snapshot
+#   experiments/carry-on.sh keep GRID...       copy the grids' newly finished cells into the repo
+#
+# GRID is a grid file (experiments/NAME.toml); its cells run under runs/NAME, logged to
+# runs/NAME.log, and are kept in experiments/results/NAME. Everything runs single-threaded
+# at `nice -n 19` so builds and tests stay usable. Start a grid once per machine (two runners
+# of one grid would train the same cells): `pgrep -af 'experiment run'` lists what runs.
+set -eu
+
+trainer=${NUNO_TRAINER:-$(cargo metadata --format-version 1 --no-deps |
+    python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')/release/nuno-trainer}
+export LD_LIBRARY_PATH="$PWD/.mujoco/lib" MUJOCO_DYNAMIC_LINK_DIR="$PWD/.mujoco/lib" \
+    NUNO_MJCF_DIR="$PWD/.mujoco/assets" RAYON_NUM_THREADS="${RAYON_NUM_THREADS:-1}"
+
+stem() { basename "$1" .toml; }
+
+# The data files a grid reads (its `file = "../data/NAME.hdf5"` lines), as names.
+grid_datasets() {
+    sed -n 's|^file *= *"\.\./data/\(.*\)\.hdf5"|\1|p' "$1"
+}
+
+# Makes data/NAME.hdf5 by the recipe its name says (the grid files' own commands, seed 0).
+make_dataset() {
+    name=$1
+    case $name in
+    neorl-*-*)
+        rest=${name#neorl-}
+        set -- --task "${rest%%-*}" --layout neorl --kind "${rest#*-}" --out "data/$name.npz" ;;
+    *-random)
+        set -- --task "${name%%-*}" --kind random --transitions 1000000 --out "data/$name.hdf5" ;;
+    *-medium-replay)
+        task=${name%%-*}
+        if [ ! -d "models/behaviour/$task/run/transitions" ]; then
+            echo "carry-on: data/$name.hdf5 needs $task's online run up to its medium step," \
+                "which only the same kind of CPU re-creates (models/behaviour/README.md)" >&2
+            return 1
+        fi
+        set -- --task "$task" --kind medium-replay --run "models/behaviour/$task/run" \
+            --out "data/$name.hdf5" ;;
+    *)
+        set -- --task "${name%%-*}" --kind "${name#*-}" --out "data/$name.hdf5" ;;
+    esac
+    echo "carry-on: making data/$name.hdf5"
+    nice -n 10 "$trainer" dataset generate "$@" --seed 0
+}
+
+# Makes every dataset it can, then fails if one could not be made.
+datasets() {
+    mkdir -p data
+    missing=0
+    for grid in "$@"; do
+        for name in $(grid_datasets "$grid"); do
+            [ -f "data/$name.hdf5" ] || make_dataset "$name" || missing=1
+        done
+    done
+    return $missing
+}
+
+# A grid's cells run in runs/NAME; the kept ones are copied in first so the runner skips
+# them, and the marker's time tells `keep` which cells finished after that.
+start() {
+    for grid in "$@"; do
+        out=runs/$(stem "$grid")
+        kept=experiments/results/$(stem "$grid")
+        mkdir -p "$out"
+        if [ -d "$kept" ]; then cp -r "$kept/." "$out/"; fi
+        touch "$out/.carried-on"
+        nohup nice -n 19 "$trainer" experiment run --grid "$grid" --out "$out" \
+            >> "$out.log" 2>&1 &
+        echo "carry-on: $grid running in $out (log $out.log, pid $!)"
+    done
+}
+
+keep() {
+    for grid in "$@"; do
+        out=runs/$(stem "$grid")
+        kept=$PWD/experiments/results/$(stem "$grid")
+        [ -f "$out/.carried-on" ] || { echo "carry-on: $out was not started here" >&2; return 1; }
+        mkdir -p "$kept"
+        (cd "$out" && find . -name result.json -newer .carried-on -exec cp --parents {} "$kept/" \;)
+        echo "carry-on: $(cd "$out" && find . -name result.json -newer .carried-on | wc -l) cells of $grid kept in $kept"
+    done
+}
+
+# The run continues from its committed snapshot; its transitions past the medium step are not
+# shipped, so the replay buffer is refilled with the snapshot policy's own steps.
+online() {
+    for task in "$@"; do
+        run=runs/$task-sac
+        refill=""
+        if [ ! -d "$run" ]; then
+            cp -r "models/behaviour/$task/run" "$run"
+            refill="--refill 10000"
+        fi
+        # shellcheck disable=SC2086
+        nohup nice -n 19 "$trainer" collect online-sac --task "$task" --steps 1000000 --seed 0 \
+            --out "$run" --resume $refill >> "$run.log" 2>&1 &
+        echo "carry-on: $task's online run resumed in $run (log $run.log, pid $!)"
+    done
+}
+
+command=${1:-}
+[ $# -gt 0 ] && shift
+case $command in
+datasets | start | keep | online) "$command" "$@" ;;
+*)
+    sed -n '9,12p' "$0" >&2
+    exit 2
+    ;;
+esac
