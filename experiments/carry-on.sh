@@ -11,8 +11,11 @@
 #   experiments/carry-on.sh online TASK...     resume TASK's online SAC run from its snapshot
 #   experiments/carry-on.sh keep GRID...       copy the grids' newly finished cells into the repo
 #
-# GRID is a grid file (experiments/NAME.toml); its cells run under runs/NAME, logged to
-# runs/NAME.log, and are kept in experiments/results/NAME. Everything runs single-threaded
+# GRID is a grid file (experiments/NAME.toml, or experiments/ablation/NAME.toml); its cells
+# run under runs/NAME (runs/ablation/NAME), logged to runs/NAME.log, and are kept in
+# experiments/results/NAME (experiments/results/ablation/NAME). A grid that borrows finished
+# cells from other experiments names their kept folders in `# borrows: DIR` lines (relative
+# to experiments/results/); `start` copies them in before the grid's own. Everything runs single-threaded
 # at `nice -n 19` so builds and tests stay usable. Start a grid once per machine (two runners
 # of one grid would train the same cells): `pgrep -af 'experiment run'` lists what runs.
 set -eu
@@ -22,7 +25,12 @@ trainer=${NUNO_TRAINER:-$(cargo metadata --format-version 1 --no-deps |
 export LD_LIBRARY_PATH="$PWD/.mujoco/lib" MUJOCO_DYNAMIC_LINK_DIR="$PWD/.mujoco/lib" \
     NUNO_MJCF_DIR="$PWD/.mujoco/assets" RAYON_NUM_THREADS="${RAYON_NUM_THREADS:-1}"
 
-stem() { basename "$1" .toml; }
+# A grid's place under experiments/, without `.toml`: names its runs/ and results/ folders.
+stem() {
+    path=${1#./}
+    path=${path#experiments/}
+    echo "${path%.toml}"
+}
 
 # The data files a grid reads (its `file = "../data/NAME.hdf5"` lines), as names.
 grid_datasets() {
@@ -73,6 +81,9 @@ start() {
         out=runs/$(stem "$grid")
         kept=experiments/results/$(stem "$grid")
         mkdir -p "$out"
+        for borrowed in $(sed -n 's|^# borrows: *||p' "$grid"); do
+            cp -r "experiments/results/$borrowed/." "$out/"
+        done
         if [ -d "$kept" ]; then cp -r "$kept/." "$out/"; fi
         touch "$out/.carried-on"
         nohup nice -n 19 "$trainer" experiment run --grid "$grid" --out "$out" \
@@ -93,15 +104,17 @@ keep() {
 }
 
 # The run continues from its committed snapshot; its transitions past the medium step are not
-# shipped, so the replay buffer is refilled with the snapshot policy's own steps.
+# shipped, so the replay buffer is refilled with the snapshot policy's own steps, then and at
+# every later resume of that run (the marker says its transitions have gaps).
 online() {
     for task in "$@"; do
         run=runs/$task-sac
-        refill=""
         if [ ! -d "$run" ]; then
             cp -r "models/behaviour/$task/run" "$run"
-            refill="--refill 10000"
+            touch "$run/.from-snapshot"
         fi
+        refill=""
+        if [ -f "$run/.from-snapshot" ]; then refill="--refill 10000"; fi
         # shellcheck disable=SC2086
         nohup nice -n 19 "$trainer" collect online-sac --task "$task" --steps 1000000 --seed 0 \
             --out "$run" --resume $refill >> "$run.log" 2>&1 &
