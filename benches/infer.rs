@@ -232,6 +232,7 @@ fn main() {
         threshold: None,
         noise_scale: 1.0,
         halt: None,
+        state_box: None,
     };
     println!();
     println!("| 10-step rollout with policy (hopper) | batch | transitions/s |");

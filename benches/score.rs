@@ -124,6 +124,7 @@ fn steps_taken(
         threshold: config.threshold,
         noise_scale: config.noise_scale,
         halt: None,
+        state_box: None,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(SEED);
     let actions = RolloutActions::Sequence(candidates);

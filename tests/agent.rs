@@ -6,7 +6,7 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 use nuno::agent::{
     ActorConfig, LoopContext, MopoSettings, PRESETS, PolicyLoopConfig, PolicyTraining,
-    PortableActor, RolloutActions, RolloutConfig, Sac, SacConfig, StepOutcome, preset,
+    PortableActor, RolloutActions, RolloutConfig, Sac, SacConfig, StateBox, StepOutcome, preset,
     rollout_model,
 };
 use nuno::artifact::{
@@ -279,6 +279,7 @@ fn a_diverging_model_ends_its_rollouts_and_keeps_nothing_that_is_not_finite() {
         threshold: None,
         noise_scale: 1.0,
         halt: None,
+        state_box: None,
     };
     let out = rollout_model(
         &dynamics,
@@ -309,6 +310,69 @@ fn a_diverging_model_ends_its_rollouts_and_keeps_nothing_that_is_not_finite() {
     ];
     assert!(all.iter().all(|v| v.iter().all(|x| x.is_finite())));
     assert!(out.trace.eta.iter().flatten().all(|e| e.is_finite()));
+}
+
+#[test]
+fn the_state_box_widens_the_datas_range_by_its_margin() {
+    // Hand computation: (0, 1) widened by 0.5 × 1, (−2, 2) by 0.5 × 4.
+    let b = StateBox::around(&[(0.0, 1.0), (-2.0, 2.0)], 0.5);
+    assert_eq!(
+        (b.lower.as_slice(), b.upper.as_slice()),
+        (&[-0.5, -4.0][..], &[1.5, 4.0][..])
+    );
+    assert!(b.contains(&[1.5, -4.0]) && b.contains(&[0.2, 0.0]));
+    assert!(!b.contains(&[1.51, 0.0]) && !b.contains(&[0.0, -4.01]));
+}
+
+#[test]
+fn a_rollout_that_leaves_the_state_box_ends_as_diverged_without_the_step() {
+    let (task, spec) = hopper();
+    let rules = Rules::from(TaskRules::new(&task, spec.dt));
+    let dynamics = ConstantEta { spec: spec.clone() };
+    // s' = s + 0.01·0.5 on every dimension: observation 2 reads 0.005, 0.010, 0.015, …
+    let policy = Constant(vec![0.5, -0.5, 0.25], spec.obs_dim);
+    let starts: Vec<f32> = [0.0f32, -1.0]
+        .iter()
+        .flat_map(|&thigh| {
+            let mut start = vec![0.0f32; spec.obs_dim];
+            (start[0], start[2]) = (1.25, thigh);
+            start
+        })
+        .collect();
+    let mut upper = vec![10.0; spec.obs_dim];
+    upper[2] = 0.012;
+    let config = RolloutConfig {
+        horizon: 4,
+        particles: 1,
+        penalty: 1.0,
+        threshold: None,
+        noise_scale: 1.0,
+        halt: None,
+        state_box: Some(StateBox {
+            lower: vec![-10.0; spec.obs_dim],
+            upper,
+        }),
+    };
+    let out = rollout_model(
+        &dynamics,
+        RolloutActions::Policy(&policy),
+        &rules,
+        &starts,
+        &config,
+        &mut ChaCha8Rng::seed_from_u64(0),
+    );
+    // Row 0 keeps its steps to 0.010 and drops the one to 0.015; row 1 (from −1) stays in.
+    assert_eq!(out.trace.kept, vec![2, 4]);
+    assert_eq!(
+        out.trace.outcome,
+        vec![StepOutcome::Diverged, StepOutcome::Continued]
+    );
+    assert_eq!((out.stats.diverged, out.transitions.len()), (1, 6));
+    let o = spec.obs_dim;
+    let thighs: Vec<f32> = (out.transitions.next_observations.chunks_exact(o))
+        .map(|s| s[2])
+        .collect();
+    assert!(thighs.iter().all(|&x| x <= 0.012), "{thighs:?}");
 }
 
 struct Constant(Vec<f32>, usize);
@@ -362,6 +426,7 @@ fn morels_halt_keeps_the_halting_step_as_terminal_less_kappa() {
                 threshold,
                 penalty: 5.0,
             }),
+            state_box: None,
         };
         let mut rng = ChaCha8Rng::seed_from_u64(0);
         rollout_model(
@@ -405,6 +470,7 @@ fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
         threshold: Some(1.0),
         noise_scale: 1.0,
         halt: None,
+        state_box: None,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let out = rollout_model(
@@ -611,6 +677,27 @@ fn hopper_context<'a>(model: &'a nuno::sde::NeuralSde, dataset: &'a Dataset) -> 
         // burn throughout, like the dynamics (the fused path: tests/infer.rs, the CLI test).
         kernel: Kernel::Burn,
         ensemble: None,
+    }
+}
+
+/// The loop's box is the dataset's own range per dimension, widened by the margin.
+#[test]
+fn the_loops_state_box_is_the_datasets_range_widened_by_its_margin() {
+    let (model, metadata) = shipped_model();
+    let dataset = small_dataset();
+    let ctx = hopper_context(&model, &dataset);
+    let mut config = tiny_config(0);
+    config.state_box_margin = Some(0.25);
+    let threshold = (config.threshold_from(metadata.provenance.thresholds.as_ref())).unwrap();
+    let training = PolicyTraining::new(config, &ctx, threshold, &Device::flex()).unwrap();
+    let state_box = training.state_box.expect("a margin makes a box");
+    for j in 0..dataset.obs_dim() {
+        let column: Vec<f32> = dataset.observations.column(j).to_vec();
+        let low = column.iter().copied().fold(f32::INFINITY, f32::min);
+        let high = column.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        let widening = 0.25 * (high - low);
+        assert_eq!(state_box.lower[j], low - widening, "dimension {j}");
+        assert_eq!(state_box.upper[j], high + widening, "dimension {j}");
     }
 }
 
@@ -922,6 +1009,7 @@ fn sde_rollouts_with_truncation_keep_nothing_past_epsilon() {
         threshold: Some(epsilon),
         noise_scale: 1.0,
         halt: None,
+        state_box: None,
     };
     let out = rollout_model(
         &model,
@@ -1084,6 +1172,7 @@ fn cancelled_rollouts_and_evaluations_stop_at_the_next_step() {
         threshold: None,
         noise_scale: 0.0,
         halt: None,
+        state_box: None,
     };
     let dynamics = Kernel::Fused.dynamics(&model);
     let out = rollout_model_or_cancel(
@@ -1148,6 +1237,7 @@ fn rollouts_penalise_eta_but_truncate_on_the_models_own_signal() {
         threshold: Some(2.5),
         noise_scale: 1.0,
         halt: None,
+        state_box: None,
     };
     let out = rollout_model(
         &dynamics,

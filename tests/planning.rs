@@ -412,6 +412,7 @@ fn scores_from_trace(
         threshold: config.threshold,
         noise_scale: config.noise_scale,
         halt: None,
+        state_box: None,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let actions = RolloutActions::Sequence(sequences);

@@ -16,7 +16,7 @@ use crate::shared::cancel::{Cancel, Cancelled};
 use crate::shared::{BatchDynamics, BatchPolicy, ModelStep, TransitionBatch, scaled_noise};
 
 /// How model rollouts run.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RolloutConfig {
     /// h, the rollout length (Table 3).
     pub horizon: usize,
@@ -34,6 +34,43 @@ pub struct RolloutConfig {
     /// row. Absent from configurations written before it (none halted).
     #[serde(default)]
     pub halt: Option<Halt>,
+    /// A step whose next observation leaves this box has diverged (dropped,
+    /// the row ended); `None` judges finiteness alone. Absent from
+    /// configurations written before it (none had a box).
+    #[serde(default)]
+    pub state_box: Option<StateBox>,
+}
+
+/// Per observation dimension, the range a model's state may reach before its
+/// rollout counts as diverged: the data's range widened by a margin. nuno's
+/// guard, neither the paper's nor NUNO's code's (docs/paper-map.md): a drift
+/// that runs away within h steps while η stays bounded (halfcheetah-random's
+/// h = 20) otherwise hands the policy rewards no state of the task can give.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StateBox {
+    pub lower: Vec<f32>,
+    pub upper: Vec<f32>,
+}
+
+impl StateBox {
+    /// `[low − m·(high − low), high + m·(high − low)]` per dimension, from each
+    /// dimension's `(low, high)` over the data.
+    pub fn around(bounds: &[(f32, f32)], margin: f32) -> Self {
+        let widen = |(low, high): (f32, f32), side: f32| {
+            let edge = if side < 0.0 { low } else { high };
+            edge + side * margin * (high - low)
+        };
+        Self {
+            lower: bounds.iter().map(|&b| widen(b, -1.0)).collect(),
+            upper: bounds.iter().map(|&b| widen(b, 1.0)).collect(),
+        }
+    }
+
+    /// Whether every dimension of `observation` lies within the box.
+    pub fn contains(&self, observation: &[f32]) -> bool {
+        (observation.iter().zip(self.lower.iter().zip(&self.upper)))
+            .all(|(x, (low, high))| (low..=high).contains(&x))
+    }
 }
 
 /// MOReL's absorbing HALT state (Kidambi et al., 2020): where the ensemble's
@@ -62,8 +99,9 @@ pub enum StepOutcome {
     Terminal,
     /// Accumulated η passed ε(h, α); the transition is dropped.
     Truncated,
-    /// The model's next state, reward or η was not finite (its drift diverged
-    /// off the data); the transition is dropped.
+    /// The model's next state, reward or η was not finite, or the next state
+    /// left the rollout's [`StateBox`] (its drift diverged off the data); the
+    /// transition is dropped.
     Diverged,
     /// The step's own signal passed MOReL's HALT threshold; the transition is
     /// kept as terminal, its reward less κ.
@@ -264,7 +302,7 @@ impl Rollout {
                 i,
                 (from, action),
                 &mut self.accumulated[r],
-                (config.threshold, config.halt),
+                (config.threshold, config.halt, config.state_box.as_ref()),
             );
             if self.record(r, (from, action), &row, config.penalty) {
                 self.active.push(r);
@@ -319,7 +357,8 @@ pub struct JudgedRow<'a> {
     pub eta: f32,
     /// `Continued` or `Terminal` keep the step; `Truncated` (the accumulated
     /// signal passed ε(h, α)) and `Diverged` (a non-finite next state, reward,
-    /// η or signal: the drift left the data) drop it and end the row.
+    /// η or signal, or a next state outside the box: the drift left the data)
+    /// drop it and end the row.
     pub fate: StepOutcome,
 }
 
@@ -334,7 +373,7 @@ pub fn judge_row<'a>(
     i: usize,
     (observation, action): (&[f32], &[f32]),
     accumulated: &mut f32,
-    (threshold, halt): (Option<f32>, Option<Halt>),
+    (threshold, halt, state_box): (Option<f32>, Option<Halt>, Option<&StateBox>),
 ) -> JudgedRow<'a> {
     let (obs_dim, state_dim) = (dynamics.obs_dim(), dynamics.state_dim());
     let next_state = &step.next_states[i * state_dim..(i + 1) * state_dim];
@@ -345,12 +384,14 @@ pub fn judge_row<'a>(
         rules.reward(observation, action, next_obs)
     };
     let (eta, signal) = (step.eta[i], step.truncation_at(i));
-    let finite = eta.is_finite()
+    // Finite, and inside the box where there is one.
+    let sound = eta.is_finite()
         && signal.is_finite()
         && reward.is_finite()
-        && next_state.iter().all(|x| x.is_finite());
-    let halted = halt.filter(|h| finite && signal > h.threshold);
-    let fate = if !finite {
+        && next_state.iter().all(|x| x.is_finite())
+        && state_box.is_none_or(|b| b.contains(next_obs));
+    let halted = halt.filter(|h| sound && signal > h.threshold);
+    let fate = if !sound {
         StepOutcome::Diverged
     } else if halted.is_some() {
         StepOutcome::Halted

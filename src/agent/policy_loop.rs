@@ -23,7 +23,9 @@ use super::buffer::ReplayBuffer;
 use super::cql::ConservativeTerm;
 use super::fused_sac::FusedSac;
 use super::mobile::BellmanPenalty;
-use super::model_rollout::{Halt, RolloutActions, RolloutConfig, RolloutStats, rollout_model};
+use super::model_rollout::{
+    Halt, RolloutActions, RolloutConfig, RolloutStats, StateBox, rollout_model,
+};
 use super::presets::Preset;
 use super::rambo::{RamboConfig, adversarial_phase, behaviour_clone};
 use super::sac::{CriticBackup, Sac, SacConfig, SacLosses};
@@ -144,6 +146,12 @@ pub struct PolicyLoopConfig {
     /// before this field had none, and load so.
     #[config(default = "None")]
     pub rambo: Option<RamboConfig>,
+    /// A model step whose next observation leaves the dataset's range widened by
+    /// this many times that range on each side ends its rollout as diverged
+    /// ([`StateBox`]); `None` (the paper's and NUNO's code's rollouts) ends
+    /// only non-finite ones. Runs saved before this field had none, and load so.
+    #[config(default = "None")]
+    pub state_box_margin: Option<f64>,
     /// Gradient steps per epoch.
     #[config(default = 1000)]
     pub steps_per_epoch: usize,
@@ -294,7 +302,12 @@ impl PolicyLoopConfig {
     /// The rollouts' settings, sampling at the model's own `noise_scale`: the
     /// run's threshold truncates on the accumulated signal, or (MOReL) halts
     /// on each step's.
-    fn rollout(&self, threshold: Option<f32>, noise_scale: f32) -> RolloutConfig {
+    fn rollout(
+        &self,
+        threshold: Option<f32>,
+        noise_scale: f32,
+        state_box: Option<&StateBox>,
+    ) -> RolloutConfig {
         let halt = (self.halt_penalty).and_then(|penalty| {
             threshold.map(|threshold| Halt {
                 threshold,
@@ -308,6 +321,7 @@ impl PolicyLoopConfig {
             threshold: threshold.filter(|_| halt.is_none()),
             noise_scale,
             halt,
+            state_box: state_box.cloned(),
         }
     }
 }
@@ -441,6 +455,8 @@ pub struct PolicyTraining {
     pub epoch: usize,
     /// ε(h, α), when truncating.
     pub threshold: Option<f32>,
+    /// The box model rollouts stay in, where the config has a margin.
+    pub state_box: Option<StateBox>,
     pub history: Vec<EpochRecord>,
     /// RAMBO: the ensemble as the adversary trains it, and as rollouts step
     /// it (in place of [`LoopContext::dynamics`]).
@@ -503,12 +519,15 @@ impl PolicyTraining {
             * config.particles
             * config.retain_epochs
             * config.model_buffer_factor;
+        let state_box = (config.state_box_margin)
+            .map(|margin| StateBox::around(&ctx.dataset.observation_bounds(), margin as f32));
         Ok(Self {
             model_buffer: ReplayBuffer::new(capacity, obs_dim, act_dim),
             rng: ChaCha8Rng::seed_from_u64(config.seed),
             step: 0,
             epoch: 0,
             threshold,
+            state_box,
             history: Vec::new(),
             adversary,
             sac,
@@ -665,9 +684,11 @@ impl PolicyTraining {
             Some(adversary) => &adversary.dynamics,
             None => ctx.dynamics,
         };
-        let config = self
-            .config
-            .rollout(self.threshold, dynamics.sample_noise_scale());
+        let config = self.config.rollout(
+            self.threshold,
+            dynamics.sample_noise_scale(),
+            self.state_box.as_ref(),
+        );
         let result = rollout_model(
             dynamics,
             RolloutActions::Policy(policy.as_ref()),
@@ -746,6 +767,7 @@ impl PolicyTraining {
             threshold: None,
             noise_scale: ctx.dynamics.sample_noise_scale(),
             halt: None,
+            state_box: None,
         };
         let rollout = rollout_model(
             ctx.dynamics,

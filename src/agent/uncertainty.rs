@@ -83,6 +83,7 @@ pub fn rollout_threshold(
         threshold: None,
         noise_scale: dynamics.sample_noise_scale(),
         halt: None,
+        state_box: None,
     };
     let mut totals = Vec::with_capacity(starts.len() * config.particles);
     for chunk in starts.chunks(config.chunk) {

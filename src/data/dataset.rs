@@ -169,14 +169,12 @@ impl Dataset {
 
     /// Each action dimension's `(low, high)` over the dataset.
     pub fn action_bounds(&self) -> Vec<(f32, f32)> {
-        self.actions
-            .columns()
-            .into_iter()
-            .map(|column| {
-                let low = column.fold(f32::INFINITY, |a, &b| a.min(b));
-                (low, column.fold(low, |a, &b| a.max(b)))
-            })
-            .collect()
+        column_bounds(&self.actions)
+    }
+
+    /// Each observation dimension's `(low, high)` over the dataset.
+    pub fn observation_bounds(&self) -> Vec<(f32, f32)> {
+        column_bounds(&self.observations)
     }
 
     /// The trajectories, in file order.
@@ -368,4 +366,14 @@ fn check_finite(file: &Path, key: &str, values: ArrayView2<f32>) -> Result<(), D
         }),
         None => Ok(()),
     }
+}
+
+/// Each column's `(low, high)`.
+fn column_bounds(values: &Array2<f32>) -> Vec<(f32, f32)> {
+    (values.columns().into_iter())
+        .map(|column| {
+            let low = column.fold(f32::INFINITY, |a, &b| a.min(b));
+            (low, column.fold(low, |a, &b| a.max(b)))
+        })
+        .collect()
 }

@@ -83,6 +83,7 @@ pub fn prediction_error(
             threshold: None,
             noise_scale: dynamics.sample_noise_scale(),
             halt: None,
+            state_box: None,
         },
         &mut rng,
     );
@@ -271,6 +272,7 @@ pub fn exploitation(
             threshold: None,
             noise_scale: dynamics.sample_noise_scale(),
             halt: None,
+            state_box: None,
         },
         &mut rng,
     );

@@ -15,6 +15,7 @@
 //! model_buffer_factor = 10  # fit-policy's --model-buffer-factor (optional; default: the recipe's)
 //! forward_velocity = "mean" # NUNO's fit-policy --forward-velocity (optional; default: the recipe's)
 //! rollout_batch = 5000      # fit-policy's --rollout-batch, every method (optional; default: each method's)
+//! state_box_margin = 0.5    # fit-policy's --state-box-margin, every model-based method (optional; default: none)
 //! mopo_settings = "nuno"    # MOPO's fit-policy --mopo-settings (optional; default "offlinerl-kit")
 //! ensemble_max_epochs = 100 # fit-ensemble's --max-epochs (optional)
 //! policy_steps = 100000     # fit-policy's --steps (the same for every method)
@@ -97,6 +98,10 @@ pub struct Budget {
     /// NUNO's 5000 and MOPO's by its `mopo_settings`).
     #[serde(default)]
     pub rollout_batch: Option<usize>,
+    /// fit-policy's `--state-box-margin`, for every model-based method (default:
+    /// none). Results written before it had none, and read so.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub state_box_margin: Option<f64>,
     /// MOPO's and TATU+MOPO's fit-policy `--mopo-settings` (default: fit-policy's,
     /// OfflineRL-Kit's). The grids run before it existed name "nuno".
     #[serde(default)]
@@ -139,6 +144,13 @@ impl Budget {
         if self.model_buffer_factor == Some(0) {
             return Err("budget: model_buffer_factor = 0 must be at least 1".into());
         }
+        if let Some(m) = self.state_box_margin
+            && !(m.is_finite() && m >= 0.0)
+        {
+            return Err(format!(
+                "budget: state_box_margin = {m} must be finite and at least 0"
+            ));
+        }
         Ok(())
     }
 
@@ -168,6 +180,7 @@ impl Budget {
             steps_per_epoch: default_steps_per_epoch(),
             eval_episodes: default_eval_episodes(),
             rollout_batch: None,
+            state_box_margin: None,
             mopo_settings: None,
             hidden: None,
         }

@@ -207,7 +207,7 @@ impl Step<'_> {
                 &obs[i * obs_dim..(i + 1) * obs_dim],
                 &actions[i * act_dim..(i + 1) * act_dim],
             );
-            // Planners score in the model as it is: no HALT.
+            // Planners score in the model as it is: no HALT, no box.
             let row = judge_row(
                 dynamics,
                 self.rules,
@@ -215,7 +215,7 @@ impl Step<'_> {
                 i,
                 from,
                 &mut accumulated[r],
-                (config.threshold, None),
+                (config.threshold, None, None),
             );
             let tally = &mut tallies[r];
             tally.outcome = row.fate;

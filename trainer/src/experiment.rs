@@ -464,6 +464,7 @@ fn policy_args(cell: &Cell, b: &Budget, model: Option<PathBuf>, dir: PathBuf) ->
     }
     args.rollout_batch = b.rollout_batch;
     args.model_buffer_factor = b.model_buffer_factor;
+    args.state_box_margin = b.state_box_margin;
     if cell.method.is_mopo() {
         args.mopo_settings = b.mopo_settings;
     } else if !cell.method.uses_ensemble() {

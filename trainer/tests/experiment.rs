@@ -241,6 +241,7 @@ fn bad_grids_are_refused_before_anything_runs() {
         ("model_eta_losses = \"codes\"", "model_eta_losses"),
         ("threshold_max_margin = 0.9", "threshold_max_margin = 0.9"),
         ("model_drift_inputs = \"angles\"", "model_drift_inputs"),
+        ("state_box_margin = -0.5", "state_box_margin = -0.5"),
     ]
     .into_iter()
     .enumerate()

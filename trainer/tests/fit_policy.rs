@@ -144,6 +144,8 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
     );
     let err = fails(&fit(20, &["--model-buffer-factor", "0"]));
     assert!(err.contains("--model-buffer-factor"), "{err}");
+    let err = fails(&fit(20, &["--state-box-margin", "NaN"]));
+    assert!(err.contains("--state-box-margin"), "{err}");
     let err = fails(&fit(20, &["--forward-velocity", "sideways"]));
     assert!(
         err.contains("unknown forward velocity \"sideways\""),

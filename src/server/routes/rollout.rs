@@ -192,6 +192,7 @@ pub async fn rollout(
         threshold,
         noise_scale,
         halt: None,
+        state_box: None,
     };
     let (seed, mode) = (r.seed, r.policy_mode);
     let worker = model.clone();

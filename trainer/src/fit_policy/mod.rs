@@ -112,6 +112,11 @@ pub struct Args {
     /// step) or mean (over the step, NUNO's code) (default: the recipe's).
     #[arg(long)]
     pub forward_velocity: Option<ForwardVelocity>,
+    /// End a model rollout as diverged once its state leaves the dataset's range
+    /// widened by this many times that range on each side (nuno's guard; default:
+    /// none, as the paper and NUNO's code).
+    #[arg(long)]
+    pub state_box_margin: Option<f64>,
     /// β, the real-data fraction of each SAC batch (default: the method's:
     /// 0.05, combo 0.5).
     #[arg(long)]
@@ -410,6 +415,7 @@ impl Args {
             .unwrap_or(config.model_buffer_factor);
         config.forward_velocity = self.forward_velocity.unwrap_or(config.forward_velocity);
         config.real_ratio = self.real_ratio.unwrap_or(config.real_ratio);
+        config.state_box_margin = self.state_box_margin;
         config.steps_per_epoch = self.steps_per_epoch;
         config.epochs = self.steps.div_ceil(self.steps_per_epoch);
         config.eval_episodes = self.eval_episodes;
@@ -468,6 +474,12 @@ impl Args {
             self.model_buffer_factor != Some(0),
             "--model-buffer-factor must be at least 1"
         );
+        if let Some(m) = self.state_box_margin {
+            anyhow::ensure!(
+                m.is_finite() && m >= 0.0,
+                "--state-box-margin must be finite and at least 0, got {m}"
+            );
+        }
         if let Some(p) = self.pessimism {
             anyhow::ensure!(
                 p.is_finite() && p > 0.0,

@@ -58,6 +58,7 @@ impl Args {
             (self.real_ratio.is_some(), "--real-ratio"),
             (self.combo_weight.is_some(), "--combo-weight"),
             (self.halt_penalty.is_some(), "--halt-penalty"),
+            (self.state_box_margin.is_some(), "--state-box-margin"),
         ];
         if let Some((_, flag)) = in_model_flags.iter().find(|(given, _)| *given) {
             anyhow::bail!(
