@@ -226,7 +226,7 @@ const CELL_POLL: std::time::Duration = std::time::Duration::from_millis(200);
 
 /// Runs the cells as child processes, at most `jobs` at a time.
 fn run_local(grid: &GridArgs, cells: &[Cell], jobs: usize) -> anyhow::Result<()> {
-    let exe = std::env::current_exe().context("locating nuno-trainer")?;
+    let exe = crate::run_record::running_binary()?;
     let mut queue = cells.iter();
     let mut running: Vec<(Cell, Child, Instant)> = Vec::new();
     let mut failed = Vec::new();
@@ -239,7 +239,13 @@ fn run_local(grid: &GridArgs, cells: &[Cell], jobs: usize) -> anyhow::Result<()>
                 .create(true)
                 .append(true)
                 .open(dir.join("log.txt"))?;
-            let child = Process::new(&exe)
+            let mut command = Process::new(&exe);
+            // The cell's record names the binary as the runner was invoked.
+            #[cfg(unix)]
+            if let Some(name) = std::env::args_os().next() {
+                std::os::unix::process::CommandExt::arg0(&mut command, name);
+            }
+            let child = command
                 .args(["experiment", "run-cell", "--cell", &cell.index.to_string()])
                 .arg("--grid")
                 .arg(&grid.grid)

@@ -36,6 +36,18 @@ struct RunRecord<'a, P> {
     plan: &'a P,
 }
 
+/// The binary this process runs, to hash or to start again: on Linux
+/// `/proc/self/exe`, which still opens it after a rebuild replaced its file
+/// (where [`std::env::current_exe`] names a path ending in " (deleted)"), so a
+/// grid's cells keep running the build that started them.
+pub fn running_binary() -> anyhow::Result<PathBuf> {
+    let own = Path::new("/proc/self/exe");
+    if own.exists() {
+        return Ok(own.to_path_buf());
+    }
+    std::env::current_exe().context("locating the running binary")
+}
+
 /// Writes `out/run.json` for `plan` (atomically) and prints it.
 pub fn write_run_record<P: Serialize>(
     out: &Path,
@@ -43,7 +55,7 @@ pub fn write_run_record<P: Serialize>(
     plan: &P,
     datasets: &[&Path],
 ) -> anyhow::Result<()> {
-    let exe = std::env::current_exe().context("locating the running binary")?;
+    let exe = running_binary()?;
     let datasets = datasets
         .iter()
         .map(|&path| {

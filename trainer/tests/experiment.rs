@@ -281,6 +281,39 @@ fn bad_grids_are_refused_before_anything_runs() {
 
 /// A grid over a 300-transition hopper file: dataset `a` (nuno and mopo,
 /// seeds 0 and 1) on it, dataset `b` (nuno, seed 7) on `b_file`.
+/// A rebuild replaces the binary under a running sweep (cargo unlinks the old
+/// file): the runner still starts its cells, and each records its build, through
+/// `/proc/self/exe`, where the path it was started from names a deleted file.
+#[test]
+#[cfg(target_os = "linux")]
+fn a_sweep_outlives_a_rebuild_that_replaces_its_binary() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let grid = hopper_grid(dir, "[\"bc\"]", "[0]");
+    let binary = dir.join("nuno-trainer");
+    std::fs::copy(env!("CARGO_BIN_EXE_nuno-trainer"), &binary).unwrap();
+    let log = std::fs::File::create(dir.join("runner.log")).unwrap();
+    let mut runner = Command::new(&binary)
+        .args(["experiment", "run", "--grid", &grid, "--out"])
+        .arg(dir.join("out"))
+        .stdout(log.try_clone().unwrap())
+        .stderr(log)
+        .spawn()
+        .unwrap();
+    // Spawning returns once the runner runs the binary, so the file can go.
+    std::fs::remove_file(&binary).unwrap();
+    let status = common::peer::bounded::wait_within(&mut runner, "the grid's runner");
+    let log = std::fs::read_to_string(dir.join("runner.log")).unwrap();
+    assert!(status.success(), "{log}");
+    let cell = dir.join("out/hopper-random/bc/seed-0");
+    assert!(cell.join("result.json").is_file(), "{log}");
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(cell.join("policy/run.json")).unwrap())
+            .unwrap();
+    let built = nuno::artifact::sha256_file(Path::new(env!("CARGO_BIN_EXE_nuno-trainer"))).unwrap();
+    assert_eq!(record["binary_sha256"].as_str(), Some(built.as_str()));
+}
+
 fn two_dataset_grid(dir: &Path, b_file: &str) -> PathBuf {
     generate_hopper(&s(&dir.join("hopper.hdf5")), 300, 0);
     let rows = [
