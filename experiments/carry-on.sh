@@ -82,6 +82,10 @@ start() {
         kept=experiments/results/$(stem "$grid")
         mkdir -p "$out"
         for borrowed in $(sed -n 's|^# borrows: *||p' "$grid"); do
+            if [ ! -d "experiments/results/$borrowed" ]; then
+                echo "carry-on: $grid borrows experiments/results/$borrowed, which is not there" >&2
+                return 1
+            fi
             cp -r "experiments/results/$borrowed/." "$out/"
         done
         if [ -d "$kept" ]; then cp -r "$kept/." "$out/"; fi
