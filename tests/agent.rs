@@ -256,13 +256,12 @@ impl BatchDynamics for DivergesWhereMarked {
 
 #[test]
 fn a_diverging_model_ends_its_rollouts_and_keeps_nothing_that_is_not_finite() {
-    let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(&task, spec.dt));
+    let hopper = HopperRollouts::new();
+    let spec = &hopper.spec;
     let dynamics = DivergesWhereMarked {
         inner: ConstantEta { spec: spec.clone() },
         calls: Default::default(),
     };
-    let policy = Constant(vec![0.5, -0.5, 0.25], spec.obs_dim);
     // Upright hoppers; even rows marked, rows 0, 4 higher up (NaN states).
     let starts: Vec<f32> = (0..8)
         .flat_map(|row| {
@@ -272,23 +271,7 @@ fn a_diverging_model_ends_its_rollouts_and_keeps_nothing_that_is_not_finite() {
             start
         })
         .collect();
-    let config = RolloutConfig {
-        horizon: 4,
-        particles: 1,
-        penalty: 1.0,
-        threshold: None,
-        noise_scale: 1.0,
-        halt: None,
-        state_box: None,
-    };
-    let out = rollout_model(
-        &dynamics,
-        RolloutActions::Policy(&policy),
-        &rules,
-        &starts,
-        &config,
-        &mut ChaCha8Rng::seed_from_u64(0),
-    );
+    let out = hopper.roll(&dynamics, &starts, &plain_rollouts(4, 1, 1.0));
     let diverged = StepOutcome::Diverged;
     for row in 0..8 {
         if row % 2 == 0 {
@@ -326,11 +309,10 @@ fn the_state_box_widens_the_datas_range_by_its_margin() {
 
 #[test]
 fn a_rollout_that_leaves_the_state_box_ends_as_diverged_without_the_step() {
-    let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(&task, spec.dt));
+    let hopper = HopperRollouts::new();
+    let spec = &hopper.spec;
     let dynamics = ConstantEta { spec: spec.clone() };
     // s' = s + 0.01·0.5 on every dimension: observation 2 reads 0.005, 0.010, 0.015, …
-    let policy = Constant(vec![0.5, -0.5, 0.25], spec.obs_dim);
     let starts: Vec<f32> = [0.0f32, -1.0]
         .iter()
         .flat_map(|&thigh| {
@@ -342,25 +324,13 @@ fn a_rollout_that_leaves_the_state_box_ends_as_diverged_without_the_step() {
     let mut upper = vec![10.0; spec.obs_dim];
     upper[2] = 0.012;
     let config = RolloutConfig {
-        horizon: 4,
-        particles: 1,
-        penalty: 1.0,
-        threshold: None,
-        noise_scale: 1.0,
-        halt: None,
         state_box: Some(StateBox {
             lower: vec![-10.0; spec.obs_dim],
             upper,
         }),
+        ..plain_rollouts(4, 1, 1.0)
     };
-    let out = rollout_model(
-        &dynamics,
-        RolloutActions::Policy(&policy),
-        &rules,
-        &starts,
-        &config,
-        &mut ChaCha8Rng::seed_from_u64(0),
-    );
+    let out = hopper.roll(&dynamics, &starts, &config);
     // Row 0 keeps its steps to 0.010 and drops the one to 0.015; row 1 (from −1) stays in.
     assert_eq!(out.trace.kept, vec![2, 4]);
     assert_eq!(
@@ -402,41 +372,87 @@ fn hopper() -> (TaskConfig, DynamicsSpec) {
     (task, spec)
 }
 
+/// The action of every hopper rollout test's policy.
+const HOPPER_ACTION: [f32; 3] = [0.5, -0.5, 0.25];
+
+/// What the hopper rollout tests share: the task's rules and a policy that
+/// always takes [`HOPPER_ACTION`].
+struct HopperRollouts {
+    spec: DynamicsSpec,
+    rules: Rules,
+    policy: Constant,
+}
+
+impl HopperRollouts {
+    fn new() -> Self {
+        let (task, spec) = hopper();
+        Self {
+            rules: Rules::from(TaskRules::new(&task, spec.dt)),
+            policy: Constant(HOPPER_ACTION.to_vec(), spec.obs_dim),
+            spec,
+        }
+    }
+
+    /// An upright hopper (z = 1.25, everything else 0).
+    fn upright(&self) -> Vec<f32> {
+        let mut start = vec![0.0f32; self.spec.obs_dim];
+        start[0] = 1.25;
+        start
+    }
+
+    fn roll(
+        &self,
+        dynamics: &dyn BatchDynamics,
+        starts: &[f32],
+        config: &RolloutConfig,
+    ) -> nuno::agent::ModelRollout {
+        self.roll_with(dynamics, starts, config, &mut ChaCha8Rng::seed_from_u64(0))
+    }
+
+    fn roll_with(
+        &self,
+        dynamics: &dyn BatchDynamics,
+        starts: &[f32],
+        config: &RolloutConfig,
+        rng: &mut ChaCha8Rng,
+    ) -> nuno::agent::ModelRollout {
+        let actions = RolloutActions::Policy(&self.policy);
+        rollout_model(dynamics, actions, &self.rules, starts, config, rng)
+    }
+}
+
+/// Rollouts with no truncation, HALT or state box, at the sampler's own noise.
+fn plain_rollouts(horizon: usize, particles: usize, penalty: f64) -> RolloutConfig {
+    RolloutConfig {
+        horizon,
+        particles,
+        penalty,
+        threshold: None,
+        noise_scale: 1.0,
+        halt: None,
+        state_box: None,
+    }
+}
+
 /// MOReL's HALT compares each step's own signal (η = 0.3 here), not the sum:
 /// under 0.35 nothing halts though the sum passes it; under 0.25 the first
 /// step halts, kept as terminal with its reward less κ.
 #[test]
 fn morels_halt_keeps_the_halting_step_as_terminal_less_kappa() {
-    let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(&task, spec.dt));
+    let hopper = HopperRollouts::new();
+    let (spec, rules) = (&hopper.spec, &hopper.rules);
     let dynamics = ConstantEta { spec: spec.clone() };
-    let action = [0.5, -0.5, 0.25];
-    let policy = Constant(action.to_vec(), spec.obs_dim);
-    let mut start = vec![0.0f32; spec.obs_dim];
-    start[0] = 1.25;
+    let start = hopper.upright();
     let starts = start.repeat(4);
     let run = |threshold: f32| {
         let config = RolloutConfig {
-            horizon: 10,
-            particles: 1,
-            penalty: 0.0,
-            threshold: None,
-            noise_scale: 1.0,
             halt: Some(nuno::agent::Halt {
                 threshold,
                 penalty: 5.0,
             }),
-            state_box: None,
+            ..plain_rollouts(10, 1, 0.0)
         };
-        let mut rng = ChaCha8Rng::seed_from_u64(0);
-        rollout_model(
-            &dynamics,
-            RolloutActions::Policy(&policy),
-            &rules,
-            &starts,
-            &config,
-            &mut rng,
-        )
+        hopper.roll(&dynamics, &starts, &config)
     };
     let out = run(0.35);
     assert_eq!(out.transitions.len(), 40);
@@ -448,39 +464,24 @@ fn morels_halt_keeps_the_halting_step_as_terminal_less_kappa() {
     assert_eq!(out.transitions.terminals, vec![1.0; 4]);
     for i in 0..4 {
         let next = &out.transitions.next_observations[i * spec.obs_dim..(i + 1) * spec.obs_dim];
-        let reward = rules.reward(&start, &action, next);
+        let reward = rules.reward(&start, &HOPPER_ACTION, next);
         assert!((out.transitions.rewards[i] - (reward - 5.0)).abs() < 1e-5);
     }
 }
 
 #[test]
 fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
-    let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(&task, spec.dt));
+    let hopper = HopperRollouts::new();
+    let (spec, rules) = (&hopper.spec, &hopper.rules);
     let dynamics = ConstantEta { spec: spec.clone() };
-    let policy = Constant(vec![0.5, -0.5, 0.25], spec.obs_dim);
-    // An upright hopper: z = 1.25, everything else 0.
-    let mut start = vec![0.0f32; spec.obs_dim];
-    start[0] = 1.25;
+    let start = hopper.upright();
     let starts = start.repeat(4);
     let config = RolloutConfig {
-        horizon: 10,
-        particles: 2,
-        penalty: 2.0,
         threshold: Some(1.0),
-        noise_scale: 1.0,
-        halt: None,
-        state_box: None,
+        ..plain_rollouts(10, 2, 2.0)
     };
     let mut rng = ChaCha8Rng::seed_from_u64(0);
-    let out = rollout_model(
-        &dynamics,
-        RolloutActions::Policy(&policy),
-        &rules,
-        &starts,
-        &config,
-        &mut rng,
-    );
+    let out = hopper.roll_with(&dynamics, &starts, &config, &mut rng);
     // η = 0.3 per step: 0.3, 0.6, 0.9 are kept, 1.2 > ε truncates.
     assert_eq!(out.trace.rows, 8);
     assert_eq!(out.trace.kept, vec![3; 8]);
@@ -501,7 +502,7 @@ fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
     for i in 0..out.transitions.len() {
         let next = &out.transitions.next_observations[i * spec.obs_dim..(i + 1) * spec.obs_dim];
         let obs = &out.transitions.observations[i * spec.obs_dim..(i + 1) * spec.obs_dim];
-        let reward = rules.reward(obs, &[0.5, -0.5, 0.25], next);
+        let reward = rules.reward(obs, &HOPPER_ACTION, next);
         assert!((out.transitions.rewards[i] - (reward - 0.6)).abs() < 1e-5);
         assert_eq!(out.transitions.terminals[i], 0.0);
     }
@@ -510,25 +511,11 @@ fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
         threshold: None,
         ..config
     };
-    let out = rollout_model(
-        &dynamics,
-        RolloutActions::Policy(&policy),
-        &rules,
-        &starts,
-        &free,
-        &mut rng,
-    );
+    let out = hopper.roll_with(&dynamics, &starts, &free, &mut rng);
     assert_eq!(out.transitions.len(), 80);
     let mut fallen = start.clone();
     fallen[0] = 0.5;
-    let out = rollout_model(
-        &dynamics,
-        RolloutActions::Policy(&policy),
-        &rules,
-        &fallen,
-        &free,
-        &mut rng,
-    );
+    let out = hopper.roll_with(&dynamics, &fallen, &free, &mut rng);
     assert_eq!(out.trace.kept, vec![1, 1]);
     assert_eq!(out.transitions.terminals, vec![1.0, 1.0]);
     assert_eq!(out.stats.terminated, 2);
@@ -1222,31 +1209,17 @@ impl BatchDynamics for TwoSignals {
 
 #[test]
 fn rollouts_penalise_eta_but_truncate_on_the_models_own_signal() {
-    let (task, spec) = hopper();
-    let rules = Rules::from(TaskRules::new(&task, spec.dt));
+    let hopper = HopperRollouts::new();
+    let (spec, rules) = (&hopper.spec, &hopper.rules);
     let dynamics = TwoSignals {
         inner: ConstantEta { spec: spec.clone() },
     };
-    let policy = Constant(vec![0.5, -0.5, 0.25], spec.obs_dim);
-    let mut start = vec![0.0f32; spec.obs_dim];
-    start[0] = 1.25;
     let config = RolloutConfig {
-        horizon: 10,
-        particles: 1,
-        penalty: 2.0,
         threshold: Some(2.5),
-        noise_scale: 1.0,
-        halt: None,
-        state_box: None,
+        ..plain_rollouts(10, 1, 2.0)
     };
-    let out = rollout_model(
-        &dynamics,
-        RolloutActions::Policy(&policy),
-        &rules,
-        &start.repeat(3),
-        &config,
-        &mut ChaCha8Rng::seed_from_u64(0),
-    );
+    let start = hopper.upright();
+    let out = hopper.roll(&dynamics, &start.repeat(3), &config);
     // The signal adds 1.0 a step: 1, 2 kept, 3 > 2.5 truncates (η's 0.3s would allow 8).
     assert_eq!(out.trace.kept, vec![2; 3]);
     assert_eq!(out.stats.truncated, 3);
@@ -1256,7 +1229,7 @@ fn rollouts_penalise_eta_but_truncate_on_the_models_own_signal() {
         let at = i * spec.obs_dim..(i + 1) * spec.obs_dim;
         let reward = rules.reward(
             &out.transitions.observations[at.clone()],
-            &[0.5, -0.5, 0.25],
+            &HOPPER_ACTION,
             &out.transitions.next_observations[at],
         );
         assert!((out.transitions.rewards[i] - (reward - 0.6)).abs() < 1e-5);
@@ -1264,12 +1237,12 @@ fn rollouts_penalise_eta_but_truncate_on_the_models_own_signal() {
 
     // NUNO^al: the same model reporting ‖σ‖ = 5 as η penalises by λ·5.
     let aleatoric = nuno::agent::AleatoricAsEta::new(&dynamics.inner);
-    let step = aleatoric.step(&start, &[0.5, -0.5, 0.25], &vec![0.0; spec.obs_dim]);
+    let step = aleatoric.step(&start, &HOPPER_ACTION, &vec![0.0; spec.obs_dim]);
     assert_eq!(step.eta, vec![0.0], "ConstantEta's σ is zero");
     let aleatoric = nuno::agent::AleatoricAsEta::new(&dynamics);
     let step = aleatoric.step(
         &start.repeat(2),
-        &[0.5, -0.5, 0.25].repeat(2),
+        &HOPPER_ACTION.repeat(2),
         &vec![0.0; 2 * spec.obs_dim],
     );
     assert_eq!(step.eta, vec![5.0, 5.0]);

@@ -41,6 +41,22 @@ pub struct RolloutConfig {
     pub state_box: Option<StateBox>,
 }
 
+impl RolloutConfig {
+    /// The model's own rollouts, as the analyses and thresholds measure them:
+    /// no penalty, truncation, HALT or box, at the model's sampling noise.
+    pub fn unpenalised(horizon: usize, particles: usize, dynamics: &dyn BatchDynamics) -> Self {
+        Self {
+            horizon,
+            particles,
+            penalty: 0.0,
+            threshold: None,
+            noise_scale: dynamics.sample_noise_scale(),
+            halt: None,
+            state_box: None,
+        }
+    }
+}
+
 /// Per observation dimension, the range a model's state may reach before its
 /// rollout counts as diverged: the data's range widened by a margin. nuno's
 /// guard, neither the paper's nor NUNO's code's (docs/paper-map.md): a drift
@@ -56,13 +72,15 @@ impl StateBox {
     /// `[low − m·(high − low), high + m·(high − low)]` per dimension, from each
     /// dimension's `(low, high)` over the data.
     pub fn around(bounds: &[(f32, f32)], margin: f32) -> Self {
-        let widen = |(low, high): (f32, f32), side: f32| {
-            let edge = if side < 0.0 { low } else { high };
-            edge + side * margin * (high - low)
-        };
         Self {
-            lower: bounds.iter().map(|&b| widen(b, -1.0)).collect(),
-            upper: bounds.iter().map(|&b| widen(b, 1.0)).collect(),
+            lower: bounds
+                .iter()
+                .map(|&(low, high)| low - margin * (high - low))
+                .collect(),
+            upper: bounds
+                .iter()
+                .map(|&(low, high)| high + margin * (high - low))
+                .collect(),
         }
     }
 

@@ -760,15 +760,7 @@ impl PolicyTraining {
             })
             .collect();
         debug_assert_eq!(starts.len(), self.config.eval_episodes * obs_dim);
-        let config = RolloutConfig {
-            horizon: self.config.model_eval_horizon,
-            particles: 1,
-            penalty: 0.0,
-            threshold: None,
-            noise_scale: ctx.dynamics.sample_noise_scale(),
-            halt: None,
-            state_box: None,
-        };
+        let config = RolloutConfig::unpenalised(self.config.model_eval_horizon, 1, ctx.dynamics);
         let rollout = rollout_model(
             ctx.dynamics,
             RolloutActions::Policy(policy),

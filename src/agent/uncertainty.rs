@@ -76,15 +76,7 @@ pub fn rollout_threshold(
         .map_err(|e| AgentError::Threshold(format!("windows of length {horizon}: {e}")))?;
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let starts = sampler.draw_distinct(config.max_windows, &mut rng);
-    let rollout = RolloutConfig {
-        horizon,
-        particles: config.particles,
-        penalty: 0.0,
-        threshold: None,
-        noise_scale: dynamics.sample_noise_scale(),
-        halt: None,
-        state_box: None,
-    };
+    let rollout = RolloutConfig::unpenalised(horizon, config.particles, dynamics);
     let mut totals = Vec::with_capacity(starts.len() * config.particles);
     for chunk in starts.chunks(config.chunk) {
         let windows = sampler.gather(chunk);

@@ -13,8 +13,8 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::ExperimentError;
-use crate::agent::{RolloutActions, RolloutConfig, rollout_model};
-use crate::data::{Dataset, WindowSampler};
+use crate::agent::{RolloutActions, RolloutConfig, RolloutTrace, rollout_model};
+use crate::data::{Dataset, WindowBatch, WindowSampler};
 use crate::envs::{MujocoTask, Rules, TaskConfig};
 use crate::shared::{BatchDynamics, BatchPolicy, SeedStream, derive_seed};
 
@@ -76,49 +76,57 @@ pub fn prediction_error(
         RolloutActions::Sequence(&windows.actions),
         rules,
         &windows.first_states(),
-        &RolloutConfig {
-            horizon: config.horizon,
-            particles: config.particles,
-            penalty: 0.0,
-            threshold: None,
-            noise_scale: dynamics.sample_noise_scale(),
-            halt: None,
-            state_box: None,
-        },
+        &RolloutConfig::unpenalised(config.horizon, config.particles, dynamics),
         &mut rng,
     );
-    let trace = &rollout.trace;
-    let mut squared = vec![0.0f64; config.horizon];
-    let mut reached = vec![0usize; config.horizon];
-    let window_width = (config.horizon + 1) * obs_dim;
-    for w in 0..starts.len() {
-        let rows = w * config.particles..(w + 1) * config.particles;
-        for k in 0..config.horizon {
-            // The mean over the particles that got this far.
-            let alive: Vec<usize> = rows.clone().filter(|&r| trace.kept[r] > k).collect();
-            if alive.is_empty() {
-                break;
-            }
-            let at = w * window_width + (k + 1) * obs_dim;
-            let truth = &windows.states[at..at + obs_dim];
-            let error: f64 = (0..obs_dim)
-                .map(|d| {
-                    let mean = alive
-                        .iter()
+    let errors = StepErrors::of(&rollout.trace, &windows, scale, config.particles);
+    Ok(errors.rmse())
+}
+
+/// Per horizon step, the summed scaled squared error of the windows' mean
+/// predictions and how many windows reached the step.
+struct StepErrors {
+    squared: Vec<f64>,
+    reached: Vec<usize>,
+}
+
+impl StepErrors {
+    fn of(trace: &RolloutTrace, windows: &WindowBatch, scale: &[f32], particles: usize) -> Self {
+        let (horizon, obs_dim) = (windows.horizon, scale.len());
+        let mut errors = Self {
+            squared: vec![0.0; horizon],
+            reached: vec![0; horizon],
+        };
+        let window_width = (horizon + 1) * obs_dim;
+        for w in 0..windows.batch {
+            let rows = w * particles..(w + 1) * particles;
+            for k in 0..horizon {
+                // The mean over the particles that got this far.
+                let alive: Vec<usize> = rows.clone().filter(|&r| trace.kept[r] > k).collect();
+                if alive.is_empty() {
+                    break;
+                }
+                let at = w * window_width + (k + 1) * obs_dim;
+                let truth = &windows.states[at..at + obs_dim];
+                let predicted = |d: usize| {
+                    let sum: f64 = (alive.iter())
                         .map(|&r| f64::from(trace.observations[r][(k + 1) * obs_dim + d]))
-                        .sum::<f64>()
-                        / alive.len() as f64;
-                    ((mean - f64::from(truth[d])) / f64::from(scale[d])).powi(2)
-                })
-                .sum();
-            squared[k] += error / obs_dim as f64;
-            reached[k] += 1;
+                        .sum();
+                    sum / alive.len() as f64
+                };
+                let error: f64 = (0..obs_dim)
+                    .map(|d| ((predicted(d) - f64::from(truth[d])) / f64::from(scale[d])).powi(2))
+                    .sum();
+                errors.squared[k] += error / obs_dim as f64;
+                errors.reached[k] += 1;
+            }
         }
+        errors
     }
-    Ok(PredictionError {
-        rmse: squared
-            .iter()
-            .zip(&reached)
+
+    /// RMSE per step over the windows that reached it (NaN where none did).
+    fn rmse(self) -> PredictionError {
+        let rmse = (self.squared.iter().zip(&self.reached))
             .map(|(s, &n)| {
                 if n == 0 {
                     f64::NAN
@@ -126,9 +134,12 @@ pub fn prediction_error(
                     (s / n as f64).sqrt()
                 }
             })
-            .collect(),
-        windows: reached,
-    })
+            .collect();
+        PredictionError {
+            rmse,
+            windows: self.reached,
+        }
+    }
 }
 
 /// Whose actions the uncertainty is probed at.
