@@ -200,7 +200,7 @@ fn run_grid(args: RunArgs) -> anyhow::Result<()> {
     let mut pending = Vec::new();
     for cell in &cells {
         if !matches!(
-            cell_status(&args.grid.out, cell, &grid.budget)?,
+            cell_status(&args.grid.out, cell, &grid.budget_for(cell))?,
             CellStatus::Done(_)
         ) {
             pending.push(cell.clone());
@@ -365,7 +365,7 @@ fn run_cell(args: CellArgs) -> anyhow::Result<()> {
             args.cell
         )
     })?;
-    let (root, budget) = (&args.grid.out, &grid.budget);
+    let (root, budget) = (&args.grid.out, &grid.budget_for(cell));
     if let CellStatus::Done(_) = cell_status(root, cell, budget)? {
         println!("{} is finished", cell.id());
         return Ok(());
@@ -486,7 +486,7 @@ fn status(args: StatusArgs) -> anyhow::Result<()> {
     let cells = select.select(&cells)?;
     let mut statuses = Vec::new();
     for cell in &cells {
-        let status = cell_status(&args.out, cell, &grid.budget)?;
+        let status = cell_status(&args.out, cell, &grid.budget_for(cell))?;
         let state = match &status {
             CellStatus::Done(r) => format!(
                 "done: best {:.1}, final {:.1} ({} steps)",
@@ -519,7 +519,7 @@ fn report(args: GridArgs) -> anyhow::Result<()> {
     let (grid, cells) = Grid::read(&args.grid)?;
     let mut results: Vec<CellResult> = Vec::new();
     for cell in &cells {
-        if let CellStatus::Done(r) = cell_status(&args.out, cell, &grid.budget)? {
+        if let CellStatus::Done(r) = cell_status(&args.out, cell, &grid.budget_for(cell))? {
             results.push(*r);
         }
     }
@@ -645,7 +645,7 @@ mod tests {
             system: None,
             neorl: false,
         };
-        let runner = model_args(&cell, &grid.budget, data, "m".into());
+        let runner = model_args(&cell, &grid.budget_for(&cell), data, "m".into());
         let typed = [
             "t",
             "fit-model",
@@ -699,7 +699,7 @@ mod tests {
         ] {
             let (grid, cell) = cell_of(dir.path(), method, budget);
             let file = cell.file.display().to_string();
-            let runner = policy_args(&cell, &grid.budget, Some("m".into()), "c".into());
+            let runner = policy_args(&cell, &grid.budget_for(&cell), Some("m".into()), "c".into());
             let mut typed = vec![
                 "t",
                 "fit-policy",

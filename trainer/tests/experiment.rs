@@ -603,8 +603,12 @@ fn methods_in_the_same_kind_of_model_share_one_fit_per_seed() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let grid = hopper_grid(dir, "[\"nuno\", \"nuno-al\"]", "[0]");
-    // The grid's model options reach the fit.
+    // The grid's model options reach the fit, the row's over the budget's.
     add_to_budget(Path::new(&grid), "model_likelihood = \"data\"");
+    add_to_budget(Path::new(&grid), "model_drift_inputs = \"z-scores\"");
+    let text = std::fs::read_to_string(&grid).unwrap();
+    let row = text.replace("methods = ", "model_drift_inputs = \"pose\"\nmethods = ");
+    std::fs::write(&grid, row).unwrap();
     let out = dir.join("out");
     // Both cells start together; one fits the SDE, the other waits for it.
     let run = ok(&[
@@ -622,6 +626,12 @@ fn methods_in_the_same_kind_of_model_share_one_fit_per_seed() {
     let metadata: serde_json::Value =
         serde_json::from_slice(&std::fs::read(model.join("model.json")).unwrap()).unwrap();
     assert_eq!(metadata["fit"]["loss"]["likelihood"], "data");
+    assert_eq!(metadata["model"]["drift_inputs"], "pose");
+    let result = |m: &str| -> serde_json::Value {
+        let file = out.join(format!("hopper-random/{m}/seed-0/result.json"));
+        serde_json::from_slice(&std::fs::read(file).unwrap()).unwrap()
+    };
+    assert_eq!(result("nuno")["budget"]["model_drift_inputs"], "pose");
     let fitted = ["nuno", "nuno-al"]
         .iter()
         .filter(|m| {
