@@ -20,9 +20,9 @@ pub use grid::{Budget, Cell, CellSelection, Grid, GridDataset, MopoRow};
 pub use linear_model::LinearModel;
 pub use paper_tables::{PaperScore, paper_layout_table, paper_score};
 pub use results::{
-    CellResult, CellStatus, MeanCurve, Summary, cell_dir, cell_status, collect_results,
-    markdown_table, mean_curves, policy_time_left, read_result, results_csv, summarize,
-    summarize_run, write_result,
+    CellResult, CellStatus, MeanCurve, Summary, cell_dir, cell_status, check_fitted_sde,
+    collect_results, markdown_table, mean_curves, policy_time_left, read_result, results_csv,
+    summarize, summarize_run, write_result,
 };
 
 /// Everything that can be wrong with an experiment.

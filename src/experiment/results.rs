@@ -14,7 +14,10 @@ use super::grid::{Budget, Cell};
 use crate::agent::EpochRecord;
 use crate::agent::Method;
 use crate::agent::MopoSettings;
-use crate::artifact::{latest_checkpoint, read_versioned_json_filled, sha256_file, write_json};
+use crate::artifact::{
+    latest_checkpoint, read_dynamics_metadata, read_versioned_json_filled, sha256_file, write_json,
+};
+use crate::sde::FitConfig;
 use crate::shared::{Metric, MetricsTable, mean_std_sample};
 
 pub const RESULT_SCHEMA_VERSION: u32 = 1;
@@ -226,6 +229,43 @@ fn budget_changes(then: &Budget, now: &Budget) -> Vec<String> {
             format!("{key}: {value} then, {now} now")
         })
         .collect()
+}
+
+/// The settings of an SDE fit that a grid's budget gives, by name.
+fn budget_fit_settings(fit: &FitConfig) -> [(&'static str, serde_json::Value); 7] {
+    use serde_json::json;
+    [
+        ("max_steps", json!(fit.max_steps)),
+        ("likelihood", json!(fit.loss.likelihood)),
+        ("step_discount", json!(fit.loss.step_discount)),
+        ("eta_losses", json!(fit.loss.eta_losses)),
+        ("sample_noise_scale", json!(fit.model.sample_noise_scale)),
+        ("drift_inputs", json!(fit.model.drift_inputs)),
+        ("reward_model", json!(fit.model.reward_model)),
+    ]
+}
+
+/// Refuses the SDE in `dir` where it was fitted under other budget settings
+/// than `wanted` (a grid edited after its models were fitted), naming each: a
+/// cell would otherwise train its policy in a model its budget does not
+/// describe. A model written without its fit settings is taken as it is.
+pub fn check_fitted_sde(dir: &Path, wanted: &FitConfig) -> Result<(), ExperimentError> {
+    let Some(fitted) = read_dynamics_metadata(dir)?.provenance.fit else {
+        return Ok(());
+    };
+    let changed: Vec<String> = (budget_fit_settings(&fitted).into_iter())
+        .zip(budget_fit_settings(wanted))
+        .filter(|(then, now)| then.1 != now.1)
+        .map(|((name, then), (_, now))| format!("{name}: {then} then, {now} now"))
+        .collect();
+    if changed.is_empty() {
+        return Ok(());
+    }
+    Err(ExperimentError::Invalid(format!(
+        "{}: fitted under another budget ({}); give the grid another --out, or move this folder away",
+        dir.display(),
+        changed.join("; ")
+    )))
 }
 
 /// Policy training left in a grid at the pace of its finished cells: their

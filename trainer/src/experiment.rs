@@ -18,8 +18,8 @@ use nuno::data::read_system_dataset;
 use nuno::envs::{ObservationLayout, System};
 use nuno::experiment::{
     Budget, Cell, CellResult, CellSelection, CellStatus, Grid, MeanCurve, cell_dir, cell_status,
-    collect_results, markdown_table, mean_curves, paper_layout_table, policy_time_left,
-    results_csv, summarize, summarize_run, write_result,
+    check_fitted_sde, collect_results, markdown_table, mean_curves, paper_layout_table,
+    policy_time_left, results_csv, summarize, summarize_run, write_result,
 };
 
 use crate::data_source::{DataSource, system_of};
@@ -416,8 +416,13 @@ fn fit_cell_model(cell: &Cell, budget: &Budget, model: &Path) -> anyhow::Result<
             args.max_epochs = budget.ensemble_max_epochs;
             fit_ensemble::fit(&args.plan()?)?;
         }
-    } else if !model.join("model.json").is_file() {
-        fit_model::fit(&model_args(cell, budget, data, out).plan()?)?;
+    } else {
+        let plan = model_args(cell, budget, data, out).plan()?;
+        if model.join("model.json").is_file() {
+            check_fitted_sde(model, &plan.fit)?;
+        } else {
+            fit_model::fit(&plan)?;
+        }
     }
     Ok(())
 }

@@ -654,6 +654,26 @@ fn methods_in_the_same_kind_of_model_share_one_fit_per_seed() {
         policy("nuno-al")["dynamics_sha256"]
     );
     assert!(!model.join("policy.json").exists());
+    // A grid edited after its model was fitted: the cell that would train in
+    // the old model is refused, naming the model and the setting.
+    let text = std::fs::read_to_string(&grid).unwrap();
+    std::fs::write(&grid, text.replace("\"pose\"", "\"z-scores\"")).unwrap();
+    std::fs::remove_dir_all(out.join("hopper-random/nuno-al")).unwrap();
+    let error = fails(&[
+        "experiment",
+        "run-cell",
+        "--cell",
+        "1",
+        "--grid",
+        &grid,
+        "--out",
+        &s(&out),
+    ]);
+    assert!(
+        error.contains("models/hopper-random/sde/seed-0")
+            && error.contains("drift_inputs: \"pose\" then, \"z-scores\" now"),
+        "{error}"
+    );
 }
 
 #[test]
