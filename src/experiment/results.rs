@@ -246,18 +246,29 @@ fn budget_fit_settings(fit: &FitConfig) -> [(&'static str, serde_json::Value); 7
 }
 
 /// Refuses the SDE in `dir` where it was fitted under other budget settings
-/// than `wanted` (a grid edited after its models were fitted), naming each: a
-/// cell would otherwise train its policy in a model its budget does not
-/// describe. A model written without its fit settings is taken as it is.
-pub fn check_fitted_sde(dir: &Path, wanted: &FitConfig) -> Result<(), ExperimentError> {
-    let Some(fitted) = read_dynamics_metadata(dir)?.provenance.fit else {
+/// than `wanted` and ε's `wanted_margin` (a grid edited after its models were
+/// fitted), naming each: a cell would otherwise train its policy in a model
+/// its budget does not describe. What a model did not record is taken as it is.
+pub fn check_fitted_sde(
+    dir: &Path,
+    wanted: &FitConfig,
+    wanted_margin: f32,
+) -> Result<(), ExperimentError> {
+    let provenance = read_dynamics_metadata(dir)?.provenance;
+    let Some(fitted) = provenance.fit else {
         return Ok(());
     };
-    let changed: Vec<String> = (budget_fit_settings(&fitted).into_iter())
+    let mut changed: Vec<String> = (budget_fit_settings(&fitted).into_iter())
         .zip(budget_fit_settings(wanted))
         .filter(|(then, now)| then.1 != now.1)
         .map(|((name, then), (_, now))| format!("{name}: {then} then, {now} now"))
         .collect();
+    let margin = provenance.thresholds.and_then(|t| t.max_margin);
+    if let Some(then) = margin.filter(|&m| m != wanted_margin) {
+        changed.push(format!(
+            "threshold_max_margin: {then} then, {wanted_margin} now"
+        ));
+    }
     if changed.is_empty() {
         return Ok(());
     }

@@ -54,6 +54,10 @@ pub struct ThresholdTable {
     /// Windows the statistics were taken over, per horizon.
     pub windows: Vec<usize>,
     pub particles: usize,
+    /// `ThresholdConfig::max_margin` of ε(h, α ≥ 1); absent from tables
+    /// written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_margin: Option<f32>,
 }
 
 impl ThresholdConfig {
@@ -261,5 +265,6 @@ pub fn compute_thresholds(
         values,
         windows,
         particles: config.particles,
+        max_margin: Some(config.max_margin),
     })
 }

@@ -419,7 +419,7 @@ fn fit_cell_model(cell: &Cell, budget: &Budget, model: &Path) -> anyhow::Result<
     } else {
         let plan = model_args(cell, budget, data, out).plan()?;
         if model.join("model.json").is_file() {
-            check_fitted_sde(model, &plan.fit)?;
+            check_fitted_sde(model, &plan.fit, plan.report.thresholds.max_margin)?;
         } else {
             fit_model::fit(&plan)?;
         }

@@ -657,7 +657,9 @@ fn methods_in_the_same_kind_of_model_share_one_fit_per_seed() {
     // A grid edited after its model was fitted: the cell that would train in
     // the old model is refused, naming the model and the setting.
     let text = std::fs::read_to_string(&grid).unwrap();
-    std::fs::write(&grid, text.replace("\"pose\"", "\"z-scores\"")).unwrap();
+    let edited = text.replace("\"pose\"", "\"z-scores\"");
+    let edited = edited.replace("[budget]\n", "[budget]\nthreshold_max_margin = 1.25\n");
+    std::fs::write(&grid, edited).unwrap();
     std::fs::remove_dir_all(out.join("hopper-random/nuno-al")).unwrap();
     let error = fails(&[
         "experiment",
@@ -671,7 +673,8 @@ fn methods_in_the_same_kind_of_model_share_one_fit_per_seed() {
     ]);
     assert!(
         error.contains("models/hopper-random/sde/seed-0")
-            && error.contains("drift_inputs: \"pose\" then, \"z-scores\" now"),
+            && error.contains("drift_inputs: \"pose\" then, \"z-scores\" now")
+            && error.contains("threshold_max_margin: 1 then, 1.25 now"),
         "{error}"
     );
 }
