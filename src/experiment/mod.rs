@@ -21,8 +21,8 @@ pub use linear_model::LinearModel;
 pub use paper_tables::{PaperScore, paper_layout_table, paper_score};
 pub use results::{
     CellResult, CellStatus, MeanCurve, Summary, cell_dir, cell_status, check_fitted_sde,
-    collect_results, markdown_table, mean_curves, policy_time_left, read_result, results_csv,
-    summarize, summarize_run, write_result,
+    collect_results, fit_changes, markdown_table, mean_curves, policy_time_left, read_result,
+    results_csv, summarize, summarize_run, write_result,
 };
 
 /// Everything that can be wrong with an experiment.

@@ -258,17 +258,8 @@ pub fn check_fitted_sde(
     let Some(fitted) = provenance.fit else {
         return Ok(());
     };
-    let mut changed: Vec<String> = (budget_fit_settings(&fitted).into_iter())
-        .zip(budget_fit_settings(wanted))
-        .filter(|(then, now)| then.1 != now.1)
-        .map(|((name, then), (_, now))| format!("{name}: {then} then, {now} now"))
-        .collect();
     let margin = provenance.thresholds.and_then(|t| t.max_margin);
-    if let Some(then) = margin.filter(|&m| m != wanted_margin) {
-        changed.push(format!(
-            "threshold_max_margin: {then} then, {wanted_margin} now"
-        ));
-    }
+    let changed = fit_changes((&fitted, margin), (wanted, wanted_margin));
     if changed.is_empty() {
         return Ok(());
     }
@@ -277,6 +268,23 @@ pub fn check_fitted_sde(
         dir.display(),
         changed.join("; ")
     )))
+}
+
+/// The budget's fit settings that differ between a fit `then` (its ε margin,
+/// if recorded) and the one wanted `now`, as "name: then then, now now".
+pub fn fit_changes(then: (&FitConfig, Option<f32>), now: (&FitConfig, f32)) -> Vec<String> {
+    let mut changed: Vec<String> = (budget_fit_settings(then.0).into_iter())
+        .zip(budget_fit_settings(now.0))
+        .filter(|(a, b)| a.1 != b.1)
+        .map(|((name, a), (_, b))| format!("{name}: {a} then, {b} now"))
+        .collect();
+    if let Some(margin) = then.1.filter(|&m| m != now.1) {
+        changed.push(format!(
+            "threshold_max_margin: {margin} then, {} now",
+            now.1
+        ));
+    }
+    changed
 }
 
 /// Policy training left in a grid at the pace of its finished cells: their

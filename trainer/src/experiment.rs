@@ -400,13 +400,7 @@ fn fit_cell_model(cell: &Cell, budget: &Budget, model: &Path) -> anyhow::Result<
         .with_context(|| format!("creating {}", lock_path.display()))?;
     lock.lock()
         .with_context(|| format!("locking {}", lock_path.display()))?;
-    let data = DataSource {
-        dataset: cell.file.clone(),
-        format: None,
-        task: cell.task,
-        system: cell.system.clone(),
-        neorl: cell.layout == ObservationLayout::Neorl,
-    };
+    let data = cell_data(cell);
     // Each fit writes its JSON last: without it the fit did not finish.
     let out = model.to_path_buf();
     if cell.method.uses_ensemble() {
@@ -425,6 +419,17 @@ fn fit_cell_model(cell: &Cell, budget: &Budget, model: &Path) -> anyhow::Result<
         }
     }
     Ok(())
+}
+
+/// The cell's data as the fits read it.
+fn cell_data(cell: &Cell) -> DataSource {
+    DataSource {
+        dataset: cell.file.clone(),
+        format: None,
+        task: cell.task,
+        system: cell.system.clone(),
+        neorl: cell.layout == ObservationLayout::Neorl,
+    }
 }
 
 /// fit-model's flags for the cell's SDE: the budget's over the defaults,
@@ -601,10 +606,9 @@ mod tests {
     use std::path::Path;
 
     use clap::Parser;
-    use nuno::experiment::Grid;
+    use nuno::experiment::{Grid, fit_changes};
 
-    use super::{model_args, policy_args};
-    use crate::data_source::DataSource;
+    use super::{cell_data, model_args, policy_args};
     use crate::{fit_model, fit_policy};
 
     /// The command lines a user would type, parsed as the trainer parses them.
@@ -643,13 +647,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let (grid, cell) = cell_of(dir.path(), "nuno-r", NUNO);
         let file = cell.file.display().to_string();
-        let data = DataSource {
-            dataset: cell.file.clone(),
-            format: None,
-            task: cell.task,
-            system: None,
-            neorl: false,
-        };
+        let data = cell_data(&cell);
         let runner = model_args(&cell, &grid.budget_for(&cell), data, "m".into());
         let typed = [
             "t",
@@ -685,6 +683,66 @@ mod tests {
             unreachable!()
         };
         assert_eq!(json(&runner.plan().unwrap()), json(&typed.plan().unwrap()));
+    }
+
+    /// Every budget key that shapes a cell's SDE, with a value other than
+    /// `cell_of`'s (its model_steps, 300, is changed on the parsed budget).
+    const FIT_KEYS: [(&str, &str); 8] = [
+        ("model_steps", ""),
+        ("recipe", "recipe = \"code\""),
+        ("model_likelihood", "model_likelihood = \"data\""),
+        ("model_sample_noise", "model_sample_noise = \"sqrt-dt\""),
+        ("model_step_discount", "model_step_discount = 0.8"),
+        ("model_eta_losses", "model_eta_losses = \"code\""),
+        ("model_drift_inputs", "model_drift_inputs = \"pose\""),
+        ("threshold_max_margin", "threshold_max_margin = 1.3"),
+    ];
+    /// The budget keys that do not reach fit-model.
+    const OTHER_KEYS: [&str; 10] = [
+        "ensemble_max_epochs",
+        "policy_steps",
+        "steps_per_epoch",
+        "eval_episodes",
+        "rollout_batch",
+        "state_box_margin",
+        "mopo_settings",
+        "hidden",
+        "model_buffer_factor",
+        "forward_velocity",
+    ];
+
+    /// A model folder is checked against every budget key that shapes the fit:
+    /// changing any one of them is a change the runner names, and a key added
+    /// to the budget fails here until it is sorted into one list or the other.
+    #[test]
+    fn every_budget_key_that_shapes_a_fit_is_checked_against_a_fitted_model() {
+        let dir = tempfile::tempdir().unwrap();
+        let fit = |own: &str, steps: usize| {
+            let (mut grid, cell) = cell_of(dir.path(), "nuno", own);
+            grid.budget.model_steps = steps;
+            let data = cell_data(&cell);
+            let plan =
+                (model_args(&cell, &grid.budget_for(&cell), data, "m".into()).plan()).unwrap();
+            (plan.fit, plan.report.thresholds.max_margin)
+        };
+        let (base, base_margin) = fit("", 300);
+        for (key, line) in FIT_KEYS {
+            let (now, margin) = match key {
+                "model_steps" => fit("", 301),
+                _ => fit(line, 300),
+            };
+            let changes = fit_changes((&base, Some(base_margin)), (&now, margin));
+            assert!(!changes.is_empty(), "{key} changed nothing the check reads");
+        }
+        let serde_json::Value::Object(keys) = json(&cell_of(dir.path(), "nuno", "").0.budget)
+        else {
+            unreachable!()
+        };
+        for key in keys.keys() {
+            let sorted =
+                FIT_KEYS.iter().any(|(k, _)| k == key) || OTHER_KEYS.contains(&key.as_str());
+            assert!(sorted, "budget key {key}: add it to FIT_KEYS or OTHER_KEYS");
+        }
     }
 
     #[test]
