@@ -259,6 +259,12 @@ mod tests {
         .unwrap()
     }
 
+    /// The error a grid's text is refused with, when it reads as TOML.
+    fn refusal(text: &str) -> String {
+        let grid: Grid = toml::from_str(text).unwrap();
+        grid.cells(Path::new("/grids")).unwrap_err()
+    }
+
     #[test]
     fn a_default_named_and_a_default_left_out_are_one_budget() {
         // NUNO's scripts roll 5000 starts; OfflineRL-Kit's MOPO 50 000.
@@ -293,8 +299,7 @@ mod tests {
         }
         // A preset and policy settings together are one too many.
         let both = row.replace("policy = ", "preset = \"hopper-random\"\npolicy = ");
-        let grid: Grid = toml::from_str(&both).unwrap();
-        let error = grid.cells(Path::new("/grids")).unwrap_err();
+        let error = refusal(&both);
         assert!(
             error.contains("`pendulum-random` needs task and preset"),
             "{error}"
@@ -320,22 +325,13 @@ mod tests {
         assert_eq!((pair(Method::Nuno), pair(Method::Mopo)), (None, given));
         assert_eq!(pair(Method::Morel), given);
         let without = row.replace("mopo = { horizon = 5, penalty = 2.5 }\n", "");
-        let error = toml::from_str::<Grid>(&without)
-            .unwrap()
-            .cells(Path::new("/grids"))
-            .unwrap_err();
+        let error = refusal(&without);
         assert!(error.contains("neorl-hopper-low (for MOPO)"), "{error}");
         let own = row.replace("neorl-hopper-low", "hopper-random");
-        let error = toml::from_str::<Grid>(&own)
-            .unwrap()
-            .cells(Path::new("/grids"))
-            .unwrap_err();
+        let error = refusal(&own);
         assert!(error.contains("`hopper-random` has its own row"), "{error}");
         let unread = row.replace("\"mopo\", \"morel\"", "\"bc\"");
-        let error = toml::from_str::<Grid>(&unread)
-            .unwrap()
-            .cells(Path::new("/grids"))
-            .unwrap_err();
+        let error = refusal(&unread);
         assert!(
             error.contains("runs no mopo, tatu-mopo or morel"),
             "{error}"
@@ -366,10 +362,7 @@ mod tests {
         assert_eq!(drift("hop", Method::Nuno), Some(DriftInputs::ZScores));
         assert_eq!(drift("hc", Method::Mopo), None);
         let unread = rows.replace("[\"nuno\", \"mopo\"]", "[\"mopo\"]");
-        let error = toml::from_str::<Grid>(&unread)
-            .unwrap()
-            .cells(Path::new("/grids"))
-            .unwrap_err();
+        let error = refusal(&unread);
         assert!(
             error.contains("dataset `hc`") && error.contains("runs no nuno"),
             "{error}"
