@@ -287,24 +287,47 @@ pub fn fit_changes(then: (&FitConfig, Option<f32>), now: (&FitConfig, f32)) -> V
     changed
 }
 
-/// Policy training left in a grid at the pace of its finished cells: their
-/// recorded seconds per epoch times the epochs not yet run, each cell running
-/// `epochs_per_cell`. None until some finished cell has recorded its time.
-pub fn policy_time_left(statuses: &[CellStatus], epochs_per_cell: usize) -> Option<f64> {
-    let (mut seconds, mut timed_epochs, mut left) = (0.0, 0usize, 0usize);
-    for status in statuses {
+/// Policy training left in a grid, each method at its own pace.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimeLeft {
+    /// The paced methods' cells: seconds per epoch over the method's finished
+    /// cells times the epochs its cells have not yet run.
+    pub seconds: f64,
+    /// Methods with cells to run and no finished, timed cell to pace them by.
+    pub unpaced: Vec<Method>,
+}
+
+/// Policy training left in a grid whose cells each run `epochs_per_cell`.
+/// Paced per method, not across them: one method's update can cost 65 times
+/// another's (EDAC's 50 critics against SAC's two, BENCHMARKS.md), so the
+/// cheap methods' finished cells would understate an expensive one's.
+pub fn policy_time_left(cells: &[(Method, &CellStatus)], epochs_per_cell: usize) -> TimeLeft {
+    // Per method: recorded seconds, the epochs they timed, epochs left.
+    let mut paces: BTreeMap<Method, (f64, usize, usize)> = BTreeMap::new();
+    for (method, status) in cells {
+        let pace = paces.entry(*method).or_default();
         match status {
             CellStatus::Done(r) => {
                 if let Some(s) = r.policy_seconds {
-                    seconds += s;
-                    timed_epochs += r.curve.len();
+                    pace.0 += s;
+                    pace.1 += r.curve.len();
                 }
             }
-            CellStatus::Partial { epochs } => left += epochs_per_cell.saturating_sub(*epochs),
-            CellStatus::Pending => left += epochs_per_cell,
+            CellStatus::Partial { epochs } => pace.2 += epochs_per_cell.saturating_sub(*epochs),
+            CellStatus::Pending => pace.2 += epochs_per_cell,
         }
     }
-    (timed_epochs > 0).then(|| seconds / timed_epochs as f64 * left as f64)
+    let mut left = TimeLeft {
+        seconds: 0.0,
+        unpaced: Vec::new(),
+    };
+    for (method, (seconds, timed, epochs)) in paces.into_iter().filter(|p| p.1.2 > 0) {
+        match timed {
+            0 => left.unpaced.push(method),
+            _ => left.seconds += seconds / timed as f64 * epochs as f64,
+        }
+    }
+    left
 }
 
 /// Mean ± std over the seeds of one dataset × method.
@@ -610,17 +633,34 @@ mod tests {
     }
 
     #[test]
-    fn time_left_is_the_finished_pace_times_the_epochs_to_run() {
-        // 10 + 10 epochs in 30 s + 50 s: 4 s an epoch; an untimed result adds
-        // nothing; left: 10 − 4 of a partial cell and 10 of a pending one.
-        let statuses = [
-            done(10, Some(30.0)),
-            done(10, Some(50.0)),
-            done(10, None),
-            CellStatus::Partial { epochs: 4 },
-            CellStatus::Pending,
+    fn time_left_paces_each_method_by_its_own_finished_cells() {
+        // NUNO: 10 + 10 epochs in 30 s + 50 s, 4 s an epoch, an untimed result
+        // adding nothing; left 10 − 4 of a partial cell and 10 of a pending one.
+        // MOPO: 10 epochs in 200 s, 20 s an epoch, one pending cell. EDAC has
+        // finished nothing; MOReL has nothing left.
+        let (nuno, mopo) = (
+            [done(10, Some(30.0)), done(10, Some(50.0)), done(10, None)],
+            done(10, Some(200.0)),
+        );
+        let (partial, pending) = (CellStatus::Partial { epochs: 4 }, CellStatus::Pending);
+        let cells = [
+            (Method::Nuno, &nuno[0]),
+            (Method::Nuno, &nuno[1]),
+            (Method::Nuno, &nuno[2]),
+            (Method::Nuno, &partial),
+            (Method::Nuno, &pending),
+            (Method::Mopo, &mopo),
+            (Method::Mopo, &pending),
+            (Method::Edac, &pending),
+            (Method::Morel, &mopo),
         ];
-        assert_eq!(policy_time_left(&statuses, 10), Some(4.0 * 16.0));
-        assert_eq!(policy_time_left(&statuses[2..], 10), None);
+        let left = policy_time_left(&cells, 10);
+        assert_eq!(left.seconds, 4.0 * 16.0 + 20.0 * 10.0);
+        assert_eq!(left.unpaced, [Method::Edac]);
+        let untimed = policy_time_left(&cells[2..5], 10);
+        assert_eq!(
+            (untimed.seconds, untimed.unpaced),
+            (0.0, vec![Method::Nuno])
+        );
     }
 }

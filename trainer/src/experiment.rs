@@ -512,15 +512,22 @@ fn status(args: StatusArgs) -> anyhow::Result<()> {
         .iter()
         .filter(|s| matches!(s, CellStatus::Done(_)))
         .count();
+    println!("{done}/{} cells done", cells.len());
     let b = &grid.budget;
-    let epochs_per_cell = b.policy_steps.div_ceil(b.steps_per_epoch);
-    match policy_time_left(&statuses, epochs_per_cell) {
-        Some(left) if done < cells.len() => println!(
-            "{done}/{} cells done; about {:.1} h of policy training left at the finished cells' pace (model fits not included)",
-            cells.len(),
-            left / 3600.0
-        ),
-        _ => println!("{done}/{} cells done", cells.len()),
+    let methods = cells.iter().map(|c| c.method).zip(&statuses);
+    let left = policy_time_left(
+        &methods.collect::<Vec<_>>(),
+        b.policy_steps.div_ceil(b.steps_per_epoch),
+    );
+    if left.seconds > 0.0 {
+        println!(
+            "about {:.1} h of policy training left, each method at its finished cells' pace (model fits not included)",
+            left.seconds / 3600.0
+        );
+    }
+    if !left.unpaced.is_empty() {
+        let names: Vec<&str> = left.unpaced.iter().map(|m| m.as_str()).collect();
+        println!("no finished cell to pace {} by yet", names.join(", "));
     }
     Ok(())
 }
