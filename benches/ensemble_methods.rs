@@ -4,11 +4,11 @@
 //! Swish, 5 elites): MOBILE's update is SAC's plus its Bellman penalty on the
 //! batch's 244 model rows (5 elites × 10 sampled next states each through the
 //! ensemble, the actor and both target critics), all on the fused kernels.
-//! RAMBO's adversarial model step (burn's autodiff through the ensemble):
-//! x̂ drawn from the elites for 256 (s, a), its advantage under the critics,
-//! and one Adam step on w_adv·mean(log p(x̂)·A) + L_sl on 256 real rows; one
-//! policy epoch of RAMBO takes `adversary_steps` × h of them.
-//! (COMBO's update is CQL's term on burn: `cargo bench --bench model_free`.)
+//! RAMBO's adversarial model step, on burn's autodiff through the ensemble and
+//! on the fused kernels: x̂ drawn from the elites for 256 (s, a), its advantage
+//! under the critics, and one Adam step on w_adv·mean(log p(x̂)·A) + L_sl on
+//! 256 real rows; one adversarial phase takes `adversary_steps` of them.
+//! (COMBO's update is CQL's on the mixed batch: `cargo bench --bench model_free`.)
 //!
 //! Run: `cargo bench --bench ensemble_methods`.
 
@@ -22,6 +22,7 @@ use nuno::ensemble::{
     AdversarialConfig, AdversarialEnsemble, EnsembleDynamics, EnsembleFit, EnsembleUncertainty,
     GaussianEnsemble, Scaler,
 };
+use nuno::infer::Kernel;
 use nuno::nn::seeded_init;
 use nuno::shared::TransitionBatch;
 use rand::{Rng, SeedableRng};
@@ -126,8 +127,13 @@ fn main() {
     });
     row("MOBILE (penalty + SAC)", mobile_seconds);
 
-    let rambo_seconds = rambo_step_seconds(&batch, &ensemble, &sac, &device);
-    row("RAMBO's adversarial model step", rambo_seconds);
+    for kernel in [Kernel::Burn, Kernel::Fused] {
+        let seconds = rambo_step_seconds(&batch, &ensemble, &sac, (kernel, &device));
+        row(
+            &format!("RAMBO's adversarial model step ({kernel})"),
+            seconds,
+        );
+    }
 }
 
 /// Seconds per RAMBO adversarial model step on `batch`'s 256 rows.
@@ -135,13 +141,13 @@ fn rambo_step_seconds(
     batch: &TransitionBatch,
     ensemble: &EnsembleDynamics,
     sac: &Sac,
-    device: &Device,
+    (kernel, device): (Kernel, &Device),
 ) -> f64 {
     let mut rng = ChaCha8Rng::seed_from_u64(4);
     // hopper-medium's w_adv (the weight does not change the work).
     let adv_weight = RAMBO_PRESETS[1].2;
     let mut adversary =
-        AdversarialEnsemble::new(ensemble, AdversarialConfig::new(adv_weight), device);
+        AdversarialEnsemble::new(ensemble, AdversarialConfig::new(adv_weight), kernel, device);
     let no_terminals = vec![0.0; BATCH];
     let real = (
         &batch.observations[..],
@@ -158,6 +164,6 @@ fn rambo_step_seconds(
         );
         let mut advantage = advantages(sac, (&batch.observations, &batch.actions), drawn);
         standardise(&mut advantage);
-        adversary.step(sample, &advantage, real);
+        adversary.step(&sample, &advantage, real);
     })
 }

@@ -7,7 +7,7 @@ use ndarray::{Array1, Array2};
 use nuno::data::{Dataset, DatasetMetadata, DatasetParts};
 use nuno::ensemble::{
     AdversarialConfig, AdversarialEnsemble, EnsembleConfig, EnsembleDynamics, EnsembleFit,
-    EnsembleUncertainty, fit_ensemble,
+    EnsembleUncertainty, GaussianEnsemble, fit_ensemble,
 };
 use nuno::infer::Kernel;
 use nuno::nn::to_f32_vec;
@@ -62,6 +62,27 @@ fn small_config() -> EnsembleConfig {
         .with_weight_decay(vec![2.5e-5, 5e-5, 1e-4])
         .with_batch_size(32)
         .with_max_epochs(Some(150))
+}
+
+/// The bounds, then every member's weights and biases.
+fn params(model: &GaussianEnsemble) -> Vec<f32> {
+    let mut all = to_f32_vec(model.max_logvar.val());
+    all.extend(to_f32_vec(model.min_logvar.val()));
+    for member in &model.members {
+        for layer in &member.layers {
+            all.extend(to_f32_vec(layer.weight.val()));
+            all.extend(to_f32_vec(layer.bias.as_ref().unwrap().val()));
+        }
+    }
+    all
+}
+
+fn largest_difference(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
 }
 
 fn fitted() -> EnsembleFit {
@@ -120,24 +141,8 @@ fn the_fused_fit_follows_burns_autodiff() {
     }
     // 90 Adam steps in: every parameter within 1e-4 of burn's (weights are O(0.1);
     // a wrong bound gradient moves them by 1e-2).
-    let params = |fit: &EnsembleFit| {
-        let mut all = to_f32_vec(fit.model.max_logvar.val());
-        all.extend(to_f32_vec(fit.model.min_logvar.val()));
-        for member in &fit.model.members {
-            for layer in &member.layers {
-                all.extend(to_f32_vec(layer.weight.val()));
-                all.extend(to_f32_vec(layer.bias.as_ref().unwrap().val()));
-            }
-        }
-        all
-    };
-    let (b, f) = (params(&burn), params(&fused));
-    assert_eq!(b.len(), f.len());
-    let worst = b
-        .iter()
-        .zip(&f)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f32::max);
+    let (b, f) = (params(&burn.model), params(&fused.model));
+    let worst = largest_difference(&b, &f);
     assert!(worst < 1e-4, "largest parameter difference {worst}");
     // The bounds moved from their initial 0.5 / −10: their gradients are in.
     assert!(b[..3].iter().all(|&v| v != 0.5), "{:?}", &b[..3]);
@@ -771,15 +776,21 @@ fn mobiles_penalty_is_the_elites_spread_of_the_next_value() {
 /// elites' Gaussian mixture's, by hand from the means and σ the ensemble's own
 /// step reports for each elite; one step with a positive advantage makes the
 /// drawn transition less likely, with a negative one more likely (the
-/// adversarial term's sign), the supervised term present in both.
+/// adversarial term's sign), the supervised term present in both; on either kernel.
 #[test]
 fn rambos_adversarial_step_lowers_the_likelihood_of_what_the_policy_values() {
+    for kernel in [Kernel::Burn, Kernel::Fused] {
+        adversarial_step_lowers_the_likelihood_of_what_the_policy_values(kernel);
+    }
+}
+
+fn adversarial_step_lowers_the_likelihood_of_what_the_policy_values(kernel: Kernel) {
     let fit = fitted();
     let dynamics = EnsembleDynamics::new(&fit, 2, 1, EnsembleUncertainty::MaxAleatoric);
     let config = AdversarialConfig::new(1e3).with_learning_rate(1e-3);
     let device = Device::flex();
     let (obs, actions) = (vec![0.4f32, -0.3, -0.2, 0.5], vec![0.5f32, -0.7]);
-    let adversary = AdversarialEnsemble::new(&dynamics, config.clone(), &device);
+    let mut adversary = AdversarialEnsemble::new(&dynamics, config.clone(), kernel, &device);
     let sample = adversary.sample(&obs, &actions, &mut ChaCha8Rng::seed_from_u64(3));
 
     // By hand: ln((1/2)·Σ_e Π_d N(x_d | m_e,d, σ_e,d)), each elite's m and σ
@@ -809,7 +820,7 @@ fn rambos_adversarial_step_lowers_the_likelihood_of_what_the_policy_values() {
             sample.log_probs()[r],
             by_hand(&dynamics, state, actions[r], x),
         );
-        assert!(close(ours, hand), "row {r}: {ours} vs {hand}");
+        assert!(close(ours, hand), "{kernel}, row {r}: {ours} vs {hand}");
     }
 
     // One row, one step each way; the real batch is a dataset-like transition.
@@ -820,11 +831,11 @@ fn rambos_adversarial_step_lowers_the_likelihood_of_what_the_policy_values() {
         &[0.9f32][..],
     );
     for advantage in [1.0f32, -1.0] {
-        let mut adversary = AdversarialEnsemble::new(&dynamics, config.clone(), &device);
+        let mut adversary = AdversarialEnsemble::new(&dynamics, config.clone(), kernel, &device);
         let sample = adversary.sample(&obs[..2], &actions[..1], &mut ChaCha8Rng::seed_from_u64(4));
         let (next, reward) = (sample.next_observations.clone(), sample.rewards.clone());
         let before = sample.log_probs()[0];
-        adversary.step(sample, &[advantage], real);
+        adversary.step(&sample, &[advantage], real);
         let after = adversary.log_prob(&obs[..2], &actions[..1], &next, &reward)[0];
         // The stepped ensemble, handed back as dynamics, steps with the new weights.
         let stepped = adversary.dynamics(&dynamics);
@@ -834,10 +845,89 @@ fn rambos_adversarial_step_lowers_the_likelihood_of_what_the_policy_values() {
             actions[0],
             [next[0], next[1], reward[0]],
         );
-        assert!(close(after, hand), "stepped: {after} vs {hand}");
+        assert!(close(after, hand), "{kernel}, stepped: {after} vs {hand}");
         assert!(
             (after - before) * advantage < 0.0,
-            "A = {advantage}: log p {before} → {after}"
+            "{kernel}, A = {advantage}: log p {before} → {after}"
         );
     }
+}
+
+/// RAMBO's adversarial step on the fused kernels is burn's autodiff's: from
+/// the same ensemble, the same drawn transitions (both kernels draw them alike),
+/// advantage and real batch, three steps each leave both losses, every weight
+/// and bound, and Adam's moments within float rounding of each other; the
+/// adversarial term moves the weights far more than that (with A = 0 the
+/// fused step ends elsewhere), so a fused step without it could not pass.
+#[test]
+fn rambos_fused_adversarial_step_follows_burns_autodiff() {
+    let fit = fitted();
+    let dynamics = EnsembleDynamics::new(&fit, 2, 1, EnsembleUncertainty::MaxAleatoric);
+    let config = AdversarialConfig::new(10.0).with_learning_rate(1e-3);
+    let device = Device::flex();
+    let data = linear_gaussian(32, 5);
+    let (obs, actions) = (
+        data.observations.as_slice().unwrap(),
+        data.actions.as_slice().unwrap(),
+    );
+    let real = (
+        &obs[..32],
+        &actions[..16],
+        &data.next_observations.as_slice().unwrap()[..32],
+        &data.rewards.as_slice().unwrap()[..16],
+    );
+    let (starts, start_actions) = (&obs[32..], &actions[16..]);
+    let mut rng = ChaCha8Rng::seed_from_u64(6);
+    let advantage: Vec<f32> = (0..16).map(|_| rng.sample(StandardNormal)).collect();
+    let adversary = |kernel| AdversarialEnsemble::new(&dynamics, config.clone(), kernel, &device);
+    let (mut burn, mut fused) = (adversary(Kernel::Burn), adversary(Kernel::Fused));
+    let sample = burn.sample(starts, start_actions, &mut ChaCha8Rng::seed_from_u64(7));
+    let fused_sample = fused.sample(starts, start_actions, &mut ChaCha8Rng::seed_from_u64(7));
+    let drawn = |s: &nuno::ensemble::AdversarialSample| {
+        let mut all = s.next_observations.clone();
+        all.extend(&s.rewards);
+        all.extend(s.log_probs());
+        all
+    };
+    let worst = largest_difference(&drawn(&sample), &drawn(&fused_sample));
+    assert!(worst < 1e-4, "the kernels draw apart: {worst}");
+    for step in 0..3 {
+        let (b, f) = (
+            burn.step(&sample, &advantage, real),
+            fused.step(&sample, &advantage, real),
+        );
+        for (what, b, f) in [
+            ("adversarial", b.adversarial, f.adversarial),
+            ("supervised", b.supervised, f.supervised),
+        ] {
+            assert!(
+                (b - f).abs() <= 1e-4 * b.abs().max(1.0),
+                "step {step}, {what}: burn {b}, fused {f}"
+            );
+        }
+    }
+    let (b, f) = (params(&burn.model()), params(&fused.model()));
+    let worst = largest_difference(&b, &f);
+    assert!(worst < 1e-5, "largest parameter difference {worst}");
+    let (burn_adam, fused_adam) = (burn.optimizer_state(), fused.optimizer_state());
+    assert_eq!(burn_adam.time, fused_adam.time);
+    assert_eq!(burn_adam.moments.len(), fused_adam.moments.len());
+    for (path, bm) in &burn_adam.moments {
+        // Gradients scale with w_adv: relative to the largest moment.
+        let worst = largest_difference(&bm.first, &fused_adam.moments[path].first);
+        let scale = bm.first.iter().fold(1e-3f32, |m, v| m.max(v.abs()));
+        assert!(
+            worst < 1e-4 * scale,
+            "{path}: first moments {worst} apart (largest {scale})"
+        );
+    }
+    let mut blind = adversary(Kernel::Fused);
+    for _ in 0..3 {
+        blind.step(&sample, &[0.0; 16], real);
+    }
+    let moved = largest_difference(&params(&blind.model()), &f);
+    assert!(
+        moved > 100.0 * 1e-5,
+        "the adversarial term moved the weights by only {moved}"
+    );
 }

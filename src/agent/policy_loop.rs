@@ -495,7 +495,12 @@ impl PolicyTraining {
         let adversary = (config.rambo.as_ref())
             .zip(ctx.ensemble)
             .map(|(rambo, ensemble)| Adversary {
-                ensemble: AdversarialEnsemble::new(ensemble, rambo.adversary.clone(), device),
+                ensemble: AdversarialEnsemble::new(
+                    ensemble,
+                    rambo.adversary.clone(),
+                    ctx.kernel,
+                    device,
+                ),
                 dynamics: ensemble.clone(),
             });
         let (obs_dim, act_dim) = (ctx.dynamics.obs_dim(), ctx.dynamics.act_dim());

@@ -126,7 +126,7 @@ pub fn adversarial_phase(
             standardise(&mut advantage);
             let real = TransitionSampler::new(dataset).sample(config.adversary_batch, rng);
             losses.push(adversary.step(
-                sample,
+                &sample,
                 &advantage,
                 (
                     &real.observations,

@@ -112,16 +112,17 @@ fn write_adversary(
         return Ok(None);
     };
     let ensemble = &adversary.ensemble;
-    let mut tensors: NamedTensors = collect_tensors(ensemble.model())
+    let mut tensors: NamedTensors = collect_tensors(&ensemble.model())
         .into_iter()
         .map(|(k, v)| (format!("model.{k}"), v))
         .collect();
-    put_moments(&mut tensors, "adam/", &ensemble.state);
+    let state = ensemble.optimizer_state();
+    put_moments(&mut tensors, "adam/", &state);
     let bytes = safetensors_bytes(&tensors, None)?;
     write_synced(&dir.join(ADVERSARY), &bytes)?;
     Ok(Some(AdversaryFiles {
         sha256: sha256_hex(&bytes),
-        adam_time: ensemble.state.time,
+        adam_time: state.time,
     }))
 }
 
@@ -148,7 +149,7 @@ fn read_adversary(
         .filter_map(|(k, v)| Some((k.strip_prefix("model.")?.to_string(), v.clone())))
         .collect();
     tensors.retain(|k, _| !k.starts_with("model."));
-    let model = adversary.ensemble.model().clone();
+    let model = adversary.ensemble.model();
     let device = model.max_logvar.val().device();
     let model = load_tensors(model, &weights, &device)?;
     let moments = take_moments(&mut tensors, "adam/", |p| {

@@ -20,8 +20,12 @@ use rand::Rng;
 
 use super::dynamics::EnsembleDynamics;
 use super::fit::{Scaler, push_target};
-use super::model::GaussianEnsemble;
-use super::trainer::{ADAM_EPSILON, bounds_loss, member_nll, weight_decay};
+use super::fused_trainer::{FusedTrainer, OutputTerm};
+use super::model::{BoundedLogvar, GaussianEnsemble};
+use super::trainer::{
+    ADAM_EPSILON, EnsembleTrainer, LossTerms, MemberBatch, bounds_loss, member_nll, weight_decay,
+};
+use crate::infer::Kernel;
 use crate::nn::{Adam, AdamState, assign_params, fill_standard_normal, seeded_init, to_f32_vec};
 use crate::shared::BatchDynamics;
 
@@ -41,21 +45,28 @@ pub struct AdversarialConfig {
     pub weight_decay: Vec<f64>,
 }
 
-/// Transitions drawn for one adversarial step, and the graph to their
-/// log-likelihood under the elites' mixture.
+/// Transitions drawn for one adversarial step, with the (s, a) rows they
+/// were drawn at: either kernel's step takes them.
 pub struct AdversarialSample {
+    observations: Vec<f32>,
+    actions: Vec<f32>,
     /// ŝ', `[rows, obs_dim]`.
     pub next_observations: Vec<f32>,
     /// r̂, `[rows]`.
     pub rewards: Vec<f32>,
-    /// log p(x̂), `[rows, 1]`, on the autodiff graph.
-    log_prob: Tensor<2>,
+    /// log p(x̂) per row under the elites' mixture when drawn.
+    log_probs: Vec<f32>,
 }
 
 impl AdversarialSample {
-    /// log p(x̂) per row, off the graph.
-    pub fn log_probs(&self) -> Vec<f32> {
-        to_f32_vec(self.log_prob.clone())
+    /// log p(x̂) per row.
+    pub fn log_probs(&self) -> &[f32] {
+        &self.log_probs
+    }
+
+    /// x̂ = (ŝ', r̂), `[rows, obs_dim + 1]`.
+    fn targets(&self) -> Vec<f32> {
+        joined_targets(&self.next_observations, &self.rewards)
     }
 }
 
@@ -78,214 +89,465 @@ impl AdversarialLosses {
     }
 }
 
-/// The ensemble as RAMBO trains it: the same members, scaler and elites as
-/// the [`EnsembleDynamics`] it starts from, on an autodiff device, with its
-/// own Adam state.
-pub struct AdversarialEnsemble {
-    model: GaussianEnsemble,
+/// Who trains the members: burn's autodiff (the reference, and a GPU's path)
+/// or the fused CPU kernels (`FusedTrainer`), held to it in tests/ensemble.rs.
+enum Members {
+    Burn {
+        /// On the autodiff device.
+        model: GaussianEnsemble,
+        adam: Adam,
+        state: AdamState,
+    },
+    Fused(FusedTrainer),
+}
+
+/// What both kernels read: the rows' layout, the scaler, the elites, the knobs.
+struct Layout {
     scaler: Scaler,
     elites: Vec<usize>,
     obs_dim: usize,
     act_dim: usize,
     config: AdversarialConfig,
-    adam: Adam,
-    pub state: AdamState,
+}
+
+/// The ensemble as RAMBO trains it: the same members, scaler and elites as
+/// the [`EnsembleDynamics`] it starts from, with its own Adam state, on the
+/// kernel it was made for.
+pub struct AdversarialEnsemble {
+    members: Members,
+    layout: Layout,
 }
 
 impl AdversarialEnsemble {
-    /// `dynamics`' ensemble, trainable on `device`'s autodiff form.
-    pub fn new(dynamics: &EnsembleDynamics, config: AdversarialConfig, device: &Device) -> Self {
-        let device = &device.clone().autodiff();
+    /// `dynamics`' ensemble, trained on `kernel`'s path (burn's on `device`'s
+    /// autodiff form).
+    pub fn new(
+        dynamics: &EnsembleDynamics,
+        config: AdversarialConfig,
+        kernel: Kernel,
+        device: &Device,
+    ) -> Self {
         let (model, scaler, elites) = dynamics.parts();
-        let hidden: Vec<usize> = model.members[0].layers[..model.members[0].layers.len() - 1]
-            .iter()
-            .map(|layer| layer.weight.val().dims()[1])
-            .collect();
-        let (obs_dim, act_dim) = (dynamics.obs_dim(), dynamics.act_dim());
-        // Drawn (any seed: every value is then overwritten) so the copy's parameters track gradients.
-        let fresh = seeded_init(device, 0, || {
-            GaussianEnsemble::init(
-                obs_dim + act_dim,
-                obs_dim + 1,
-                &hidden,
-                model.members.len(),
-                (0.0, 0.0),
-                device,
-            )
-        });
-        Self {
-            model: assign_params(fresh, model),
+        let members = match kernel {
+            Kernel::Fused => Members::Fused(FusedTrainer::new(
+                model.clone(),
+                LossTerms {
+                    learning_rate: config.learning_rate,
+                    weight_decay: config.weight_decay.clone(),
+                    bounds_coef: config.logvar_loss_coef,
+                },
+            )),
+            Kernel::Burn => Members::Burn {
+                model: trainable_copy(model, &device.clone().autodiff()),
+                adam: Adam::new(ADAM_EPSILON),
+                state: AdamState::default(),
+            },
+        };
+        let layout = Layout {
             scaler: scaler.clone(),
             elites: elites.to_vec(),
-            obs_dim,
-            act_dim,
+            obs_dim: dynamics.obs_dim(),
+            act_dim: dynamics.act_dim(),
             config,
-            adam: Adam::new(ADAM_EPSILON),
-            state: AdamState::default(),
-        }
+        };
+        Self { members, layout }
     }
 
     /// The ensemble now, ready to step as `like` does (its kernel and uncertainty).
     pub fn dynamics(&self, like: &EnsembleDynamics) -> EnsembleDynamics {
-        like.with_model(assign_params(like.parts().0.clone(), &self.model))
+        like.with_model(assign_params(like.parts().0.clone(), &self.model()))
     }
 
     /// The members' current weights (a checkpoint's).
-    pub fn model(&self) -> &GaussianEnsemble {
-        &self.model
+    pub fn model(&self) -> GaussianEnsemble {
+        match &self.members {
+            Members::Burn { model, .. } => model.clone(),
+            Members::Fused(trainer) => trainer.model(),
+        }
+    }
+
+    /// Adam's state, moments by the ensemble's module paths (a checkpoint's;
+    /// either kernel resumes the other's).
+    pub fn optimizer_state(&self) -> AdamState {
+        match &self.members {
+            Members::Burn { state, .. } => state.clone(),
+            Members::Fused(trainer) => trainer.optimizer_state(),
+        }
     }
 
     /// Restores saved weights and Adam state (a checkpoint's).
-    pub fn restore(&mut self, model: &GaussianEnsemble, state: AdamState) {
-        self.model = assign_params(self.model.clone(), model);
-        self.state = state;
+    pub fn restore(&mut self, saved: &GaussianEnsemble, adam: AdamState) {
+        match &mut self.members {
+            Members::Burn { model, state, .. } => {
+                *model = assign_params(model.clone(), saved);
+                *state = adam;
+            }
+            Members::Fused(trainer) => trainer.restore(saved, adam),
+        }
     }
 
-    /// Normalised inputs `[rows, obs + act]` of (s, a) rows.
-    fn inputs(&self, observations: &[f32], actions: &[f32]) -> Tensor<2> {
-        let (o, a) = (self.obs_dim, self.act_dim);
-        let rows = observations.len() / o;
-        let x = self
-            .scaler
-            .inputs((observations, o), &actions[..rows * a], a);
-        let device = self.model.max_logvar.val().device();
-        Tensor::from_data(TensorData::new(x, [rows, o + a]), &device)
+    /// The elites at the rows on the host.
+    fn host_predictions(&mut self, observations: &[f32], actions: &[f32]) -> HostElites {
+        let layout = &self.layout;
+        match &mut self.members {
+            Members::Fused(trainer) => layout.fused_predictions(trainer, observations, actions),
+            Members::Burn { model, .. } => {
+                HostElites::from_graph(&layout.graph_predictions(model, observations, actions))
+            }
+        }
     }
 
-    /// Each elite's mean (s + Δs, r) and log-variance at the rows, on the graph.
-    fn elite_predictions(
-        &self,
-        observations: &[f32],
-        actions: &[f32],
-    ) -> Vec<(Tensor<2>, Tensor<2>)> {
-        let (o, d) = (self.obs_dim, self.obs_dim + 1);
-        let rows = observations.len() / o;
-        let x = self.inputs(observations, actions);
-        let base: Vec<f32> = observations
-            .chunks_exact(o)
-            .flat_map(|s| s.iter().copied().chain([0.0]))
-            .collect();
-        let base = Tensor::<2>::from_data(TensorData::new(base, [rows, d]), &x.device());
-        (self.elites.iter())
-            .map(|&m| {
-                let (mean, logvar) = self.model.member(m, x.clone());
-                (mean + base.clone(), logvar)
-            })
-            .collect()
-    }
-
-    /// Draws x̂ for each (s, a) row from a random elite and keeps the graph to
-    /// log p(x̂) under the elites' mixture.
+    /// Draws x̂ for each (s, a) row from a random elite, with log p(x̂) under
+    /// the elites' mixture.
     pub fn sample(
-        &self,
+        &mut self,
         observations: &[f32],
         actions: &[f32],
         rng: &mut impl Rng,
     ) -> AdversarialSample {
-        let (o, d) = (self.obs_dim, self.obs_dim + 1);
+        let (o, a) = (self.layout.obs_dim, self.layout.act_dim);
+        let d = o + 1;
         let rows = observations.len() / o;
-        let elites = self.elite_predictions(observations, actions);
-        let host: Vec<(Vec<f32>, Vec<f32>)> = (elites.iter())
-            .map(|(mean, logvar)| (to_f32_vec(mean.clone()), to_f32_vec(logvar.clone())))
-            .collect();
+        let elites = self.host_predictions(observations, actions);
         let mut eps = Vec::new();
         fill_standard_normal(&mut eps, rows * d, rng);
         let mut drawn = Vec::with_capacity(rows * d);
         for r in 0..rows {
-            let (mean, logvar) = &host[rng.random_range(0..host.len())];
+            let e = rng.random_range(0..elites.means.len());
+            let (mean, logvar) = (&elites.means[e], &elites.logvars[e]);
             for k in r * d..(r + 1) * d {
                 drawn.push(mean[k] + (0.5 * logvar[k]).exp() * eps[k]);
             }
         }
-        let device = elites[0].0.device();
-        let target = Tensor::<2>::from_data(TensorData::new(drawn.clone(), [rows, d]), &device);
         AdversarialSample {
-            next_observations: drawn
-                .chunks_exact(d)
+            observations: observations.to_vec(),
+            actions: actions[..rows * a].to_vec(),
+            next_observations: (drawn.chunks_exact(d))
                 .flat_map(|row| row[..o].to_vec())
                 .collect(),
             rewards: drawn.chunks_exact(d).map(|row| row[o]).collect(),
-            log_prob: mixture_log_prob(&elites, target),
+            log_probs: elites.mixture(&drawn).log_probs,
         }
     }
 
-    /// log p((s', r) | s, a) under the elites' mixture now, per row, off the graph.
+    /// log p((s', r) | s, a) under the elites' mixture now, per row.
     pub fn log_prob(
-        &self,
+        &mut self,
         observations: &[f32],
         actions: &[f32],
         next_observations: &[f32],
         rewards: &[f32],
     ) -> Vec<f32> {
-        let (o, d) = (self.obs_dim, self.obs_dim + 1);
-        let rows = rewards.len();
-        let elites = self.elite_predictions(observations, actions);
-        let x: Vec<f32> = (0..rows)
-            .flat_map(|r| {
-                next_observations[r * o..(r + 1) * o]
-                    .iter()
-                    .copied()
-                    .chain([rewards[r]])
-            })
-            .collect();
-        let x = Tensor::<2>::from_data(TensorData::new(x, [rows, d]), &elites[0].0.device());
-        to_f32_vec(mixture_log_prob(&elites, x))
+        let x = joined_targets(next_observations, rewards);
+        let elites = self.host_predictions(observations, actions);
+        elites.mixture(&x).log_probs
     }
 
     /// One Adam step on w_adv·mean(log p(x̂)·A) + L_sl, L_sl on the real
     /// transitions `real` (observations, actions, next observations, rewards).
     pub fn step(
         &mut self,
-        sample: AdversarialSample,
+        sample: &AdversarialSample,
         advantage: &[f32],
         real: (&[f32], &[f32], &[f32], &[f32]),
     ) -> AdversarialLosses {
-        let device = sample.log_prob.device();
-        let rows = advantage.len();
-        let advantage =
-            Tensor::<2>::from_data(TensorData::new(advantage.to_vec(), [rows, 1]), &device);
-        let adversarial = (sample.log_prob * advantage).mean();
-        let supervised = self.supervised_loss(real);
-        let values = (
-            to_f32_vec(adversarial.clone())[0],
-            to_f32_vec(supervised.clone())[0],
-        );
-        let loss = adversarial * self.config.adv_weight + supervised;
-        let grads = GradientsParams::from_grads(loss.backward(), &self.model);
-        self.model = self.adam.step_module(
-            self.config.learning_rate,
-            self.model.clone(),
-            grads,
-            &mut self.state,
-        );
-        AdversarialLosses {
-            adversarial: values.0,
-            supervised: values.1,
+        let layout = &self.layout;
+        let real = layout.real_rows(real);
+        match &mut self.members {
+            Members::Burn { model, adam, state } => {
+                let (stepped, losses) =
+                    layout.burn_step(model.clone(), (adam, state), (sample, advantage), real);
+                *model = stepped;
+                losses
+            }
+            Members::Fused(trainer) => layout.fused_step(trainer, (sample, advantage), real),
         }
     }
+}
 
-    /// L_sl: every member's NLL on the same real batch, weight decay and the
-    /// bounds' term.
-    fn supervised_loss(
+impl Layout {
+    /// Normalised inputs `[rows, obs + act]` of (s, a) rows.
+    fn inputs(&self, observations: &[f32], actions: &[f32]) -> Vec<f32> {
+        let (o, a) = (self.obs_dim, self.act_dim);
+        let rows = observations.len() / o;
+        (self.scaler).inputs((observations, o), &actions[..rows * a], a)
+    }
+
+    /// Each row's (s, 0): what an elite's mean (Δs, r) is added to.
+    fn base(&self, observations: &[f32]) -> Vec<f32> {
+        (observations.chunks_exact(self.obs_dim))
+            .flat_map(|s| s.iter().copied().chain([0.0]))
+            .collect()
+    }
+
+    /// The real transitions as normalised inputs and targets (Δs, r).
+    fn real_rows(
         &self,
         (obs, actions, next, rewards): (&[f32], &[f32], &[f32], &[f32]),
-    ) -> Tensor<1> {
-        let (o, d) = (self.obs_dim, self.obs_dim + 1);
-        let rows = rewards.len();
-        let x = self.inputs(obs, actions);
-        let mut y = Vec::with_capacity(rows * d);
+    ) -> MemberBatch {
+        let o = self.obs_dim;
+        let mut y = Vec::with_capacity(rewards.len() * (o + 1));
         for ((next, obs), &reward) in next.chunks_exact(o).zip(obs.chunks_exact(o)).zip(rewards) {
             push_target(&mut y, obs, next, reward);
         }
-        let y = Tensor::<2>::from_data(TensorData::new(y, [rows, d]), &x.device());
-        let model = &self.model;
-        (0..model.members.len()).fold(
-            bounds_loss(model, self.config.logvar_loss_coef),
+        MemberBatch {
+            x: self.inputs(obs, actions),
+            y,
+        }
+    }
+
+    /// Each elite's mean (s + Δs, r) and log-variance at the rows, on burn's graph.
+    fn graph_predictions(
+        &self,
+        model: &GaussianEnsemble,
+        observations: &[f32],
+        actions: &[f32],
+    ) -> Vec<(Tensor<2>, Tensor<2>)> {
+        let (d, width) = (self.obs_dim + 1, self.obs_dim + self.act_dim);
+        let rows = observations.len() / self.obs_dim;
+        let device = model.max_logvar.val().device();
+        let x = self.inputs(observations, actions);
+        let x = Tensor::<2>::from_data(TensorData::new(x, [rows, width]), &device);
+        let base = self.base(observations);
+        let base = Tensor::<2>::from_data(TensorData::new(base, [rows, d]), &device);
+        (self.elites.iter())
+            .map(|&m| {
+                let (mean, logvar) = model.member(m, x.clone());
+                (mean + base.clone(), logvar)
+            })
+            .collect()
+    }
+
+    /// The elites at the rows from the fused members' raw outputs.
+    fn fused_predictions(
+        &self,
+        trainer: &mut FusedTrainer,
+        observations: &[f32],
+        actions: &[f32],
+    ) -> HostElites {
+        let raw = trainer.outputs(&self.elites, &self.inputs(observations, actions));
+        HostElites::from_raw(raw, &self.base(observations), trainer.bounds())
+    }
+
+    /// The step on burn's graph: `model` stepped, and the two terms.
+    fn burn_step(
+        &self,
+        model: GaussianEnsemble,
+        (adam, state): (&Adam, &mut AdamState),
+        (sample, advantage): (&AdversarialSample, &[f32]),
+        real: MemberBatch,
+    ) -> (GaussianEnsemble, AdversarialLosses) {
+        let (d, width) = (self.obs_dim + 1, self.obs_dim + self.act_dim);
+        let elites = self.graph_predictions(&model, &sample.observations, &sample.actions);
+        let device = model.max_logvar.val().device();
+        let tensor = |values: Vec<f32>, width: usize| {
+            let rows = values.len() / width;
+            Tensor::<2>::from_data(TensorData::new(values, [rows, width]), &device)
+        };
+        let log_prob = mixture_log_prob(&elites, tensor(sample.targets(), d));
+        let adversarial = (log_prob * tensor(advantage.to_vec(), 1)).mean();
+        let (x, y) = (tensor(real.x, width), tensor(real.y, d));
+        let supervised = (0..model.members.len()).fold(
+            bounds_loss(&model, self.config.logvar_loss_coef),
             |loss, m| {
-                loss + member_nll(model, m, x.clone(), y.clone())
+                loss + member_nll(&model, m, x.clone(), y.clone())
                     + weight_decay(&model.members[m], &self.config.weight_decay)
             },
+        );
+        let losses = AdversarialLosses {
+            adversarial: to_f32_vec(adversarial.clone())[0],
+            supervised: to_f32_vec(supervised.clone())[0],
+        };
+        let loss = adversarial * self.config.adv_weight + supervised;
+        let grads = GradientsParams::from_grads(loss.backward(), &model);
+        let model = adam.step_module(self.config.learning_rate, model, grads, state);
+        (model, losses)
+    }
+
+    /// The same step by hand: the mixture's gradient by each elite's output
+    /// on the sample's rows (`HostElites::gradient`), then one pass of every
+    /// member over the real batch and, for the elites, those rows after it.
+    fn fused_step(
+        &self,
+        trainer: &mut FusedTrainer,
+        (sample, advantage): (&AdversarialSample, &[f32]),
+        real: MemberBatch,
+    ) -> AdversarialLosses {
+        let inputs = self.inputs(&sample.observations, &sample.actions);
+        let raw = trainer.outputs(&self.elites, &inputs);
+        let elites = HostElites::from_raw(raw, &self.base(&sample.observations), trainer.bounds());
+        let targets = sample.targets();
+        let mixture = elites.mixture(&targets);
+        let rows = advantage.len().max(1) as f32;
+        // ∂(w_adv·mean(log p·A))/∂log p_r = w_adv·A_r/rows.
+        let weight = self.config.adv_weight as f32 / rows;
+        let weights: Vec<f32> = advantage.iter().map(|a| weight * a).collect();
+        let (grads, max, min) = elites.gradient((&targets, &mixture), &weights);
+        let mut term = OutputTerm {
+            rows: vec![None; trainer.member_count()],
+            max,
+            min,
+        };
+        for (&m, grad) in self.elites.iter().zip(grads) {
+            term.rows[m] = Some((inputs.clone(), grad));
+        }
+        let supervised = trainer.step_with(&vec![real; term.rows.len()], Some(&term));
+        let adversarial = (mixture.log_probs.iter().zip(advantage))
+            .map(|(l, a)| l * a)
+            .sum::<f32>()
+            / rows;
+        AdversarialLosses {
+            adversarial,
+            supervised: supervised as f32,
+        }
+    }
+}
+
+/// (s', r) rows, `[rows, obs_dim + 1]`.
+fn joined_targets(next_observations: &[f32], rewards: &[f32]) -> Vec<f32> {
+    let o = next_observations.len() / rewards.len().max(1);
+    (next_observations.chunks_exact(o.max(1)))
+        .zip(rewards)
+        .flat_map(|(s, &r)| s.iter().copied().chain([r]))
+        .collect()
+}
+
+/// A copy of `model` whose parameters track gradients on `device`.
+fn trainable_copy(model: &GaussianEnsemble, device: &Device) -> GaussianEnsemble {
+    let layers = &model.members[0].layers;
+    let hidden: Vec<usize> = (layers[..layers.len() - 1].iter())
+        .map(|layer| layer.weight.val().dims()[1])
+        .collect();
+    let d_in = layers[0].weight.val().dims()[0];
+    let d_out = model.max_logvar.val().dims()[0];
+    // Drawn (any seed: every value is then overwritten) so the copy's parameters track gradients.
+    let fresh = seeded_init(device, 0, || {
+        GaussianEnsemble::init(
+            d_in,
+            d_out,
+            &hidden,
+            model.members.len(),
+            (0.0, 0.0),
+            device,
         )
+    });
+    assign_params(fresh, model)
+}
+
+/// The elites' Gaussians at some rows, on the host: means (s + Δs, r) and
+/// bounded log-variances `[rows, d]` each; from raw outputs (the fused path),
+/// also ∂log σ²/∂(raw, max, min) per value, for the gradient.
+struct HostElites {
+    /// Values per row: the state's and the reward.
+    d: usize,
+    means: Vec<Vec<f32>>,
+    logvars: Vec<Vec<f32>>,
+    derivatives: Vec<Vec<(f32, f32, f32)>>,
+}
+
+/// log p per row, and each elite's share of it (its responsibility π).
+struct Mixture {
+    log_probs: Vec<f32>,
+    /// `[rows, elites]`.
+    shares: Vec<f32>,
+}
+
+impl HostElites {
+    fn from_raw(raw: Vec<Vec<f32>>, base: &[f32], (max, min): (&[f32], &[f32])) -> Self {
+        let d = max.len();
+        let mut elites = Self {
+            d,
+            means: Vec::new(),
+            logvars: Vec::new(),
+            derivatives: Vec::new(),
+        };
+        for out in raw {
+            let (mut mean, mut logvar, mut derivative) = (Vec::new(), Vec::new(), Vec::new());
+            for (row, base) in out.chunks_exact(2 * d).zip(base.chunks_exact(d)) {
+                for j in 0..d {
+                    let bounded = BoundedLogvar::of(row[d + j], max[j], min[j]);
+                    mean.push(row[j] + base[j]);
+                    logvar.push(bounded.value);
+                    derivative.push((bounded.d_raw, bounded.d_max, bounded.d_min));
+                }
+            }
+            elites.means.push(mean);
+            elites.logvars.push(logvar);
+            elites.derivatives.push(derivative);
+        }
+        elites
+    }
+
+    fn from_graph(elites: &[(Tensor<2>, Tensor<2>)]) -> Self {
+        Self {
+            d: elites[0].0.dims()[1],
+            means: elites.iter().map(|(m, _)| to_f32_vec(m.clone())).collect(),
+            logvars: elites.iter().map(|(_, l)| to_f32_vec(l.clone())).collect(),
+            derivatives: Vec::new(),
+        }
+    }
+
+    /// log (1/E)·Σ_e Π_d N(x_d | μ_e, σ_e) per row of `x` (`[rows, d]`), as a
+    /// log-sum-exp over the elites (as [`mixture_log_prob`]), and each elite's share.
+    fn mixture(&self, x: &[f32]) -> Mixture {
+        let (d, elites) = (self.d, self.means.len());
+        let rows = x.len() / d;
+        let ln_two_pi = (2.0 * std::f32::consts::PI).ln();
+        let mut out = Mixture {
+            log_probs: Vec::with_capacity(rows),
+            shares: Vec::with_capacity(rows * elites),
+        };
+        let mut each = vec![0.0f32; elites];
+        for r in 0..rows {
+            for (e, l) in each.iter_mut().enumerate() {
+                *l = (r * d..(r + 1) * d)
+                    .map(|k| {
+                        let diff = x[k] - self.means[e][k];
+                        let logvar = self.logvars[e][k];
+                        -0.5 * (diff * diff * (-logvar).exp() + logvar + ln_two_pi)
+                    })
+                    .sum();
+            }
+            let top = each.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+            let log_sum = top + each.iter().map(|l| (l - top).exp()).sum::<f32>().ln();
+            out.log_probs.push(log_sum - (elites as f32).ln());
+            out.shares.extend(each.iter().map(|l| (l - log_sum).exp()));
+        }
+        out
+    }
+
+    /// The gradient of Σ_r c_r·log p_r(x_r) by each elite's raw output
+    /// (`[rows, 2·d]`) and by the bounds (max, min), from the shares π:
+    /// ∂/∂μ = c·π·(x − μ)/σ², ∂/∂log σ² = −½·c·π·(1 − (x − μ)²/σ²), the
+    /// latter through the bounds.
+    fn gradient(
+        &self,
+        (x, mixture): (&[f32], &Mixture),
+        weights: &[f32],
+    ) -> (Vec<Vec<f32>>, Vec<f32>, Vec<f32>) {
+        let (d, elites) = (self.d, self.means.len());
+        let (mut grad_max, mut grad_min) = (vec![0.0f32; d], vec![0.0f32; d]);
+        let grads = (0..elites)
+            .map(|e| {
+                let mut grad = vec![0.0f32; weights.len() * 2 * d];
+                for (r, &c) in weights.iter().enumerate() {
+                    let c = c * mixture.shares[r * elites + e];
+                    for j in 0..d {
+                        let k = r * d + j;
+                        let diff = x[k] - self.means[e][k];
+                        let inverse_variance = (-self.logvars[e][k]).exp();
+                        let d_logvar = -0.5 * c * (1.0 - diff * diff * inverse_variance);
+                        let (d_raw, d_max, d_min) = self.derivatives[e][k];
+                        grad[r * 2 * d + j] = c * diff * inverse_variance;
+                        grad[r * 2 * d + d + j] = d_logvar * d_raw;
+                        grad_max[j] += d_logvar * d_max;
+                        grad_min[j] += d_logvar * d_min;
+                    }
+                }
+                grad
+            })
+            .collect();
+        (grads, grad_max, grad_min)
     }
 }
 

@@ -14,7 +14,7 @@ use burn::module::Param;
 use burn::tensor::{Tensor, TensorData};
 use rayon::prelude::*;
 
-use super::model::{GaussianEnsemble, softplus};
+use super::model::{BoundedLogvar, GaussianEnsemble};
 use super::trainer::{ADAM_EPSILON, EnsembleTrainer, LossTerms, MemberBatch};
 use crate::infer::{MlpTape, TrainableMlp};
 use crate::nn::{Adam, AdamState, Mlp, to_f32_vec};
@@ -35,6 +35,18 @@ struct BoundsGradient {
     loss: f64,
     max: Vec<f32>,
     min: Vec<f32>,
+}
+
+/// A term beside the fit's loss whose gradient the caller has taken with
+/// respect to some members' outputs on rows of their own (RAMBO's adversarial
+/// term, `super::adversarial`).
+pub(super) struct OutputTerm {
+    /// Per member: normalised inputs `[rows, d_in]` and ∂term/∂output
+    /// `[rows, 2·d_out]` (by the raw log-variance, through the bounds), or none.
+    pub rows: Vec<Option<(Vec<f32>, Vec<f32>)>>,
+    /// ∂term/∂ the log-variance limits.
+    pub max: Vec<f32>,
+    pub min: Vec<f32>,
 }
 
 pub(super) struct FusedTrainer {
@@ -76,28 +88,41 @@ impl FusedTrainer {
             template: model,
         }
     }
-}
 
-impl EnsembleTrainer for FusedTrainer {
-    type Member = TrainableMlp;
-
-    fn step(&mut self, batches: &[MemberBatch]) -> f64 {
+    /// One Adam step on the fit's loss over `batches` plus `term`, whose
+    /// gradient the caller has taken; returns the fit's loss before the step
+    /// (the term's value is the caller's).
+    pub fn step_with(&mut self, batches: &[MemberBatch], term: Option<&OutputTerm>) -> f64 {
         let (adam, terms) = (self.adam, &self.terms);
         let (max, min) = (&self.max_logvar, &self.min_logvar);
         let contributions: Vec<BoundsGradient> = self
             .members
             .par_iter_mut()
             .zip(batches)
-            .map(|(member, batch)| {
+            .enumerate()
+            .map(|(m, (member, batch))| {
                 let d = max.len();
                 let rows = batch.y.len() / d;
-                member.net.forward(&batch.x, rows, &mut member.tape);
+                // The term's rows after the batch's: one pass over both.
+                let extra = term.and_then(|t| t.rows[m].as_ref());
+                let joined;
+                let (input, all_rows) = match extra {
+                    Some((x, grad)) => {
+                        joined = [batch.x.as_slice(), x].concat();
+                        (joined.as_slice(), rows + grad.len() / (2 * d))
+                    }
+                    None => (batch.x.as_slice(), rows),
+                };
+                member.net.forward(input, all_rows, &mut member.tape);
                 let mut bounds = nll_gradient(
-                    &member.tape.output,
+                    &member.tape.output[..rows * 2 * d],
                     &batch.y,
                     (max, min),
                     &mut member.grad_output,
                 );
+                if let Some((_, grad)) = extra {
+                    member.grad_output.extend_from_slice(grad);
+                }
                 member.net.backward(
                     &mut member.tape,
                     &member.grad_output,
@@ -139,6 +164,16 @@ impl EnsembleTrainer for FusedTrainer {
             grad_max.iter_mut().zip(&c.max).for_each(|(g, v)| *g += v);
             grad_min.iter_mut().zip(&c.min).for_each(|(g, v)| *g += v);
         }
+        if let Some(term) = term {
+            grad_max
+                .iter_mut()
+                .zip(&term.max)
+                .for_each(|(g, v)| *g += v);
+            grad_min
+                .iter_mut()
+                .zip(&term.min)
+                .for_each(|(g, v)| *g += v);
+        }
         let step = self.adam.begin(&mut self.bounds_state, terms.learning_rate);
         for (name, param, grad) in [
             ("max_logvar", &mut self.max_logvar, &grad_max),
@@ -148,6 +183,47 @@ impl EnsembleTrainer for FusedTrainer {
             self.adam.update(step, param, grad, moments);
         }
         loss
+    }
+
+    /// The raw outputs (μ, then the unbounded log-variance; `[rows, 2·d_out]`)
+    /// of each of `members`, in their order, at normalised inputs `x`.
+    pub fn outputs(&mut self, members: &[usize], x: &[f32]) -> Vec<Vec<f32>> {
+        let rows = x.len() / self.members[0].net.d_in();
+        let mut by_member: Vec<Option<Vec<f32>>> = (self.members.par_iter_mut().enumerate())
+            .map(|(m, member)| {
+                members.contains(&m).then(|| {
+                    member.net.forward(x, rows, &mut member.tape);
+                    member.tape.output.clone()
+                })
+            })
+            .collect();
+        (members.iter())
+            .filter_map(|&m| by_member.get_mut(m)?.take())
+            .collect()
+    }
+
+    /// How many members it trains.
+    pub fn member_count(&self) -> usize {
+        self.members.len()
+    }
+
+    /// The log-variance limits now (max, min).
+    pub fn bounds(&self) -> (&[f32], &[f32]) {
+        (&self.max_logvar, &self.min_logvar)
+    }
+
+    /// The ensemble with the members' current weights.
+    pub fn model(&self) -> GaussianEnsemble {
+        let current: Vec<TrainableMlp> = self.members.iter().map(|m| m.net.clone()).collect();
+        self.model_with(&current)
+    }
+}
+
+impl EnsembleTrainer for FusedTrainer {
+    type Member = TrainableMlp;
+
+    fn step(&mut self, batches: &[MemberBatch]) -> f64 {
+        self.step_with(batches, None)
     }
 
     fn holdout_mse(&mut self, holdout: &MemberBatch) -> Vec<f32> {
@@ -276,26 +352,17 @@ fn nll_gradient(
         .zip(targets.chunks_exact(d))
     {
         for j in 0..d {
-            let above = max[j] - out[d + j];
-            let logvar_1 = max[j] - softplus(above);
-            let below = logvar_1 - min[j];
-            let logvar = min[j] + softplus(below);
+            let logvar = BoundedLogvar::of(out[d + j], max[j], min[j]);
             let diff = out[j] - y[j];
-            let inverse_variance = (-logvar).exp();
-            sum += f64::from(diff * diff * inverse_variance + logvar);
+            let inverse_variance = (-logvar.value).exp();
+            sum += f64::from(diff * diff * inverse_variance + logvar.value);
             grad[j] = 2.0 * diff * inverse_variance * scale;
             let d_logvar = (1.0 - diff * diff * inverse_variance) * scale;
-            let (s_below, s_above) = (sigmoid(below), sigmoid(above));
-            let d_logvar_1 = d_logvar * s_below;
-            grad[d + j] = d_logvar_1 * s_above;
-            bounds.max[j] += d_logvar_1 * sigmoid(-above);
-            bounds.min[j] += d_logvar * sigmoid(-below);
+            grad[d + j] = d_logvar * logvar.d_raw;
+            bounds.max[j] += d_logvar * logvar.d_max;
+            bounds.min[j] += d_logvar * logvar.d_min;
         }
     }
     bounds.loss = sum * f64::from(scale);
     bounds
-}
-
-fn sigmoid(x: f32) -> f32 {
-    1.0 / (1.0 + (-x).exp())
 }

@@ -56,3 +56,32 @@ impl GaussianEnsemble {
 pub(super) fn softplus(x: f32) -> f32 {
     if x > 20.0 { x } else { x.exp().ln_1p() }
 }
+
+fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+/// [`GaussianEnsemble::member`]'s soft bounds on one host value, with the
+/// derivatives of log σ² by the raw output and by the two limits (s the
+/// sigmoid, above = max − raw, below = log σ²₁ − min):
+/// ∂/∂raw = s(below)·s(above), ∂/∂max = s(below)·s(−above), ∂/∂min = s(−below).
+pub(super) struct BoundedLogvar {
+    pub value: f32,
+    pub d_raw: f32,
+    pub d_max: f32,
+    pub d_min: f32,
+}
+
+impl BoundedLogvar {
+    pub fn of(raw: f32, max: f32, min: f32) -> Self {
+        let above = max - raw;
+        let below = max - softplus(above) - min;
+        let s_below = sigmoid(below);
+        Self {
+            value: min + softplus(below),
+            d_raw: s_below * sigmoid(above),
+            d_max: s_below * sigmoid(-above),
+            d_min: sigmoid(-below),
+        }
+    }
+}
