@@ -326,7 +326,7 @@ impl Layout {
         actions: &[f32],
     ) -> HostElites {
         let raw = trainer.outputs(&self.elites, &self.inputs(observations, actions));
-        HostElites::from_raw(raw, &self.base(observations), trainer.bounds())
+        RawElites::new(raw, &self.base(observations), trainer.bounds()).host
     }
 
     /// The step on burn's graph: `model` stepped, and the two terms.
@@ -365,7 +365,7 @@ impl Layout {
     }
 
     /// The same step by hand: the mixture's gradient by each elite's output
-    /// on the sample's rows (`HostElites::gradient`), then one pass of every
+    /// on the sample's rows (`RawElites::gradient`), then one pass of every
     /// member over the real batch and, for the elites, those rows after it.
     fn fused_step(
         &self,
@@ -375,9 +375,9 @@ impl Layout {
     ) -> AdversarialLosses {
         let inputs = self.inputs(&sample.observations, &sample.actions);
         let raw = trainer.outputs(&self.elites, &inputs);
-        let elites = HostElites::from_raw(raw, &self.base(&sample.observations), trainer.bounds());
+        let elites = RawElites::new(raw, &self.base(&sample.observations), trainer.bounds());
         let targets = sample.targets();
-        let mixture = elites.mixture(&targets);
+        let mixture = elites.host.mixture(&targets);
         let rows = advantage.len().max(1) as f32;
         // ∂(w_adv·mean(log p·A))/∂log p_r = w_adv·A_r/rows.
         let weight = self.config.adv_weight as f32 / rows;
@@ -435,13 +435,18 @@ fn trainable_copy(model: &GaussianEnsemble, device: &Device) -> GaussianEnsemble
 }
 
 /// The elites' Gaussians at some rows, on the host: means (s + Δs, r) and
-/// bounded log-variances `[rows, d]` each; from raw outputs (the fused path),
-/// also ∂log σ²/∂(raw, max, min) per value, for the gradient.
+/// bounded log-variances `[rows, d]` each.
 struct HostElites {
     /// Values per row: the state's and the reward.
     d: usize,
     means: Vec<Vec<f32>>,
     logvars: Vec<Vec<f32>>,
+}
+
+/// The same from the fused members' raw outputs, with ∂log σ²/∂(raw, max,
+/// min) per value: what the gradient by those outputs needs.
+struct RawElites {
+    host: HostElites,
     derivatives: Vec<Vec<(f32, f32, f32)>>,
 }
 
@@ -452,13 +457,15 @@ struct Mixture {
     shares: Vec<f32>,
 }
 
-impl HostElites {
-    fn from_raw(raw: Vec<Vec<f32>>, base: &[f32], (max, min): (&[f32], &[f32])) -> Self {
+impl RawElites {
+    fn new(raw: Vec<Vec<f32>>, base: &[f32], (max, min): (&[f32], &[f32])) -> Self {
         let d = max.len();
         let mut elites = Self {
-            d,
-            means: Vec::new(),
-            logvars: Vec::new(),
+            host: HostElites {
+                d,
+                means: Vec::new(),
+                logvars: Vec::new(),
+            },
             derivatives: Vec::new(),
         };
         for out in raw {
@@ -471,19 +478,55 @@ impl HostElites {
                     derivative.push((bounded.d_raw, bounded.d_max, bounded.d_min));
                 }
             }
-            elites.means.push(mean);
-            elites.logvars.push(logvar);
+            elites.host.means.push(mean);
+            elites.host.logvars.push(logvar);
             elites.derivatives.push(derivative);
         }
         elites
     }
 
+    /// The gradient of Σ_r c_r·log p_r(x_r) by each elite's raw output
+    /// (`[rows, 2·d]`) and by the bounds (max, min), from the shares π:
+    /// ∂/∂μ = c·π·(x − μ)/σ², ∂/∂log σ² = −½·c·π·(1 − (x − μ)²/σ²), the
+    /// latter through the bounds.
+    fn gradient(
+        &self,
+        (x, mixture): (&[f32], &Mixture),
+        weights: &[f32],
+    ) -> (Vec<Vec<f32>>, Vec<f32>, Vec<f32>) {
+        let (host, elites) = (&self.host, self.host.means.len());
+        let d = host.d;
+        let (mut grad_max, mut grad_min) = (vec![0.0f32; d], vec![0.0f32; d]);
+        let grads = (0..elites)
+            .map(|e| {
+                let mut grad = vec![0.0f32; weights.len() * 2 * d];
+                for (r, &c) in weights.iter().enumerate() {
+                    let c = c * mixture.shares[r * elites + e];
+                    for j in 0..d {
+                        let k = r * d + j;
+                        let diff = x[k] - host.means[e][k];
+                        let inverse_variance = (-host.logvars[e][k]).exp();
+                        let d_logvar = -0.5 * c * (1.0 - diff * diff * inverse_variance);
+                        let (d_raw, d_max, d_min) = self.derivatives[e][k];
+                        grad[r * 2 * d + j] = c * diff * inverse_variance;
+                        grad[r * 2 * d + d + j] = d_logvar * d_raw;
+                        grad_max[j] += d_logvar * d_max;
+                        grad_min[j] += d_logvar * d_min;
+                    }
+                }
+                grad
+            })
+            .collect();
+        (grads, grad_max, grad_min)
+    }
+}
+
+impl HostElites {
     fn from_graph(elites: &[(Tensor<2>, Tensor<2>)]) -> Self {
         Self {
             d: elites[0].0.dims()[1],
             means: elites.iter().map(|(m, _)| to_f32_vec(m.clone())).collect(),
             logvars: elites.iter().map(|(_, l)| to_f32_vec(l.clone())).collect(),
-            derivatives: Vec::new(),
         }
     }
 
@@ -514,40 +557,6 @@ impl HostElites {
             out.shares.extend(each.iter().map(|l| (l - log_sum).exp()));
         }
         out
-    }
-
-    /// The gradient of Σ_r c_r·log p_r(x_r) by each elite's raw output
-    /// (`[rows, 2·d]`) and by the bounds (max, min), from the shares π:
-    /// ∂/∂μ = c·π·(x − μ)/σ², ∂/∂log σ² = −½·c·π·(1 − (x − μ)²/σ²), the
-    /// latter through the bounds.
-    fn gradient(
-        &self,
-        (x, mixture): (&[f32], &Mixture),
-        weights: &[f32],
-    ) -> (Vec<Vec<f32>>, Vec<f32>, Vec<f32>) {
-        let (d, elites) = (self.d, self.means.len());
-        let (mut grad_max, mut grad_min) = (vec![0.0f32; d], vec![0.0f32; d]);
-        let grads = (0..elites)
-            .map(|e| {
-                let mut grad = vec![0.0f32; weights.len() * 2 * d];
-                for (r, &c) in weights.iter().enumerate() {
-                    let c = c * mixture.shares[r * elites + e];
-                    for j in 0..d {
-                        let k = r * d + j;
-                        let diff = x[k] - self.means[e][k];
-                        let inverse_variance = (-self.logvars[e][k]).exp();
-                        let d_logvar = -0.5 * c * (1.0 - diff * diff * inverse_variance);
-                        let (d_raw, d_max, d_min) = self.derivatives[e][k];
-                        grad[r * 2 * d + j] = c * diff * inverse_variance;
-                        grad[r * 2 * d + d + j] = d_logvar * d_raw;
-                        grad_max[j] += d_logvar * d_max;
-                        grad_min[j] += d_logvar * d_min;
-                    }
-                }
-                grad
-            })
-            .collect();
-        (grads, grad_max, grad_min)
     }
 }
 
