@@ -2,7 +2,7 @@
 //! known answers: a model that predicts no change, one whose uncertainty is
 //! the action's norm, and the real task stepped here.
 
-use nuno::agent::PortableActor;
+use nuno::agent::{PortableActor, StateBox};
 use nuno::data::{Dataset, GenerateConfig, WindowSampler, generate};
 use nuno::envs::{MujocoTask, Rules, TaskConfig, TaskName, TaskRules};
 use nuno::experiment::{
@@ -166,20 +166,57 @@ fn exploitation_compares_the_real_task_with_the_model_and_its_penalty() {
         penalty: 2.0,
         seed: 5,
     };
-    let result = exploitation(&Stationary, &rules, &task(), &policy, &config).unwrap();
-    // The real task by hand from the same resets.
+    // The data's range: wide, but for the height (obs[0]) cut at the middle
+    // start's, and the x velocity (obs[5]) at 0.5 m/s.
     let mut env = MujocoTask::new(&task()).unwrap();
+    let mut heights: Vec<f32> = (0..3).map(|i| env.reset(Some(5 + i))[0] as f32).collect();
+    heights.sort_by(f32::total_cmp);
+    let (mut lower, mut upper) = (vec![-1e3f32; 11], vec![1e3f32; 11]);
+    (upper[0], upper[5]) = (heights[1], 0.5);
+    lower[5] = -0.5;
+    let data = StateBox {
+        lower: lower.clone(),
+        upper: upper.clone(),
+    };
+    let result = exploitation((&Stationary, &rules), &task(), &policy, &data, &config).unwrap();
+    // The real task by hand from the same resets.
+    let inside = |obs: &[f64]| {
+        (obs.iter().zip(lower.iter().zip(&upper)))
+            .all(|(&x, (&low, &high))| f64::from(low) <= x && x <= f64::from(high))
+    };
     let mut per_step = vec![0.0f64; 40];
+    let mut outside = vec![(0usize, 0usize); 40];
     for i in 0..3 {
         env.reset(Some(5 + i));
-        for r in per_step.iter_mut() {
+        for (r, (took, out)) in per_step.iter_mut().zip(&mut outside) {
             let step = env.step(&[0.25, -0.125, 0.5]).unwrap();
             *r += step.reward / 3.0;
+            let obs: Vec<f64> = step
+                .observation
+                .iter()
+                .map(|&x| f64::from(x as f32))
+                .collect();
+            (*took, *out) = (*took + 1, *out + usize::from(!inside(&obs)));
             if step.terminated {
                 break;
             }
         }
     }
+    for (k, &(took, out)) in outside.iter().enumerate() {
+        let share = result.real_outside_data[k];
+        match took {
+            0 => assert!(share.is_nan(), "step {}: {share}", k + 1),
+            _ => assert_eq!(share, out as f64 / took as f64, "step {}", k + 1),
+        }
+    }
+    // Both kinds of step occur (the check above compares something).
+    let shares = &result.real_outside_data;
+    assert!(
+        shares.contains(&0.0) && shares.iter().any(|&s| s > 0.0),
+        "{shares:?}"
+    );
+    // The model never moves: the tallest start stays above the cut, alone.
+    assert!(result.model_outside_data.iter().all(|&s| s == 1.0 / 3.0));
     let mut total = 0.0;
     for (k, r) in per_step.iter().enumerate() {
         total += r;

@@ -6,14 +6,15 @@
 //! - Figure 3: the model's uncertainty at dataset states for the dataset's,
 //!   uniformly random and a policy's actions ([`uncertainty_by_action`]);
 //! - Figure 4: model exploitation, a policy's return in the model with and
-//!   without the penalty against its return in the real task ([`exploitation`]).
+//!   without the penalty against its return in the real task, and how many of
+//!   the states it reaches in each lie outside the data's range ([`exploitation`]).
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::ExperimentError;
-use crate::agent::{RolloutActions, RolloutConfig, RolloutTrace, rollout_model};
+use crate::agent::{RolloutActions, RolloutConfig, RolloutTrace, StateBox, rollout_model};
 use crate::data::{Dataset, WindowBatch, WindowSampler};
 use crate::envs::{MujocoTask, Rules, TaskConfig};
 use crate::shared::{BatchDynamics, BatchPolicy, SeedStream, derive_seed};
@@ -226,6 +227,37 @@ pub struct Exploitation {
     pub model: Vec<f64>,
     pub model_penalized: Vec<f64>,
     pub penalty: f64,
+    /// Entry k: the share of the trajectories that took step k + 1 whose
+    /// state after it lies outside the data's range in some dimension (NaN
+    /// where none took it): where a model's rollouts escape the data, and
+    /// where the policy itself leaves it in the real task.
+    pub real_outside_data: Vec<f64>,
+    pub model_outside_data: Vec<f64>,
+}
+
+/// Per step: trajectories that took it, and how many of them ended it
+/// outside the data's range.
+struct OutsideCounts(Vec<(usize, usize)>);
+
+impl OutsideCounts {
+    fn new(horizon: usize) -> Self {
+        Self(vec![(0, 0); horizon])
+    }
+
+    fn count(&mut self, step: usize, state: &[f32], data: &StateBox) {
+        let (took, outside) = &mut self.0[step];
+        *took += 1;
+        *outside += usize::from(!data.contains(state));
+    }
+
+    fn shares(self) -> Vec<f64> {
+        (self.0.into_iter())
+            .map(|(took, outside)| match took {
+                0 => f64::NAN,
+                _ => outside as f64 / took as f64,
+            })
+            .collect()
+    }
 }
 
 /// How [`exploitation`] runs.
@@ -240,18 +272,20 @@ pub struct ExploitationConfig {
 }
 
 /// Runs `policy` from the task's reset states in the real task and in
-/// `dynamics`, up to `horizon` steps or the end of each episode.
+/// `dynamics`, up to `horizon` steps or the end of each episode; `data` is
+/// the dataset's range per dimension (`StateBox::around(bounds, 0)`).
 pub fn exploitation(
-    dynamics: &dyn BatchDynamics,
-    rules: &Rules,
+    (dynamics, rules): (&dyn BatchDynamics, &Rules),
     task: &TaskConfig,
     policy: &dyn BatchPolicy,
+    data: &StateBox,
     config: &ExploitationConfig,
 ) -> Result<Exploitation, ExperimentError> {
     let invalid = |e: crate::envs::EnvError| ExperimentError::Invalid(e.to_string());
     let mut env = MujocoTask::new(task).map_err(invalid)?;
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let mut real = vec![0.0f64; config.horizon];
+    let mut real_outside = OutsideCounts::new(config.horizon);
     let mut starts = Vec::with_capacity(config.starts * env.obs_dim());
     for i in 0..config.starts as u64 {
         let mut obs: Vec<f32> = env
@@ -260,12 +294,13 @@ pub fn exploitation(
             .map(|&x| x as f32)
             .collect();
         starts.extend_from_slice(&obs);
-        for total in real.iter_mut() {
+        for (k, total) in real.iter_mut().enumerate() {
             let action = policy.act(&obs, &mut rng);
             let action: Vec<f64> = action.iter().map(|&a| f64::from(a)).collect();
             let step = env.step(&action).map_err(invalid)?;
             *total += step.reward;
             obs = step.observation.iter().map(|&x| x as f32).collect();
+            real_outside.count(k, &obs, data);
             if step.terminated || step.truncated {
                 break;
             }
@@ -288,10 +323,15 @@ pub fn exploitation(
         &mut rng,
     );
     let trace = &rollout.trace;
+    let obs_dim = env.obs_dim();
     let mut model = vec![0.0f64; config.horizon];
     let mut penalized = vec![0.0f64; config.horizon];
+    let mut model_outside = OutsideCounts::new(config.horizon);
     for row in 0..trace.rows {
         for k in 0..trace.kept[row] {
+            // The trace holds the start, then the state after each kept step.
+            let state = &trace.observations[row][(k + 1) * obs_dim..(k + 2) * obs_dim];
+            model_outside.count(k, state, data);
             let (r, eta) = (
                 f64::from(trace.rewards[row][k]),
                 f64::from(trace.eta[row][k]),
@@ -314,5 +354,7 @@ pub fn exploitation(
         model: cumulative_mean(model),
         model_penalized: cumulative_mean(penalized),
         penalty: config.penalty,
+        real_outside_data: real_outside.shares(),
+        model_outside_data: model_outside.shares(),
     })
 }

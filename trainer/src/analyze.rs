@@ -7,19 +7,20 @@
 //! - `uncertainty.csv|svg`: each model's η at dataset states for dataset,
 //!   random and (given --policy) the policy's actions;
 //! - `exploitation.csv|svg` (given --policy): the policy's return in each model,
-//!   with and without the penalty, against the real task.
+//!   with and without the penalty, against the real task, and the share of the
+//!   states it reaches in each that lie outside the dataset's range.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use burn::tensor::Device;
-use nuno::agent::{ActionMode, ActorPolicy};
+use nuno::agent::{ActionMode, ActorPolicy, StateBox};
 use nuno::artifact::{BEST_POLICY, ModelFolder, load_policy};
 use nuno::data::{Dataset, DatasetFormat, NormalizerConfig, Stats, read_system_dataset};
 use nuno::envs::{Rules, System, TaskConfig};
 use nuno::experiment::{
-    ExploitationConfig, LinearModel, PredictionConfig, exploitation, prediction_error,
-    uncertainty_by_action,
+    Exploitation, ExploitationConfig, LinearModel, PredictionConfig, exploitation,
+    prediction_error, uncertainty_by_action,
 };
 use nuno::infer::Kernel;
 use nuno::shared::{BatchDynamics, BatchPolicy, Metric, MetricsTable};
@@ -130,7 +131,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     write_prediction_error(&args, &predictors, &dataset, ood.as_ref())?;
     write_uncertainty(&args, &models, system, &dataset, policy.as_deref())?;
     match (&policy, system.simulator()) {
-        (Some(policy), Some(task)) => write_exploitation(&args, &models, task, policy.as_ref())?,
+        (Some(policy), Some(task)) => {
+            let data = StateBox::around(&dataset.observation_bounds(), 0.0);
+            write_exploitation(&args, &models, (task, &data), policy.as_ref())?
+        }
         (Some(_), None) => println!(
             "no Figure 4: {} is a system described in a file, with no simulator to run the policy in",
             system.name()
@@ -290,15 +294,24 @@ fn write_uncertainty(
     )
 }
 
-/// A row of exploitation.csv: model, step, real, model, model_penalized.
-type ExploitationRow = (String, usize, f64, f64, f64);
+/// A row of exploitation.csv.
+struct ExploitationRow {
+    model: String,
+    step: usize,
+    real: f64,
+    in_model: f64,
+    penalized: f64,
+    real_outside: f64,
+    model_outside: f64,
+}
 
 /// Figure 4: the policy's mean cumulative return in each model, with and
-/// without the penalty, against the real task.
+/// without the penalty, against the real task; and where each leaves `data`,
+/// the dataset's range, also printed at a few steps.
 fn write_exploitation(
     args: &Args,
     models: &[Model],
-    task: TaskConfig,
+    (task, data): (TaskConfig, &StateBox),
     policy: &dyn BatchPolicy,
 ) -> anyhow::Result<()> {
     let config = ExploitationConfig {
@@ -311,16 +324,23 @@ fn write_exploitation(
     let mut curves = Vec::new();
     for model in models {
         let result = exploitation(
-            model.dynamics.as_ref(),
-            &model.rules,
+            (model.dynamics.as_ref(), &model.rules),
             &task,
             policy,
+            data,
             &config,
         )?;
+        println!("{}", outside_summary(&model.name, &result));
         for k in 0..args.episode_steps {
-            let (real, in_model) = (result.real[k], result.model[k]);
-            let penalized = result.model_penalized[k];
-            rows.push((model.name.clone(), k + 1, real, in_model, penalized));
+            rows.push(ExploitationRow {
+                model: model.name.clone(),
+                step: k + 1,
+                real: result.real[k],
+                in_model: result.model[k],
+                penalized: result.model_penalized[k],
+                real_outside: result.real_outside_data[k],
+                model_outside: result.model_outside_data[k],
+            });
         }
         if curves.is_empty() {
             curves.push(("real task".to_string(), result.real.clone()));
@@ -332,11 +352,17 @@ fn write_exploitation(
         ));
     }
     let table = MetricsTable::new()
-        .column("model", |r: &ExploitationRow| r.0.as_str().into())
-        .column("step", |r: &ExploitationRow| r.1.into())
-        .column("real", |r: &ExploitationRow| r.2.into())
-        .column("model", |r: &ExploitationRow| r.3.into())
-        .column("model_penalized", |r: &ExploitationRow| r.4.into());
+        .column("model", |r: &ExploitationRow| r.model.as_str().into())
+        .column("step", |r: &ExploitationRow| r.step.into())
+        .column("real", |r: &ExploitationRow| r.real.into())
+        .column("model", |r: &ExploitationRow| r.in_model.into())
+        .column("model_penalized", |r: &ExploitationRow| r.penalized.into())
+        .column("real_outside_data", |r: &ExploitationRow| {
+            r.real_outside.into()
+        })
+        .column("model_outside_data", |r: &ExploitationRow| {
+            r.model_outside.into()
+        });
     write_text(&args.out.join("exploitation.csv"), &table.csv(&rows))?;
     line_chart(
         &args.out.join("exploitation.svg"),
@@ -344,6 +370,32 @@ fn write_exploitation(
         "step",
         "mean cumulative return",
         &per_step(&curves),
+    )
+}
+
+/// "NAME: states outside the data's range at steps 1 / 5 / 20 / H: model …, real task …"
+fn outside_summary(name: &str, result: &Exploitation) -> String {
+    let horizon = result.real.len();
+    let mut steps: Vec<usize> = [1, 5, 20, horizon]
+        .into_iter()
+        .filter(|&k| k <= horizon)
+        .collect();
+    steps.dedup();
+    let shares = |values: &[f64]| -> String {
+        let each: Vec<String> = (steps.iter())
+            .map(|&k| match values[k - 1] {
+                v if v.is_nan() => "–".to_string(),
+                v => format!("{:.0} %", 100.0 * v),
+            })
+            .collect();
+        each.join(" / ")
+    };
+    let at: Vec<String> = steps.iter().map(usize::to_string).collect();
+    format!(
+        "{name}: states outside the dataset's range after steps {}: model {}, real task {}",
+        at.join(" / "),
+        shares(&result.model_outside_data),
+        shares(&result.real_outside_data)
     )
 }
 

@@ -52,7 +52,7 @@ fn analyze_writes_every_figure_for_both_model_kinds() {
         args.extend(extra.iter().map(|e| e.to_string()));
         args
     };
-    ok(&analyze(&[
+    let printed = ok(&analyze(&[
         "--ood-dataset",
         &s(&outside),
         "--policy",
@@ -82,6 +82,18 @@ fn analyze_writes_every_figure_for_both_model_kinds() {
     assert!(uncertainty.contains("mopo,random,") && uncertainty.contains("nuno,policy,"));
     let exploitation = csv("exploitation.csv");
     assert_eq!(exploitation.lines().count(), 1 + 2 * 30);
+    // Where each model's states and the real task's leave the data, per step and printed.
+    assert!(
+        exploitation.starts_with(
+            "model,step,real,model,model_penalized,real_outside_data,model_outside_data\n"
+        ),
+        "{exploitation}"
+    );
+    for model in ["nuno", "mopo"] {
+        let line =
+            format!("{model}: states outside the dataset's range after steps 1 / 5 / 20 / 30");
+        assert!(printed.contains(&line), "{printed}");
+    }
     for figure in [
         "prediction_error.svg",
         "uncertainty.svg",
