@@ -63,21 +63,7 @@ fn main() {
         next_observations: normal(BATCH * OBS),
         terminals: vec![0.0; BATCH],
     };
-    let model = seeded_init(&device, 1, || {
-        GaussianEnsemble::init(OBS + ACT, OBS + 1, &[200; 4], 7, (0.5, -10.0), &device)
-    });
-    let fit = EnsembleFit {
-        model,
-        scaler: Scaler {
-            mean: vec![0.0; OBS + ACT],
-            std: vec![1.0; OBS + ACT],
-        },
-        elites: (0..5).collect(),
-        holdout_mse: vec![0.0; 7],
-        history: Vec::new(),
-    };
-    let ensemble =
-        EnsembleDynamics::new(&fit, OBS, ACT, EnsembleUncertainty::MaxAleatoric).on_fused_path();
+    let ensemble = hopper_ensemble(&device);
     let actor = ActorConfig::new(OBS, ACT, vec![-1.0; ACT], vec![1.0; ACT]);
     let sac = seeded_init(&device, 0, || Sac::new(actor, SacConfig::new(), &device));
     let penalty = BellmanPenalty::new(1.0);
@@ -134,6 +120,25 @@ fn main() {
             seconds,
         );
     }
+}
+
+/// MOPO's ensemble at hopper's shape (7 members of 4×200, 5 elites), seeded,
+/// on the fused path.
+fn hopper_ensemble(device: &Device) -> EnsembleDynamics {
+    let model = seeded_init(device, 1, || {
+        GaussianEnsemble::init(OBS + ACT, OBS + 1, &[200; 4], 7, (0.5, -10.0), device)
+    });
+    let fit = EnsembleFit {
+        model,
+        scaler: Scaler {
+            mean: vec![0.0; OBS + ACT],
+            std: vec![1.0; OBS + ACT],
+        },
+        elites: (0..5).collect(),
+        holdout_mse: vec![0.0; 7],
+        history: Vec::new(),
+    };
+    EnsembleDynamics::new(&fit, OBS, ACT, EnsembleUncertainty::MaxAleatoric).on_fused_path()
 }
 
 /// Seconds per RAMBO adversarial model step on `batch`'s 256 rows.

@@ -29,6 +29,64 @@ struct Member {
     grad_output: Vec<f32>,
 }
 
+impl Member {
+    /// One Adam step of this member on its NLL of `batch` and weight decay,
+    /// plus `extra`'s rows (inputs, ∂term/∂output) after the batch's in the
+    /// same pass; returns its loss and its gradient by the bounds.
+    fn step(
+        &mut self,
+        batch: &MemberBatch,
+        extra: Option<&(Vec<f32>, Vec<f32>)>,
+        (max, min): (&[f32], &[f32]),
+        (terms, adam): (&LossTerms, Adam),
+    ) -> BoundsGradient {
+        let d = max.len();
+        let rows = batch.y.len() / d;
+        let joined;
+        let (input, all_rows) = match extra {
+            Some((x, grad)) => {
+                joined = [batch.x.as_slice(), x].concat();
+                (joined.as_slice(), rows + grad.len() / (2 * d))
+            }
+            None => (batch.x.as_slice(), rows),
+        };
+        self.net.forward(input, all_rows, &mut self.tape);
+        let mut bounds = nll_gradient(
+            &self.tape.output[..rows * 2 * d],
+            &batch.y,
+            (max, min),
+            &mut self.grad_output,
+        );
+        if let Some((_, grad)) = extra {
+            self.grad_output.extend_from_slice(grad);
+        }
+        (self.net).backward(
+            &mut self.tape,
+            &self.grad_output,
+            Some(&mut self.grads),
+            None,
+        );
+        for ((layer, grad), &c) in (self.net.layers.iter())
+            .zip(&mut self.grads.layers)
+            .zip(&terms.weight_decay)
+        {
+            let c = c as f32;
+            let mut squares = 0.0f64;
+            for (g, &w) in grad.weight.iter_mut().zip(&layer.weight) {
+                *g += c * w;
+                squares += f64::from(w) * f64::from(w);
+            }
+            bounds.loss += 0.5 * f64::from(c) * squares;
+        }
+        let step = adam.begin(&mut self.state, terms.learning_rate);
+        for (path, param, grad) in self.net.params_with(&self.grads) {
+            let moments = self.state.moments.entry(path).or_default();
+            adam.update(step, param, grad, moments);
+        }
+        bounds
+    }
+}
+
 /// What one member's step reports: its loss (NLL and weight decay) and its
 /// gradient with respect to the shared bounds.
 struct BoundsGradient {
@@ -94,87 +152,41 @@ impl FusedTrainer {
     /// (the term's value is the caller's).
     pub fn step_with(&mut self, batches: &[MemberBatch], term: Option<&OutputTerm>) -> f64 {
         let (adam, terms) = (self.adam, &self.terms);
-        let (max, min) = (&self.max_logvar, &self.min_logvar);
-        let contributions: Vec<BoundsGradient> = self
-            .members
-            .par_iter_mut()
-            .zip(batches)
+        let bounds = (self.max_logvar.as_slice(), self.min_logvar.as_slice());
+        let contributions: Vec<BoundsGradient> = (self.members.par_iter_mut().zip(batches))
             .enumerate()
             .map(|(m, (member, batch))| {
-                let d = max.len();
-                let rows = batch.y.len() / d;
-                // The term's rows after the batch's: one pass over both.
                 let extra = term.and_then(|t| t.rows[m].as_ref());
-                let joined;
-                let (input, all_rows) = match extra {
-                    Some((x, grad)) => {
-                        joined = [batch.x.as_slice(), x].concat();
-                        (joined.as_slice(), rows + grad.len() / (2 * d))
-                    }
-                    None => (batch.x.as_slice(), rows),
-                };
-                member.net.forward(input, all_rows, &mut member.tape);
-                let mut bounds = nll_gradient(
-                    &member.tape.output[..rows * 2 * d],
-                    &batch.y,
-                    (max, min),
-                    &mut member.grad_output,
-                );
-                if let Some((_, grad)) = extra {
-                    member.grad_output.extend_from_slice(grad);
-                }
-                member.net.backward(
-                    &mut member.tape,
-                    &member.grad_output,
-                    Some(&mut member.grads),
-                    None,
-                );
-                for ((layer, grad), &c) in member
-                    .net
-                    .layers
-                    .iter()
-                    .zip(&mut member.grads.layers)
-                    .zip(&terms.weight_decay)
-                {
-                    let c = c as f32;
-                    let mut squares = 0.0f64;
-                    for (g, &w) in grad.weight.iter_mut().zip(&layer.weight) {
-                        *g += c * w;
-                        squares += f64::from(w) * f64::from(w);
-                    }
-                    bounds.loss += 0.5 * f64::from(c) * squares;
-                }
-                let step = adam.begin(&mut member.state, terms.learning_rate);
-                for (path, param, grad) in member.net.params_with(&member.grads) {
-                    let moments = member.state.moments.entry(path).or_default();
-                    adam.update(step, param, grad, moments);
-                }
-                bounds
+                member.step(batch, extra, bounds, (terms, adam))
             })
             .collect();
+        self.step_bounds(&contributions, term)
+    }
 
+    /// Adam's step on the shared bounds from the members' contributions, the
+    /// term's and the bounds' own loss; returns the whole loss.
+    fn step_bounds(&mut self, contributions: &[BoundsGradient], term: Option<&OutputTerm>) -> f64 {
         let coef = self.terms.bounds_coef as f32;
         let mut loss = self.terms.bounds_coef
             * (self.max_logvar.iter().map(|&v| f64::from(v)).sum::<f64>()
                 - self.min_logvar.iter().map(|&v| f64::from(v)).sum::<f64>());
         let mut grad_max = vec![coef; self.max_logvar.len()];
         let mut grad_min = vec![-coef; self.min_logvar.len()];
-        for c in &contributions {
+        let added = |into: &mut Vec<f32>, values: &[f32]| {
+            into.iter_mut().zip(values).for_each(|(g, v)| *g += v);
+        };
+        for c in contributions {
             loss += c.loss;
-            grad_max.iter_mut().zip(&c.max).for_each(|(g, v)| *g += v);
-            grad_min.iter_mut().zip(&c.min).for_each(|(g, v)| *g += v);
+            added(&mut grad_max, &c.max);
+            added(&mut grad_min, &c.min);
         }
         if let Some(term) = term {
-            grad_max
-                .iter_mut()
-                .zip(&term.max)
-                .for_each(|(g, v)| *g += v);
-            grad_min
-                .iter_mut()
-                .zip(&term.min)
-                .for_each(|(g, v)| *g += v);
+            added(&mut grad_max, &term.max);
+            added(&mut grad_min, &term.min);
         }
-        let step = self.adam.begin(&mut self.bounds_state, terms.learning_rate);
+        let step = self
+            .adam
+            .begin(&mut self.bounds_state, self.terms.learning_rate);
         for (name, param, grad) in [
             ("max_logvar", &mut self.max_logvar, &grad_max),
             ("min_logvar", &mut self.min_logvar, &grad_min),

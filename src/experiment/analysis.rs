@@ -271,6 +271,42 @@ pub struct ExploitationConfig {
     pub seed: u64,
 }
 
+/// The real task's part of [`exploitation`]: per step, the summed reward
+/// over the episodes and where they leave `data`; and the reset states.
+fn real_task(
+    task: &TaskConfig,
+    policy: &dyn BatchPolicy,
+    data: &StateBox,
+    config: &ExploitationConfig,
+    rng: &mut ChaCha8Rng,
+) -> Result<(Vec<f64>, OutsideCounts, Vec<f32>), ExperimentError> {
+    let invalid = |e: crate::envs::EnvError| ExperimentError::Invalid(e.to_string());
+    let mut env = MujocoTask::new(task).map_err(invalid)?;
+    let mut real = vec![0.0f64; config.horizon];
+    let mut outside = OutsideCounts::new(config.horizon);
+    let mut starts = Vec::with_capacity(config.starts * env.obs_dim());
+    for i in 0..config.starts as u64 {
+        let mut obs: Vec<f32> = env
+            .reset(Some(derive_seed(config.seed, SeedStream::Episode(i))))
+            .iter()
+            .map(|&x| x as f32)
+            .collect();
+        starts.extend_from_slice(&obs);
+        for (k, total) in real.iter_mut().enumerate() {
+            let action = policy.act(&obs, rng);
+            let action: Vec<f64> = action.iter().map(|&a| f64::from(a)).collect();
+            let step = env.step(&action).map_err(invalid)?;
+            *total += step.reward;
+            obs = step.observation.iter().map(|&x| x as f32).collect();
+            outside.count(k, &obs, data);
+            if step.terminated || step.truncated {
+                break;
+            }
+        }
+    }
+    Ok((real, outside, starts))
+}
+
 /// Runs `policy` from the task's reset states in the real task and in
 /// `dynamics`, up to `horizon` steps or the end of each episode; `data` is
 /// the dataset's range per dimension (`StateBox::around(bounds, 0)`).
@@ -281,31 +317,8 @@ pub fn exploitation(
     data: &StateBox,
     config: &ExploitationConfig,
 ) -> Result<Exploitation, ExperimentError> {
-    let invalid = |e: crate::envs::EnvError| ExperimentError::Invalid(e.to_string());
-    let mut env = MujocoTask::new(task).map_err(invalid)?;
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
-    let mut real = vec![0.0f64; config.horizon];
-    let mut real_outside = OutsideCounts::new(config.horizon);
-    let mut starts = Vec::with_capacity(config.starts * env.obs_dim());
-    for i in 0..config.starts as u64 {
-        let mut obs: Vec<f32> = env
-            .reset(Some(derive_seed(config.seed, SeedStream::Episode(i))))
-            .iter()
-            .map(|&x| x as f32)
-            .collect();
-        starts.extend_from_slice(&obs);
-        for (k, total) in real.iter_mut().enumerate() {
-            let action = policy.act(&obs, &mut rng);
-            let action: Vec<f64> = action.iter().map(|&a| f64::from(a)).collect();
-            let step = env.step(&action).map_err(invalid)?;
-            *total += step.reward;
-            obs = step.observation.iter().map(|&x| x as f32).collect();
-            real_outside.count(k, &obs, data);
-            if step.terminated || step.truncated {
-                break;
-            }
-        }
-    }
+    let (real, real_outside, starts) = real_task(task, policy, data, config, &mut rng)?;
     let rollout = rollout_model(
         dynamics,
         RolloutActions::Policy(policy),
@@ -323,7 +336,7 @@ pub fn exploitation(
         &mut rng,
     );
     let trace = &rollout.trace;
-    let obs_dim = env.obs_dim();
+    let obs_dim = policy.obs_dim();
     let mut model = vec![0.0f64; config.horizon];
     let mut penalized = vec![0.0f64; config.horizon];
     let mut model_outside = OutsideCounts::new(config.horizon);
