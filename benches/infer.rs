@@ -233,6 +233,7 @@ fn main() {
         noise_scale: 1.0,
         halt: None,
         state_box: None,
+        observation_clip: None,
     };
     println!();
     println!("| 10-step rollout with policy (hopper) | batch | transitions/s |");

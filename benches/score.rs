@@ -125,6 +125,7 @@ fn steps_taken(
         noise_scale: config.noise_scale,
         halt: None,
         state_box: None,
+        observation_clip: None,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(SEED);
     let actions = RolloutActions::Sequence(candidates);

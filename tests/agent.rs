@@ -345,6 +345,60 @@ fn a_rollout_that_leaves_the_state_box_ends_as_diverged_without_the_step() {
     assert!(thighs.iter().all(|&x| x <= 0.012), "{thighs:?}");
 }
 
+/// With the task's clip, a model's joint velocity past ±10 is observed at ±10:
+/// the kept next state, the next step's start and the reward all read the
+/// clipped value; positions are never clipped. Without it they pass 10.
+#[test]
+fn a_rollout_with_the_tasks_clip_keeps_velocities_where_the_task_observes_them() {
+    let hopper = HopperRollouts::new();
+    let spec = &hopper.spec;
+    let dynamics = ConstantEta { spec: spec.clone() };
+    let Rules::Task(rules) = &hopper.rules else {
+        unreachable!("hopper's rules are a task's")
+    };
+    // D4RL hopper: observations 0..5 are qpos[1..], 5..11 qvel; the model adds 0.005 a step.
+    let mut start = hopper.upright();
+    start[4] = 9.998;
+    start[5..].fill(9.998);
+    let clipped = RolloutConfig {
+        observation_clip: rules.observation_clip(),
+        ..plain_rollouts(2, 1, 0.0)
+    };
+    let out = hopper.roll(&dynamics, &start, &clipped);
+    assert_eq!(out.transitions.len(), 2);
+    let o = spec.obs_dim;
+    for (k, next) in out
+        .transitions
+        .next_observations
+        .chunks_exact(o)
+        .enumerate()
+    {
+        let foot = 9.998 + 0.005 * (k + 1) as f32;
+        assert!(
+            (next[4] - foot).abs() < 1e-5,
+            "step {k}: the foot angle {}",
+            next[4]
+        );
+        assert_eq!(&next[5..], &[10.0; 6], "step {k}");
+    }
+    // Step 2 starts where step 1's clip left it.
+    assert_eq!(&out.transitions.observations[o + 5..2 * o], &[10.0; 6]);
+    for k in 0..2 {
+        let at = k * o..(k + 1) * o;
+        let by_hand = hopper.rules.reward(
+            &out.transitions.observations[at.clone()],
+            &HOPPER_ACTION,
+            &out.transitions.next_observations[at],
+        );
+        assert_eq!(out.transitions.rewards[k], by_hand);
+    }
+    // Forward velocity 10 + healthy 1 − 1e-3·|a|², the hopper's reward at the clip.
+    let control: f32 = HOPPER_ACTION.iter().map(|a| a * a).sum();
+    assert!((out.transitions.rewards[0] - (11.0 - 1e-3 * control)).abs() < 1e-5);
+    let free = hopper.roll(&dynamics, &start, &plain_rollouts(2, 1, 0.0));
+    assert!(free.transitions.next_observations[5] > 10.0);
+}
+
 struct Constant(Vec<f32>, usize);
 
 impl BatchPolicy for Constant {
@@ -431,6 +485,7 @@ fn plain_rollouts(horizon: usize, particles: usize, penalty: f64) -> RolloutConf
         noise_scale: 1.0,
         halt: None,
         state_box: None,
+        observation_clip: None,
     }
 }
 
@@ -997,6 +1052,7 @@ fn sde_rollouts_with_truncation_keep_nothing_past_epsilon() {
         noise_scale: 1.0,
         halt: None,
         state_box: None,
+        observation_clip: None,
     };
     let out = rollout_model(
         &model,
@@ -1160,6 +1216,7 @@ fn cancelled_rollouts_and_evaluations_stop_at_the_next_step() {
         noise_scale: 0.0,
         halt: None,
         state_box: None,
+        observation_clip: None,
     };
     let dynamics = Kernel::Fused.dynamics(&model);
     let out = rollout_model_or_cancel(

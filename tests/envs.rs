@@ -3,8 +3,8 @@
 
 use nuno::agent::RandomPolicy;
 use nuno::envs::{
-    EnvError, EvaluationConfig, Joint, JointKind, MujocoTask, StateSplit, TaskConfig, TaskName,
-    evaluate,
+    EnvError, EvaluationConfig, Joint, JointKind, MujocoTask, ObservationClip, StateSplit,
+    TaskConfig, TaskName, TaskRules, evaluate,
 };
 use nuno::shared::BatchPolicy;
 
@@ -417,4 +417,69 @@ fn a_controller_is_told_which_episode_each_row_is() {
         lengths.len() > 1,
         "every episode lasted as long: {lengths:?}"
     );
+}
+
+/// The rules' observation clip is the simulator's own: at a state whose joint
+/// velocities pass ±10 both ways, the raw qpos/qvel clipped by the rules is
+/// what the task observes (hopper and walker2d, both layouts); halfcheetah
+/// observes its velocities unclipped, and its rules have no clip.
+#[test]
+fn the_rules_observation_clip_is_what_the_task_observes() {
+    for config in [
+        TaskConfig::d4rl(TaskName::Hopper),
+        TaskConfig::neorl(TaskName::Hopper),
+        TaskConfig::d4rl(TaskName::Walker2d),
+        TaskConfig::neorl(TaskName::HalfCheetah),
+    ] {
+        let name = config.task.name().to_string();
+        let mut task = MujocoTask::new(&config).unwrap();
+        let qpos = task.initial_state().0.to_vec();
+        // ±(12 + j): every joint velocity outside ±10, alternately above and below.
+        let qvel: Vec<f64> = (0..task.qvel().len())
+            .map(|j| {
+                if j % 2 == 0 {
+                    12.0 + j as f64
+                } else {
+                    -12.0 - j as f64
+                }
+            })
+            .collect();
+        let observed: Vec<f32> = (task.set_state(&qpos, &qvel).unwrap())
+            .iter()
+            .map(|&x| x as f32)
+            .collect();
+        let observed_qpos = observed.len() - qvel.len();
+        let raw: Vec<f32> = (observed[..observed_qpos].iter().copied())
+            .chain(qvel.iter().map(|&v| v as f32))
+            .collect();
+        let clip = TaskRules::of_task(&config).unwrap().observation_clip();
+        if name == "halfcheetah" {
+            assert_eq!(clip, None);
+            assert_eq!(observed, raw, "halfcheetah observes velocities unclipped");
+            continue;
+        }
+        let mut clipped = raw.clone();
+        clip.expect("hopper and walker2d clip").apply(&mut clipped);
+        assert_eq!(clipped, observed, "{name}");
+        assert_ne!(
+            raw, observed,
+            "{name}: the state's velocities pass the clip"
+        );
+    }
+}
+
+/// Only entries from `from` on are clipped; a non-finite one is left as it is,
+/// so a step that diverged still reads as diverged.
+#[test]
+fn an_observation_clip_leaves_positions_and_non_finite_entries() {
+    let clip = ObservationClip {
+        from: 1,
+        limit: 10.0,
+    };
+    let mut observation = [50.0, 12.0, -15.0, 3.0, f32::INFINITY];
+    clip.apply(&mut observation);
+    assert_eq!(observation, [50.0, 10.0, -10.0, 3.0, f32::INFINITY]);
+    let mut nan = [0.0, f32::NAN];
+    clip.apply(&mut nan);
+    assert!(nan[1].is_nan());
 }

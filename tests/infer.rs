@@ -304,6 +304,7 @@ fn fused_ten_step_rollouts_match_burn_with_fixed_noise() {
         noise_scale: 1.0,
         halt: None,
         state_box: None,
+        observation_clip: None,
     };
     let run = |model: &dyn BatchDynamics, policy: &dyn BatchPolicy| {
         rollout_model(

@@ -413,6 +413,7 @@ fn scores_from_trace(
         noise_scale: config.noise_scale,
         halt: None,
         state_box: None,
+        observation_clip: None,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let actions = RolloutActions::Sequence(sequences);

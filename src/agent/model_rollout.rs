@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::model_step::penalized_reward;
-use crate::envs::Rules;
+use crate::envs::{ObservationClip, Rules};
 use crate::shared::cancel::{Cancel, Cancelled};
 use crate::shared::{BatchDynamics, BatchPolicy, ModelStep, TransitionBatch, scaled_noise};
 
@@ -39,6 +39,12 @@ pub struct RolloutConfig {
     /// configurations written before it (none had a box).
     #[serde(default)]
     pub state_box: Option<StateBox>,
+    /// Each model next observation is clipped as the task clips what it
+    /// observes, before the step is judged; `None` (the paper's and NUNO's
+    /// code's rollouts) leaves it as the model gives it. Absent from
+    /// configurations written before it (none clipped).
+    #[serde(default)]
+    pub observation_clip: Option<ObservationClip>,
 }
 
 impl RolloutConfig {
@@ -53,6 +59,7 @@ impl RolloutConfig {
             noise_scale: dynamics.sample_noise_scale(),
             halt: None,
             state_box: None,
+            observation_clip: None,
         }
     }
 }
@@ -307,7 +314,13 @@ impl Rollout {
             config.noise_scale,
             rng,
         );
-        let step = dynamics.step(&states, &actions, &noise);
+        let mut step = dynamics.step(&states, &actions, &noise);
+        if let Some(clip) = &config.observation_clip {
+            let state_dim = dynamics.state_dim();
+            for next_state in step.next_states.chunks_exact_mut(state_dim) {
+                clip.apply(&mut next_state[..obs_dim]);
+            }
+        }
 
         let active = std::mem::take(&mut self.active);
         for (i, &r) in active.iter().enumerate() {

@@ -152,6 +152,13 @@ pub struct PolicyLoopConfig {
     /// only non-finite ones. Runs saved before this field had none, and load so.
     #[config(default = "None")]
     pub state_box_margin: Option<f64>,
+    /// Model next observations are clipped as the task clips its own
+    /// ([`Rules::observation_clip`]: Hopper's and Walker2d's joint velocities to
+    /// ±10; nothing on a task that observes them unclipped); off (the paper's
+    /// and NUNO's code's rollouts) leaves them as the model gives them. Runs
+    /// saved before this field clipped nothing, and load so.
+    #[config(default = false)]
+    pub clip_observations: bool,
     /// Gradient steps per epoch.
     #[config(default = 1000)]
     pub steps_per_epoch: usize,
@@ -306,7 +313,7 @@ impl PolicyLoopConfig {
         &self,
         threshold: Option<f32>,
         noise_scale: f32,
-        state_box: Option<&StateBox>,
+        (state_box, rules): (Option<&StateBox>, &Rules),
     ) -> RolloutConfig {
         let halt = (self.halt_penalty).and_then(|penalty| {
             threshold.map(|threshold| Halt {
@@ -322,6 +329,7 @@ impl PolicyLoopConfig {
             noise_scale,
             halt,
             state_box: state_box.cloned(),
+            observation_clip: rules.observation_clip().filter(|_| self.clip_observations),
         }
     }
 }
@@ -692,7 +700,7 @@ impl PolicyTraining {
         let config = self.config.rollout(
             self.threshold,
             dynamics.sample_noise_scale(),
-            self.state_box.as_ref(),
+            (self.state_box.as_ref(), &ctx.rules),
         );
         let result = rollout_model(
             dynamics,
@@ -832,4 +840,32 @@ fn mean_eta(dynamics: &dyn BatchDynamics, obs: &[f32], actions: &[f32]) -> f32 {
     let noise = vec![0.0; obs.len() / dynamics.obs_dim() * dynamics.noise_dim()];
     let eta = dynamics.step(&states, actions, &noise).eta;
     eta.iter().sum::<f32>() / eta.len().max(1) as f32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{PolicyLoopConfig, SacConfig};
+    use crate::envs::{ObservationClip, Rules, TaskConfig, TaskName, TaskRules};
+
+    /// The loop's switch hands its rollouts the task's own clip (hopper's
+    /// qvel, observations 5.. of D4RL's layout, to ±10), none when off, and
+    /// none on a task that observes its velocities unclipped.
+    #[test]
+    fn the_loops_rollouts_clip_observations_as_the_task_does_when_asked() {
+        let rules = |name| Rules::from(TaskRules::new(&TaskConfig::d4rl(name), 0.008));
+        let mut config = PolicyLoopConfig::new(SacConfig::new(), 5, 0.95, 1.0);
+        let clip_of = |config: &PolicyLoopConfig, name| {
+            (config.rollout(None, 1.0, (None, &rules(name)))).observation_clip
+        };
+        assert_eq!(clip_of(&config, TaskName::Hopper), None);
+        config.clip_observations = true;
+        assert_eq!(
+            clip_of(&config, TaskName::Hopper),
+            Some(ObservationClip {
+                from: 5,
+                limit: 10.0
+            })
+        );
+        assert_eq!(clip_of(&config, TaskName::HalfCheetah), None);
+    }
 }

@@ -188,7 +188,7 @@ fn buffer_tensors(buffer: &ReplayBuffer) -> NamedTensors {
 /// them lack, with the meaning those runs had: a model buffer of 1 × its
 /// rollouts, the known reward on the velocity after the step, a constant actor
 /// learning rate, and (never used by those runs, which had a simulator) the
-/// in-model evaluation's default horizon; no state box.
+/// in-model evaluation's default horizon; no state box, no observation clip.
 pub(super) fn fill_older_loop_fields(value: &mut serde_json::Value, pointer: &str) {
     if let Some(fields) = value.pointer_mut(pointer).and_then(|v| v.as_object_mut()) {
         fields
@@ -213,6 +213,9 @@ pub(super) fn fill_older_loop_fields(value: &mut serde_json::Value, pointer: &st
         fields
             .entry("state_box_margin")
             .or_insert(serde_json::Value::Null);
+        fields
+            .entry("clip_observations")
+            .or_insert(serde_json::json!(false));
         fields
             .entry("model_eval_horizon")
             .or_insert(serde_json::json!(

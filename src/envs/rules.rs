@@ -101,6 +101,16 @@ impl TaskRules {
         !self.task.spec().health.is_healthy(next_obs, self.qpos_from)
     }
 
+    /// The task's own clip of its observed velocities (Gymnasium's Hopper and
+    /// Walker2d clip qvel to ±10), over the observation's qvel entries; `None`
+    /// where the task observes them unclipped (HalfCheetah).
+    pub fn observation_clip(&self) -> Option<ObservationClip> {
+        (self.task.spec().velocity_clip).map(|limit| ObservationClip {
+            from: self.x_velocity,
+            limit: limit as f32,
+        })
+    }
+
     /// What [`reward`](Self::reward) and [`terminal`](Self::terminal) compute,
     /// as data: for writing the same rules in another form (the ONNX export).
     pub fn terms(&self) -> RuleTerms {
@@ -120,6 +130,27 @@ impl TaskRules {
             ctrl_cost_weight: spec.ctrl_cost_weight,
             health: spec.health,
             qpos_from: self.qpos_from,
+        }
+    }
+}
+
+/// Observation entries `from..` clipped to `±limit`, as the task clips what
+/// it observes: applied to a model's next observations, it keeps them where
+/// the task's own observations can be.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ObservationClip {
+    pub from: usize,
+    pub limit: f32,
+}
+
+impl ObservationClip {
+    /// Clips `observation` in place; a non-finite entry stays as it is, so a
+    /// diverged step still reads as diverged.
+    pub fn apply(&self, observation: &mut [f32]) {
+        for x in observation.iter_mut().skip(self.from) {
+            if x.is_finite() {
+                *x = x.clamp(-self.limit, self.limit);
+            }
         }
     }
 }
@@ -195,6 +226,15 @@ impl Rules {
                 SystemReward::Expression(expression) => expression.reward(obs, action, next_obs),
                 SystemReward::Learned => f32::NAN,
             },
+        }
+    }
+
+    /// The task's own observation clip ([`TaskRules::observation_clip`]); a
+    /// file's system observes what its model predicts, unclipped.
+    pub fn observation_clip(&self) -> Option<ObservationClip> {
+        match self {
+            Self::Task(rules) => rules.observation_clip(),
+            Self::System(_) => None,
         }
     }
 

@@ -332,6 +332,7 @@ pub fn exploitation(
             noise_scale: dynamics.sample_noise_scale(),
             halt: None,
             state_box: None,
+            observation_clip: None,
         },
         &mut rng,
     );

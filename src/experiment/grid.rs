@@ -16,6 +16,7 @@
 //! forward_velocity = "mean" # NUNO's fit-policy --forward-velocity (optional; default: the recipe's)
 //! rollout_batch = 5000      # fit-policy's --rollout-batch, every method (optional; default: each method's)
 //! state_box_margin = 0.5    # fit-policy's --state-box-margin, every model-based method (optional; default: none)
+//! clip_observations = true  # fit-policy's --clip-observations, every model-based method (optional; default: false)
 //! mopo_settings = "nuno"    # MOPO's fit-policy --mopo-settings (optional; default "offlinerl-kit")
 //! ensemble_max_epochs = 100 # fit-ensemble's --max-epochs (optional)
 //! policy_steps = 100000     # fit-policy's --steps (the same for every method)
@@ -111,6 +112,10 @@ pub struct Budget {
     /// none). Results written before it had none, and read so.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub state_box_margin: Option<f64>,
+    /// fit-policy's `--clip-observations`, for every model-based method
+    /// (default: off). Results written before it clipped nothing, and read so.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub clip_observations: bool,
     /// MOPO's and TATU+MOPO's fit-policy `--mopo-settings` (default: fit-policy's,
     /// OfflineRL-Kit's). The grids run before it existed name "nuno".
     #[serde(default)]
@@ -190,6 +195,7 @@ impl Budget {
             eval_episodes: default_eval_episodes(),
             rollout_batch: None,
             state_box_margin: None,
+            clip_observations: false,
             mopo_settings: None,
             hidden: None,
         }

@@ -481,6 +481,7 @@ fn policy_args(cell: &Cell, b: &Budget, model: Option<PathBuf>, dir: PathBuf) ->
     args.rollout_batch = b.rollout_batch;
     args.model_buffer_factor = b.model_buffer_factor;
     args.state_box_margin = b.state_box_margin;
+    args.clip_observations = b.clip_observations;
     if cell.method.is_mopo() {
         args.mopo_settings = b.mopo_settings;
     } else if !cell.method.uses_ensemble() {
@@ -705,13 +706,14 @@ mod tests {
         ("threshold_max_margin", "threshold_max_margin = 1.3"),
     ];
     /// The budget keys that do not reach fit-model.
-    const OTHER_KEYS: [&str; 10] = [
+    const OTHER_KEYS: [&str; 11] = [
         "ensemble_max_epochs",
         "policy_steps",
         "steps_per_epoch",
         "eval_episodes",
         "rollout_batch",
         "state_box_margin",
+        "clip_observations",
         "mopo_settings",
         "hidden",
         "model_buffer_factor",
@@ -741,8 +743,13 @@ mod tests {
             let changes = fit_changes((&base, Some(base_margin)), (&now, margin));
             assert!(!changes.is_empty(), "{key} changed nothing the check reads");
         }
-        // Set, because a budget writes its state-box margin only when one is given.
-        let every_key = cell_of(dir.path(), "nuno", "state_box_margin = 0.1").0;
+        // Set, because a budget writes these keys only when they are given.
+        let every_key = cell_of(
+            dir.path(),
+            "nuno",
+            "state_box_margin = 0.1\nclip_observations = true",
+        )
+        .0;
         let serde_json::Value::Object(keys) = json(&every_key.budget) else {
             unreachable!()
         };
@@ -764,8 +771,8 @@ mod tests {
             ),
             (
                 "mopo",
-                "mopo_settings = \"nuno\"\n",
-                vec!["--mopo-settings", "nuno"],
+                "mopo_settings = \"nuno\"\nclip_observations = true\n",
+                vec!["--mopo-settings", "nuno", "--clip-observations"],
             ),
         ] {
             let (grid, cell) = cell_of(dir.path(), method, budget);

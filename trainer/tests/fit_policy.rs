@@ -629,6 +629,11 @@ fn model_free_methods_train_on_the_dataset_alone() {
         err.contains("--horizon is for the model-based methods"),
         "{err}"
     );
+    let err = fails(&fit("cql", "bad", &["--clip-observations"]));
+    assert!(
+        err.contains("--clip-observations is for the model-based methods"),
+        "{err}"
+    );
     let err = fails(&fit("td3-bc", "bad", &["--task", "walker2d"]));
     assert!(
         err.contains("--task walker2d and the preset hopper-random"),

@@ -193,6 +193,7 @@ pub async fn rollout(
         noise_scale,
         halt: None,
         state_box: None,
+        observation_clip: None,
     };
     let (seed, mode) = (r.seed, r.policy_mode);
     let worker = model.clone();

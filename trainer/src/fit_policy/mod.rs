@@ -117,6 +117,11 @@ pub struct Args {
     /// none, as the paper and NUNO's code).
     #[arg(long)]
     pub state_box_margin: Option<f64>,
+    /// Clip each model next observation as the task clips its own (hopper's and
+    /// walker2d's joint velocities to ±10; halfcheetah observes them unclipped)
+    /// (nuno's guard; default: off, as the paper and NUNO's code).
+    #[arg(long)]
+    pub clip_observations: bool,
     /// β, the real-data fraction of each SAC batch (default: the method's:
     /// 0.05, combo 0.5).
     #[arg(long)]
@@ -416,6 +421,7 @@ impl Args {
         config.forward_velocity = self.forward_velocity.unwrap_or(config.forward_velocity);
         config.real_ratio = self.real_ratio.unwrap_or(config.real_ratio);
         config.state_box_margin = self.state_box_margin;
+        config.clip_observations = self.clip_observations;
         config.steps_per_epoch = self.steps_per_epoch;
         config.epochs = self.steps.div_ceil(self.steps_per_epoch);
         config.eval_episodes = self.eval_episodes;

@@ -59,6 +59,7 @@ impl Args {
             (self.combo_weight.is_some(), "--combo-weight"),
             (self.halt_penalty.is_some(), "--halt-penalty"),
             (self.state_box_margin.is_some(), "--state-box-margin"),
+            (self.clip_observations, "--clip-observations"),
         ];
         if let Some((_, flag)) = in_model_flags.iter().find(|(given, _)| *given) {
             anyhow::bail!(
