@@ -17,6 +17,7 @@
 //! rollout_batch = 5000      # fit-policy's --rollout-batch, every method (optional; default: each method's)
 //! state_box_margin = 0.5    # fit-policy's --state-box-margin, every model-based method (optional; default: none)
 //! clip_observations = true  # fit-policy's --clip-observations, every model-based method (optional; default: false)
+//! target_entropy = -3.0     # fit-policy's --target-entropy, every model-based method (optional; default: −|A|)
 //! mopo_settings = "nuno"    # MOPO's fit-policy --mopo-settings (optional; default "offlinerl-kit")
 //! ensemble_max_epochs = 100 # fit-ensemble's --max-epochs (optional)
 //! policy_steps = 100000     # fit-policy's --steps (the same for every method)
@@ -116,6 +117,10 @@ pub struct Budget {
     /// (default: off). Results written before it clipped nothing, and read so.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub clip_observations: bool,
+    /// fit-policy's `--target-entropy`, for every model-based method (default:
+    /// −|A|). Results written before it had −|A|, and read so.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_entropy: Option<f64>,
     /// MOPO's and TATU+MOPO's fit-policy `--mopo-settings` (default: fit-policy's,
     /// OfflineRL-Kit's). The grids run before it existed name "nuno".
     #[serde(default)]
@@ -165,6 +170,11 @@ impl Budget {
                 "budget: state_box_margin = {m} must be finite and at least 0"
             ));
         }
+        if let Some(h) = self.target_entropy
+            && !h.is_finite()
+        {
+            return Err(format!("budget: target_entropy = {h} must be finite"));
+        }
         Ok(())
     }
 
@@ -196,6 +206,7 @@ impl Budget {
             rollout_batch: None,
             state_box_margin: None,
             clip_observations: false,
+            target_entropy: None,
             mopo_settings: None,
             hidden: None,
         }

@@ -482,6 +482,7 @@ fn policy_args(cell: &Cell, b: &Budget, model: Option<PathBuf>, dir: PathBuf) ->
     args.model_buffer_factor = b.model_buffer_factor;
     args.state_box_margin = b.state_box_margin;
     args.clip_observations = b.clip_observations;
+    args.target_entropy = b.target_entropy;
     if cell.method.is_mopo() {
         args.mopo_settings = b.mopo_settings;
     } else if !cell.method.uses_ensemble() {
@@ -706,7 +707,7 @@ mod tests {
         ("threshold_max_margin", "threshold_max_margin = 1.3"),
     ];
     /// The budget keys that do not reach fit-model.
-    const OTHER_KEYS: [&str; 11] = [
+    const OTHER_KEYS: [&str; 12] = [
         "ensemble_max_epochs",
         "policy_steps",
         "steps_per_epoch",
@@ -714,6 +715,7 @@ mod tests {
         "rollout_batch",
         "state_box_margin",
         "clip_observations",
+        "target_entropy",
         "mopo_settings",
         "hidden",
         "model_buffer_factor",
@@ -747,7 +749,7 @@ mod tests {
         let every_key = cell_of(
             dir.path(),
             "nuno",
-            "state_box_margin = 0.1\nclip_observations = true",
+            "state_box_margin = 0.1\nclip_observations = true\ntarget_entropy = -3.0",
         )
         .0;
         let serde_json::Value::Object(keys) = json(&every_key.budget) else {
@@ -771,8 +773,14 @@ mod tests {
             ),
             (
                 "mopo",
-                "mopo_settings = \"nuno\"\nclip_observations = true\n",
-                vec!["--mopo-settings", "nuno", "--clip-observations"],
+                "mopo_settings = \"nuno\"\nclip_observations = true\ntarget_entropy = -3.0\n",
+                vec![
+                    "--mopo-settings",
+                    "nuno",
+                    "--clip-observations",
+                    "--target-entropy",
+                    "-3",
+                ],
             ),
         ] {
             let (grid, cell) = cell_of(dir.path(), method, budget);

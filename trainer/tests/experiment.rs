@@ -242,6 +242,7 @@ fn bad_grids_are_refused_before_anything_runs() {
         ("threshold_max_margin = 0.9", "threshold_max_margin = 0.9"),
         ("model_drift_inputs = \"angles\"", "model_drift_inputs"),
         ("state_box_margin = -0.5", "state_box_margin = -0.5"),
+        ("target_entropy = nan", "target_entropy = NaN"),
     ]
     .into_iter()
     .enumerate()

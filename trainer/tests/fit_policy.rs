@@ -146,6 +146,8 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
     assert!(err.contains("--model-buffer-factor"), "{err}");
     let err = fails(&fit(20, &["--state-box-margin", "NaN"]));
     assert!(err.contains("--state-box-margin"), "{err}");
+    let err = fails(&fit(20, &["--target-entropy", "inf"]));
+    assert!(err.contains("--target-entropy must be finite"), "{err}");
     let err = fails(&fit(20, &["--forward-velocity", "sideways"]));
     assert!(
         err.contains("unknown forward velocity \"sideways\""),
@@ -291,7 +293,7 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
         Some("hopper-medium"),
         20,
         &run,
-        &[],
+        &["--target-entropy", "-2.5", "--clip-observations"],
     ));
     // MOPO's hopper-medium row: h = 5, λ = 5; never truncated; r̃ = r − λ·max‖σ‖.
     let records: Vec<serde_json::Value> = std::fs::read_to_string(run.join("metrics.jsonl"))
@@ -328,6 +330,9 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
     );
     assert_eq!(training["actor_lr_decay"], "cosine");
     assert_eq!(training["rollout_batch"], 32);
+    // The loop's switches as given: SAC's target entropy, the task's observation clip.
+    assert_eq!(training["sac"]["target_entropy"], -2.5);
+    assert_eq!(training["clip_observations"], true);
     // TATU+MOPO on the same ensemble: MOPO's penalty, truncation at the
     // largest disagreement on the dataset / pessimism, kept for a resume.
     let tatu = |out: &Path, steps: usize, extra: &[&str]| {

@@ -147,6 +147,9 @@ pub struct Args {
     /// SAC batch size.
     #[arg(long, default_value_t = loop_defaults().sac.batch_size)]
     pub batch_size: usize,
+    /// H̄, SAC's target entropy (default: −|A|, SAC's rule; NUNO's code uses −3 for every task).
+    #[arg(long, allow_hyphen_values = true)]
+    pub target_entropy: Option<f64>,
     /// Hidden sizes of the actor and critics (default: the method's own: 256,256; cql 256,256,256).
     #[arg(long, value_delimiter = ',')]
     pub hidden: Option<Vec<usize>>,
@@ -394,6 +397,7 @@ impl Args {
         let hidden = (self.hidden.clone()).unwrap_or_else(|| self.algo.default_hidden());
         let sac = SacConfig::new()
             .with_batch_size(self.batch_size)
+            .with_target_entropy(self.target_entropy)
             .with_actor_hidden(hidden.clone())
             .with_critic_hidden(hidden);
         let mut config = match preset {
@@ -485,6 +489,9 @@ impl Args {
                 m.is_finite() && m >= 0.0,
                 "--state-box-margin must be finite and at least 0, got {m}"
             );
+        }
+        if let Some(h) = self.target_entropy {
+            anyhow::ensure!(h.is_finite(), "--target-entropy must be finite, got {h}");
         }
         if let Some(p) = self.pessimism {
             anyhow::ensure!(
