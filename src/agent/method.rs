@@ -98,10 +98,21 @@ impl Method {
         )
     }
 
+    /// Whether the method trains in the neural SDE (NUNO, NUNO^R, NUNO^al).
+    pub fn uses_sde(self) -> bool {
+        !self.is_model_free() && !self.uses_ensemble()
+    }
+
     /// Whether the method is MOPO's policy step (MOPO, TATU+MOPO): its (h, λ)
     /// table and `--mopo-settings`.
     pub fn is_mopo(self) -> bool {
         matches!(self, Method::Mopo | Method::TatuMopo)
+    }
+
+    /// Whether `--mopo-settings` chooses the method's SAC settings: MOPO's
+    /// policy step, and NUNO's loop (whose own are `MopoSettings::Nuno`).
+    pub fn takes_mopo_settings(self) -> bool {
+        self.is_mopo() || self.uses_sde()
     }
 
     /// The model the method trains in (`None`: it learns from the dataset

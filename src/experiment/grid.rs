@@ -18,7 +18,7 @@
 //! state_box_margin = 0.5    # fit-policy's --state-box-margin, every model-based method (optional; default: none)
 //! clip_observations = true  # fit-policy's --clip-observations, every model-based method (optional; default: false)
 //! target_entropy = -3.0     # fit-policy's --target-entropy, every model-based method (optional; default: −|A|)
-//! mopo_settings = "nuno"    # MOPO's fit-policy --mopo-settings (optional; default "offlinerl-kit")
+//! mopo_settings = "nuno"    # MOPO's and NUNO's fit-policy --mopo-settings (optional; default: each method's own)
 //! ensemble_max_epochs = 100 # fit-ensemble's --max-epochs (optional)
 //! policy_steps = 100000     # fit-policy's --steps (the same for every method)
 //! steps_per_epoch = 1000
@@ -121,8 +121,9 @@ pub struct Budget {
     /// −|A|). Results written before it had −|A|, and read so.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target_entropy: Option<f64>,
-    /// MOPO's and TATU+MOPO's fit-policy `--mopo-settings` (default: fit-policy's,
-    /// OfflineRL-Kit's). The grids run before it existed name "nuno".
+    /// fit-policy's `--mopo-settings` for MOPO, TATU+MOPO and NUNO's methods
+    /// (default: each method's own, OfflineRL-Kit's for MOPO, NUNO's for
+    /// NUNO). The grids run before it existed name "nuno".
     #[serde(default)]
     pub mopo_settings: Option<MopoSettings>,
     /// Hidden sizes of every method's networks (default: each method's own,
@@ -243,6 +244,14 @@ impl Budget {
             let settings = self.mopo_settings.unwrap_or_default();
             policy_loop.apply_mopo_settings(settings);
             budget.mopo_settings = Some(settings);
+        } else if method.uses_sde() {
+            // NUNO's own settings are `Nuno`: naming them is leaving them out.
+            if let Some(settings) = self.mopo_settings {
+                policy_loop.apply_mopo_settings(settings);
+            }
+            budget.mopo_settings = self.mopo_settings.filter(|&s| s != MopoSettings::Nuno);
+        } else {
+            budget.mopo_settings = None;
         }
         budget.rollout_batch = Some(self.rollout_batch.unwrap_or(policy_loop.rollout_batch));
         if method.uses_ensemble() {
@@ -257,9 +266,6 @@ impl Budget {
             budget.forward_velocity = None;
         } else {
             budget.ensemble_max_epochs = None;
-        }
-        if !method.is_mopo() {
-            budget.mopo_settings = None;
         }
         budget
     }
@@ -296,6 +302,19 @@ mod tests {
             mopo(&budget("mopo_settings = \"nuno\"")),
             mopo(&budget("mopo_settings = \"nuno\"\nrollout_batch = 5000"))
         );
+        // NUNO's own settings are "nuno"; MOPO's make its rollouts 50 000 starts.
+        assert_eq!(nuno(&budget("")), nuno(&budget("mopo_settings = \"nuno\"")));
+        let nuno_kit = nuno(&budget("mopo_settings = \"offlinerl-kit\""));
+        assert_ne!(nuno(&budget("")), nuno_kit);
+        assert_eq!(
+            nuno_kit,
+            nuno(&budget(
+                "mopo_settings = \"offlinerl-kit\"\nrollout_batch = 50000"
+            ))
+        );
+        // A method that runs its own settings records none.
+        let combo = |b: &Budget| b.for_method(Method::Combo);
+        assert_eq!(combo(&budget("")), combo(&kit));
     }
 
     #[test]
@@ -515,8 +534,7 @@ impl GridDataset {
             }
         }
         self.check_mopo_row(&methods)?;
-        let fits_sde = |m: &Method| !m.is_model_free() && !m.uses_ensemble();
-        if self.model_drift_inputs.is_some() && !methods.iter().any(fits_sde) {
+        if self.model_drift_inputs.is_some() && !methods.iter().any(|m| m.uses_sde()) {
             return Err(format!(
                 "dataset `{name}`: `model_drift_inputs` sets the SDE's drift, but the row runs no nuno, nuno-r or nuno-al"
             ));

@@ -452,7 +452,7 @@ fn model_args(cell: &Cell, b: &Budget, data: DataSource, out: PathBuf) -> fit_mo
 /// fit-policy's flags for the cell: the budget's over the defaults, the
 /// policies in the cell's folder, resuming a killed run. The recipe and the
 /// reward's velocity are NUNO's loop (an ensemble learns its rewards), the
-/// MOPO settings MOPO's; a model-free method takes the budget and the data's system.
+/// MOPO settings MOPO's and NUNO's; a model-free method takes the budget and the data's system.
 fn policy_args(cell: &Cell, b: &Budget, model: Option<PathBuf>, dir: PathBuf) -> fit_policy::Args {
     let out = dir.join("policy");
     let mut args = fit_policy::Args::defaults(model, cell.file.clone(), cell.preset.clone(), out);
@@ -483,9 +483,9 @@ fn policy_args(cell: &Cell, b: &Budget, model: Option<PathBuf>, dir: PathBuf) ->
     args.state_box_margin = b.state_box_margin;
     args.clip_observations = b.clip_observations;
     args.target_entropy = b.target_entropy;
-    if cell.method.is_mopo() {
-        args.mopo_settings = b.mopo_settings;
-    } else if !cell.method.uses_ensemble() {
+    // The method's budget names settings only where the method takes them.
+    args.mopo_settings = b.mopo_settings;
+    if cell.method.uses_sde() {
         args.recipe = b.recipe;
         args.forward_velocity = b.forward_velocity;
     }
@@ -782,6 +782,11 @@ mod tests {
                     "-3",
                 ],
             ),
+            (
+                "nuno",
+                "mopo_settings = \"offlinerl-kit\"\n",
+                vec!["--mopo-settings", "offlinerl-kit"],
+            ),
         ] {
             let (grid, cell) = cell_of(dir.path(), method, budget);
             let file = cell.file.display().to_string();
@@ -828,6 +833,8 @@ mod tests {
                 panic!("{method} trains in a model");
             };
             assert_eq!(run.config.rollout_batch, 700, "{method}");
+            let kit = budget.contains("offlinerl-kit");
+            assert_eq!(run.config.sac.actor_lr == 1e-4, kit, "{method}: {budget}");
         }
     }
 }

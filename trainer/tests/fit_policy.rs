@@ -137,11 +137,6 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
     );
     let err = fails(&fit(20, &["--real-ratio", "1.5"]));
     assert!(err.contains("--real-ratio"), "{err}");
-    let err = fails(&fit(20, &["--mopo-settings", "nuno"]));
-    assert!(
-        err.contains("--mopo-settings") && err.contains("--algo mopo"),
-        "{err}"
-    );
     let err = fails(&fit(20, &["--model-buffer-factor", "0"]));
     assert!(err.contains("--model-buffer-factor"), "{err}");
     let err = fails(&fit(20, &["--state-box-margin", "NaN"]));
@@ -474,10 +469,18 @@ fn nuno_al_penalises_and_truncates_on_the_aleatoric_sigma() {
     copy_dir(&shipped, &model);
     let s = |p: &Path| p.to_str().unwrap().to_string();
     generate_hopper(&s(&dataset), 2000, 0);
-    let args = |algo: &str, out: &Path| -> Vec<String> {
-        tiny_fit_policy(algo, &model, &dataset, Some("hopper-medium"), 10, out, &[])
+    let args = |algo: &str, out: &Path, extra: &[&str]| -> Vec<String> {
+        tiny_fit_policy(
+            algo,
+            &model,
+            &dataset,
+            Some("hopper-medium"),
+            10,
+            out,
+            extra,
+        )
     };
-    ok(&args("nuno-al", &run));
+    ok(&args("nuno-al", &run, &[]));
     let saved: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(run.join("threshold.json")).unwrap())
             .unwrap();
@@ -487,7 +490,11 @@ fn nuno_al_penalises_and_truncates_on_the_aleatoric_sigma() {
     // of the SDE's σ scale (larger off the data the rollouts wander into, so
     // a loose band) and differs from NUNO's η on the same model.
     let nuno_run = tmp.path().join("nuno");
-    ok(&args("nuno", &nuno_run));
+    ok(&args(
+        "nuno",
+        &nuno_run,
+        &["--mopo-settings", "offlinerl-kit"],
+    ));
     let mean_eta = |out: &Path| -> f64 {
         let text = std::fs::read_to_string(out.join("metrics.jsonl")).unwrap();
         let record: serde_json::Value = serde_json::from_str(text.lines().next().unwrap()).unwrap();
@@ -508,9 +515,19 @@ fn nuno_al_penalises_and_truncates_on_the_aleatoric_sigma() {
     let policy: serde_json::Value =
         serde_json::from_slice(&std::fs::read(model.join("policy.json")).unwrap()).unwrap();
     assert_eq!(policy["algorithm"], "nuno");
+    // NUNO's loop on MOPO's SAC settings where asked: actor and α at 1e-4, the
+    // actor cosine-annealed (NUNO's own: 3e-4, constant); the given
+    // --rollout-batch kept over the settings' 50 000.
+    let training = &policy["training"];
+    assert_eq!(
+        (&training["sac"]["actor_lr"], &training["sac"]["alpha_lr"]),
+        (&serde_json::json!(1e-4), &serde_json::json!(1e-4))
+    );
+    assert_eq!(training["actor_lr_decay"], "cosine");
+    assert_eq!(training["rollout_batch"], 32);
     // nuno-r needs a model that learned the reward; the shipped one did not.
     let error = fails(
-        &args("nuno-r", &tmp.path().join("r"))
+        &args("nuno-r", &tmp.path().join("r"), &[])
             .iter()
             .map(String::as_str)
             .collect::<Vec<_>>(),
@@ -632,6 +649,11 @@ fn model_free_methods_train_on_the_dataset_alone() {
     let err = fails(&fit("td3-bc", "bad", &["--horizon", "5"]));
     assert!(
         err.contains("--horizon is for the model-based methods"),
+        "{err}"
+    );
+    let err = fails(&fit("cql", "bad", &["--mopo-settings", "nuno"]));
+    assert!(
+        err.contains("--mopo-settings sets the SAC settings") && err.contains("cql runs its own"),
         "{err}"
     );
     let err = fails(&fit("cql", "bad", &["--clip-observations"]));

@@ -92,9 +92,10 @@ pub struct Args {
     /// tatu-mopo: their --mopo-settings', OfflineRL-Kit's 50 000).
     #[arg(long)]
     pub rollout_batch: Option<usize>,
-    /// mopo and tatu-mopo: offlinerl-kit (the published baseline: actor lr 1e-4
-    /// with cosine decay, α lr 1e-4, 50 000 rollout starts) or nuno (NUNO's SAC
-    /// settings, for ablations) [default: offlinerl-kit].
+    /// SAC settings of MOPO's and NUNO's policy step: offlinerl-kit (MOPO's
+    /// published baseline: actor lr 1e-4 with cosine decay, α lr 1e-4, 50 000
+    /// rollout starts) or nuno (NUNO's: 3e-4, constant, 5000) [default: mopo
+    /// and tatu-mopo offlinerl-kit, NUNO's methods nuno].
     #[arg(long)]
     pub mopo_settings: Option<MopoSettings>,
     /// SDE trajectories per start state.
@@ -298,6 +299,12 @@ impl Args {
             config.truncate = self.algo.truncation() != Truncation::Never;
             config.apply_mopo_settings(self.mopo_settings.unwrap_or_default());
         }
+        if self.algo.uses_sde()
+            && let Some(settings) = self.mopo_settings
+        {
+            // NUNO's loop under MOPO's SAC settings, to separate the two.
+            config.apply_mopo_settings(settings);
+        }
         if self.algo == Method::Combo {
             // COMBO's own h and β (its table, or --horizon and --combo-weight).
             let (horizon, beta) = match (&self.preset, self.horizon, self.combo_weight) {
@@ -456,8 +463,9 @@ impl Args {
             "--rollout-batch must be at least 1"
         );
         anyhow::ensure!(
-            self.mopo_settings.is_none() || self.algo.is_mopo(),
-            "--mopo-settings sets MOPO's policy step: it needs --algo mopo or tatu-mopo"
+            self.mopo_settings.is_none() || self.algo.takes_mopo_settings(),
+            "--mopo-settings sets the SAC settings of MOPO's or NUNO's policy step: it needs --algo mopo, tatu-mopo, nuno, nuno-r or nuno-al ({} runs its own)",
+            self.algo
         );
         anyhow::ensure!(self.particles > 0, "--particles must be at least 1");
         anyhow::ensure!(self.batch_size > 0, "--batch-size must be at least 1");
