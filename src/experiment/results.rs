@@ -598,7 +598,8 @@ mod tests {
     }
 
     /// A setting only the other kind of method reads changes nothing for a
-    /// cell; an older result's MOPO ran on NUNO's settings.
+    /// cell, nor does naming a method's own default; an older result's MOPO
+    /// ran on NUNO's settings.
     #[test]
     fn only_the_methods_own_settings_count_as_a_budget_change() {
         let with = |text: &str| -> Budget { toml::from_str(text).unwrap() };
@@ -608,11 +609,20 @@ mod tests {
         let changes = |then: &Budget, now: &Budget, method| {
             budget_changes(&then.for_method(method), &now.for_method(method))
         };
-        assert!(changes(&plain, &kit, Method::Nuno).is_empty());
         assert!(changes(&plain, &code, Method::Mopo).is_empty());
+        assert!(changes(&plain, &kit, Method::Combo).is_empty());
         // Naming the default is no change; NUNO's settings are, with their rollout batch.
         assert!(changes(&plain, &kit, Method::Mopo).is_empty());
         let nuno_sac = with("model_steps = 20\npolicy_steps = 100\nmopo_settings = \"nuno\"");
+        assert!(changes(&plain, &nuno_sac, Method::Nuno).is_empty());
+        // And the other way round for NUNO: MOPO's settings are a change.
+        assert_eq!(
+            changes(&plain, &kit, Method::Nuno),
+            [
+                "mopo_settings: null then, \"offlinerl-kit\" now",
+                "rollout_batch: 5000 then, 50000 now"
+            ]
+        );
         assert_eq!(
             changes(&plain, &nuno_sac, Method::Mopo),
             [
