@@ -18,6 +18,7 @@
 //! state_box_margin = 0.5    # fit-policy's --state-box-margin, every model-based method (optional; default: none)
 //! clip_observations = true  # fit-policy's --clip-observations, every model-based method (optional; default: false)
 //! target_entropy = -3.0     # fit-policy's --target-entropy, every model-based method (optional; default: −|A|)
+//! penalty = 5.0             # NUNO's fit-policy --penalty, λ_pen over every row's (optional; default: the row's)
 //! mopo_settings = "nuno"    # MOPO's and NUNO's fit-policy --mopo-settings (optional; default: each method's own)
 //! ensemble_max_epochs = 100 # fit-ensemble's --max-epochs (optional)
 //! policy_steps = 100000     # fit-policy's --steps (the same for every method)
@@ -121,6 +122,10 @@ pub struct Budget {
     /// −|A|). Results written before it had −|A|, and read so.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target_entropy: Option<f64>,
+    /// NUNO's fit-policy `--penalty`: λ_pen over every row's preset or policy
+    /// settings (default: the row's). Results written before it had the row's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub penalty: Option<f64>,
     /// fit-policy's `--mopo-settings` for MOPO, TATU+MOPO and NUNO's methods
     /// (default: each method's own, OfflineRL-Kit's for MOPO, NUNO's for
     /// NUNO). The grids run before it existed name "nuno".
@@ -176,6 +181,13 @@ impl Budget {
         {
             return Err(format!("budget: target_entropy = {h} must be finite"));
         }
+        if let Some(p) = self.penalty
+            && !(p.is_finite() && p >= 0.0)
+        {
+            return Err(format!(
+                "budget: penalty = {p} must be finite and at least 0"
+            ));
+        }
         Ok(())
     }
 
@@ -208,6 +220,7 @@ impl Budget {
             state_box_margin: None,
             clip_observations: false,
             target_entropy: None,
+            penalty: None,
             mopo_settings: None,
             hidden: None,
         }
@@ -252,6 +265,9 @@ impl Budget {
             budget.mopo_settings = self.mopo_settings.filter(|&s| s != MopoSettings::Nuno);
         } else {
             budget.mopo_settings = None;
+        }
+        if !method.uses_sde() {
+            budget.penalty = None;
         }
         budget.rollout_batch = Some(self.rollout_batch.unwrap_or(policy_loop.rollout_batch));
         if method.uses_ensemble() {
@@ -312,9 +328,11 @@ mod tests {
                 "mopo_settings = \"offlinerl-kit\"\nrollout_batch = 50000"
             ))
         );
-        // A method that runs its own settings records none.
+        // A method that runs its own settings records none, nor NUNO's λ_pen.
         let combo = |b: &Budget| b.for_method(Method::Combo);
         assert_eq!(combo(&budget("")), combo(&kit));
+        assert_eq!(mopo(&budget("")), mopo(&budget("penalty = 5.0")));
+        assert_ne!(nuno(&budget("")), nuno(&budget("penalty = 5.0")));
     }
 
     #[test]

@@ -486,6 +486,7 @@ fn policy_args(cell: &Cell, b: &Budget, model: Option<PathBuf>, dir: PathBuf) ->
     // The method's budget names settings only where the method takes them.
     args.mopo_settings = b.mopo_settings;
     if cell.method.uses_sde() {
+        args.penalty = b.penalty.or(args.penalty);
         args.recipe = b.recipe;
         args.forward_velocity = b.forward_velocity;
     }
@@ -707,7 +708,7 @@ mod tests {
         ("threshold_max_margin", "threshold_max_margin = 1.3"),
     ];
     /// The budget keys that do not reach fit-model.
-    const OTHER_KEYS: [&str; 12] = [
+    const OTHER_KEYS: [&str; 13] = [
         "ensemble_max_epochs",
         "policy_steps",
         "steps_per_epoch",
@@ -716,6 +717,7 @@ mod tests {
         "state_box_margin",
         "clip_observations",
         "target_entropy",
+        "penalty",
         "mopo_settings",
         "hidden",
         "model_buffer_factor",
@@ -749,7 +751,7 @@ mod tests {
         let every_key = cell_of(
             dir.path(),
             "nuno",
-            "state_box_margin = 0.1\nclip_observations = true\ntarget_entropy = -3.0",
+            "state_box_margin = 0.1\nclip_observations = true\ntarget_entropy = -3.0\npenalty = 5.0",
         )
         .0;
         let serde_json::Value::Object(keys) = json(&every_key.budget) else {
@@ -784,8 +786,8 @@ mod tests {
             ),
             (
                 "nuno",
-                "mopo_settings = \"offlinerl-kit\"\n",
-                vec!["--mopo-settings", "offlinerl-kit"],
+                "mopo_settings = \"offlinerl-kit\"\npenalty = 7.5\n",
+                vec!["--mopo-settings", "offlinerl-kit", "--penalty", "7.5"],
             ),
         ] {
             let (grid, cell) = cell_of(dir.path(), method, budget);
@@ -835,6 +837,7 @@ mod tests {
             assert_eq!(run.config.rollout_batch, 700, "{method}");
             let kit = budget.contains("offlinerl-kit");
             assert_eq!(run.config.sac.actor_lr == 1e-4, kit, "{method}: {budget}");
+            assert_eq!(run.config.penalty == 7.5, kit, "{method}: {budget}");
         }
     }
 }
