@@ -243,7 +243,10 @@ fn bad_grids_are_refused_before_anything_runs() {
         ("model_drift_inputs = \"angles\"", "model_drift_inputs"),
         ("state_box_margin = -0.5", "state_box_margin = -0.5"),
         ("target_entropy = nan", "target_entropy = NaN"),
-        ("penalty = -1.0", "penalty = -1 must be finite and at least 0"),
+        (
+            "penalty = -1.0",
+            "penalty = -1 must be finite and at least 0",
+        ),
     ]
     .into_iter()
     .enumerate()

@@ -316,15 +316,9 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
     assert_eq!(policy["dynamics_sha256"], ensemble["weights_sha256"]);
     assert_eq!(policy["training"]["penalty"], 5.0);
     assert_eq!(policy["training"]["truncate"], false);
-    // OfflineRL-Kit's MOPO by default: actor and α at 1e-4, the actor cosine-annealed
-    // (the given --rollout-batch kept over the settings' 50 000).
+    // OfflineRL-Kit's MOPO by default.
     let training = &policy["training"];
-    assert_eq!(
-        (&training["sac"]["actor_lr"], &training["sac"]["alpha_lr"]),
-        (&serde_json::json!(1e-4), &serde_json::json!(1e-4))
-    );
-    assert_eq!(training["actor_lr_decay"], "cosine");
-    assert_eq!(training["rollout_batch"], 32);
+    assert_kit_sac_settings(training);
     // The loop's switches as given: SAC's target entropy, the task's observation clip.
     assert_eq!(training["sac"]["target_entropy"], -2.5);
     assert_eq!(training["clip_observations"], true);
@@ -515,16 +509,8 @@ fn nuno_al_penalises_and_truncates_on_the_aleatoric_sigma() {
     let policy: serde_json::Value =
         serde_json::from_slice(&std::fs::read(model.join("policy.json")).unwrap()).unwrap();
     assert_eq!(policy["algorithm"], "nuno");
-    // NUNO's loop on MOPO's SAC settings where asked: actor and α at 1e-4, the
-    // actor cosine-annealed (NUNO's own: 3e-4, constant); the given
-    // --rollout-batch kept over the settings' 50 000.
-    let training = &policy["training"];
-    assert_eq!(
-        (&training["sac"]["actor_lr"], &training["sac"]["alpha_lr"]),
-        (&serde_json::json!(1e-4), &serde_json::json!(1e-4))
-    );
-    assert_eq!(training["actor_lr_decay"], "cosine");
-    assert_eq!(training["rollout_batch"], 32);
+    // NUNO's loop on MOPO's SAC settings where asked (NUNO's own: 3e-4, constant).
+    assert_kit_sac_settings(&policy["training"]);
     // nuno-r needs a model that learned the reward; the shipped one did not.
     let error = fails(
         &args("nuno-r", &tmp.path().join("r"), &[])
@@ -533,6 +519,19 @@ fn nuno_al_penalises_and_truncates_on_the_aleatoric_sigma() {
             .collect::<Vec<_>>(),
     );
     assert!(error.contains("--reward-model"), "{error}");
+}
+
+/// A policy record's training on OfflineRL-Kit's MOPO settings: actor and α
+/// at 1e-4, the actor cosine-annealed, the tests' --rollout-batch (32) kept
+/// over the settings' 50 000.
+fn assert_kit_sac_settings(training: &serde_json::Value) {
+    assert_eq!(
+        (&training["sac"]["actor_lr"], &training["sac"]["alpha_lr"]),
+        (&serde_json::json!(1e-4), &serde_json::json!(1e-4)),
+        "{training}"
+    );
+    assert_eq!(training["actor_lr_decay"], "cosine");
+    assert_eq!(training["rollout_batch"], 32);
 }
 
 /// Mean ‖σ(s, a)‖₂ of the model in `dir` over the first 500 of the dataset's
