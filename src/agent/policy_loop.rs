@@ -159,6 +159,13 @@ pub struct PolicyLoopConfig {
     /// saved before this field clipped nothing, and load so.
     #[config(default = false)]
     pub clip_observations: bool,
+    /// The scale of the model's noise in the policy's rollouts; `None` (the
+    /// paper's and NUNO's code's rollouts) samples at the model's own scale, 0
+    /// rolls its drift (the ensemble's mean) alone, to separate the diffusion's
+    /// noise from the drift's extrapolation. Runs saved before this field
+    /// sampled at the model's scale, and load so.
+    #[config(default = "None")]
+    pub rollout_noise_scale: Option<f32>,
     /// Gradient steps per epoch.
     #[config(default = 1000)]
     pub steps_per_epoch: usize,
@@ -306,13 +313,13 @@ impl PolicyLoopConfig {
         Ok(Some(threshold))
     }
 
-    /// The rollouts' settings, sampling at the model's own `noise_scale`: the
-    /// run's threshold truncates on the accumulated signal, or (MOReL) halts
-    /// on each step's.
+    /// The rollouts' settings, sampling at the model's own `model_noise_scale`
+    /// unless the run sets its own: the run's threshold truncates on the
+    /// accumulated signal, or (MOReL) halts on each step's.
     fn rollout(
         &self,
         threshold: Option<f32>,
-        noise_scale: f32,
+        model_noise_scale: f32,
         (state_box, rules): (Option<&StateBox>, &Rules),
     ) -> RolloutConfig {
         let halt = (self.halt_penalty).and_then(|penalty| {
@@ -326,7 +333,7 @@ impl PolicyLoopConfig {
             particles: self.particles,
             penalty: self.penalty,
             threshold: threshold.filter(|_| halt.is_none()),
-            noise_scale,
+            noise_scale: self.rollout_noise_scale.unwrap_or(model_noise_scale),
             halt,
             state_box: state_box.cloned(),
             observation_clip: rules.observation_clip().filter(|_| self.clip_observations),
@@ -867,5 +874,17 @@ mod tests {
             })
         );
         assert_eq!(clip_of(&config, TaskName::HalfCheetah), None);
+    }
+
+    /// Rollouts sample at the model's own noise scale unless the run sets one.
+    #[test]
+    fn the_loops_rollouts_sample_at_the_models_noise_unless_the_run_sets_its_own() {
+        let rules = Rules::from(TaskRules::new(&TaskConfig::d4rl(TaskName::Hopper), 0.008));
+        let mut config = PolicyLoopConfig::new(SacConfig::new(), 5, 0.95, 1.0);
+        let scale =
+            |config: &PolicyLoopConfig| config.rollout(None, 0.7, (None, &rules)).noise_scale;
+        assert_eq!(scale(&config), 0.7);
+        config.rollout_noise_scale = Some(0.0);
+        assert_eq!(scale(&config), 0.0);
     }
 }

@@ -217,6 +217,9 @@ pub(super) fn fill_older_loop_fields(value: &mut serde_json::Value, pointer: &st
             .entry("clip_observations")
             .or_insert(serde_json::json!(false));
         fields
+            .entry("rollout_noise_scale")
+            .or_insert(serde_json::Value::Null);
+        fields
             .entry("model_eval_horizon")
             .or_insert(serde_json::json!(
                 PolicyLoopConfig::new(SacConfig::new(), 0, 0.0, 0.0).model_eval_horizon

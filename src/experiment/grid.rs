@@ -19,6 +19,7 @@
 //! clip_observations = true  # fit-policy's --clip-observations, every model-based method (optional; default: false)
 //! target_entropy = -3.0     # fit-policy's --target-entropy, every model-based method (optional; default: −|A|)
 //! penalty = 5.0             # NUNO's fit-policy --penalty, λ_pen over every row's (optional; default: the row's)
+//! rollout_noise_scale = 0.0 # fit-policy's --rollout-noise-scale, every model-based method (optional; default: the model's)
 //! mopo_settings = "nuno"    # MOPO's and NUNO's fit-policy --mopo-settings (optional; default: each method's own)
 //! ensemble_max_epochs = 100 # fit-ensemble's --max-epochs (optional)
 //! policy_steps = 100000     # fit-policy's --steps (the same for every method)
@@ -126,6 +127,10 @@ pub struct Budget {
     /// settings (default: the row's). Results written before it had the row's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub penalty: Option<f64>,
+    /// fit-policy's `--rollout-noise-scale`, for every model-based method
+    /// (default: the model's own). Results written before it had the model's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rollout_noise_scale: Option<f32>,
     /// fit-policy's `--mopo-settings` for MOPO, TATU+MOPO and NUNO's methods
     /// (default: each method's own, OfflineRL-Kit's for MOPO, NUNO's for
     /// NUNO). The grids run before it existed name "nuno".
@@ -188,6 +193,13 @@ impl Budget {
                 "budget: penalty = {p} must be finite and at least 0"
             ));
         }
+        if let Some(scale) = self.rollout_noise_scale
+            && !(scale.is_finite() && scale >= 0.0)
+        {
+            return Err(format!(
+                "budget: rollout_noise_scale = {scale} must be finite and at least 0"
+            ));
+        }
         Ok(())
     }
 
@@ -221,6 +233,7 @@ impl Budget {
             clip_observations: false,
             target_entropy: None,
             penalty: None,
+            rollout_noise_scale: None,
             mopo_settings: None,
             hidden: None,
         }

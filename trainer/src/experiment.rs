@@ -483,6 +483,7 @@ fn policy_args(cell: &Cell, b: &Budget, model: Option<PathBuf>, dir: PathBuf) ->
     args.state_box_margin = b.state_box_margin;
     args.clip_observations = b.clip_observations;
     args.target_entropy = b.target_entropy;
+    args.rollout_noise_scale = b.rollout_noise_scale;
     // The method's budget names settings only where the method takes them.
     args.mopo_settings = b.mopo_settings;
     if cell.method.uses_sde() {
@@ -708,7 +709,7 @@ mod tests {
         ("threshold_max_margin", "threshold_max_margin = 1.3"),
     ];
     /// The budget keys that do not reach fit-model.
-    const OTHER_KEYS: [&str; 13] = [
+    const OTHER_KEYS: [&str; 14] = [
         "ensemble_max_epochs",
         "policy_steps",
         "steps_per_epoch",
@@ -718,6 +719,7 @@ mod tests {
         "clip_observations",
         "target_entropy",
         "penalty",
+        "rollout_noise_scale",
         "mopo_settings",
         "hidden",
         "model_buffer_factor",
@@ -751,7 +753,8 @@ mod tests {
         let every_key = cell_of(
             dir.path(),
             "nuno",
-            "state_box_margin = 0.1\nclip_observations = true\ntarget_entropy = -3.0\npenalty = 5.0",
+            "state_box_margin = 0.1\nclip_observations = true\ntarget_entropy = -3.0\npenalty = 5.0\n\
+             rollout_noise_scale = 0.0",
         )
         .0;
         let serde_json::Value::Object(keys) = json(&every_key.budget) else {
@@ -775,13 +778,15 @@ mod tests {
             ),
             (
                 "mopo",
-                "mopo_settings = \"nuno\"\nclip_observations = true\ntarget_entropy = -3.0\n",
+                "mopo_settings = \"nuno\"\nclip_observations = true\ntarget_entropy = -3.0\nrollout_noise_scale = 0.5\n",
                 vec![
                     "--mopo-settings",
                     "nuno",
                     "--clip-observations",
                     "--target-entropy",
                     "-3",
+                    "--rollout-noise-scale",
+                    "0.5",
                 ],
             ),
             (
@@ -838,6 +843,12 @@ mod tests {
             let kit = budget.contains("offlinerl-kit");
             assert_eq!(run.config.sac.actor_lr == 1e-4, kit, "{method}: {budget}");
             assert_eq!(run.config.penalty == 7.5, kit, "{method}: {budget}");
+            let half = budget.contains("rollout_noise_scale = 0.5");
+            assert_eq!(
+                run.config.rollout_noise_scale == Some(0.5),
+                half,
+                "{method}"
+            );
         }
     }
 }

@@ -288,7 +288,13 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
         Some("hopper-medium"),
         20,
         &run,
-        &["--target-entropy", "-2.5", "--clip-observations"],
+        &[
+            "--target-entropy",
+            "-2.5",
+            "--clip-observations",
+            "--rollout-noise-scale",
+            "0.25",
+        ],
     ));
     // MOPO's hopper-medium row: h = 5, λ = 5; never truncated; r̃ = r − λ·max‖σ‖.
     let records: Vec<serde_json::Value> = std::fs::read_to_string(run.join("metrics.jsonl"))
@@ -319,9 +325,11 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
     // OfflineRL-Kit's MOPO by default.
     let training = &policy["training"];
     assert_kit_sac_settings(training);
-    // The loop's switches as given: SAC's target entropy, the task's observation clip.
+    // The loop's switches as given: SAC's target entropy, the task's observation
+    // clip, the rollouts' noise scale.
     assert_eq!(training["sac"]["target_entropy"], -2.5);
     assert_eq!(training["clip_observations"], true);
+    assert_eq!(training["rollout_noise_scale"], 0.25);
     // TATU+MOPO on the same ensemble: MOPO's penalty, truncation at the
     // largest disagreement on the dataset / pessimism, kept for a resume.
     let tatu = |out: &Path, steps: usize, extra: &[&str]| {
@@ -653,6 +661,11 @@ fn model_free_methods_train_on_the_dataset_alone() {
     let err = fails(&fit("cql", "bad", &["--mopo-settings", "nuno"]));
     assert!(
         err.contains("--mopo-settings sets the SAC settings") && err.contains("cql runs its own"),
+        "{err}"
+    );
+    let err = fails(&fit("cql", "bad", &["--rollout-noise-scale", "0"]));
+    assert!(
+        err.contains("--rollout-noise-scale is for the model-based methods"),
         "{err}"
     );
     let err = fails(&fit("cql", "bad", &["--clip-observations"]));

@@ -123,6 +123,10 @@ pub struct Args {
     /// (nuno's guard; default: off, as the paper and NUNO's code).
     #[arg(long)]
     pub clip_observations: bool,
+    /// The scale of the model's noise in the policy's rollouts (default: the
+    /// model's own; 0 rolls the drift, or the ensemble's mean, alone).
+    #[arg(long)]
+    pub rollout_noise_scale: Option<f32>,
     /// β, the real-data fraction of each SAC batch (default: the method's:
     /// 0.05, combo 0.5).
     #[arg(long)]
@@ -433,6 +437,7 @@ impl Args {
         config.real_ratio = self.real_ratio.unwrap_or(config.real_ratio);
         config.state_box_margin = self.state_box_margin;
         config.clip_observations = self.clip_observations;
+        config.rollout_noise_scale = self.rollout_noise_scale;
         config.steps_per_epoch = self.steps_per_epoch;
         config.epochs = self.steps.div_ceil(self.steps_per_epoch);
         config.eval_episodes = self.eval_episodes;
@@ -500,6 +505,12 @@ impl Args {
         }
         if let Some(h) = self.target_entropy {
             anyhow::ensure!(h.is_finite(), "--target-entropy must be finite, got {h}");
+        }
+        if let Some(scale) = self.rollout_noise_scale {
+            anyhow::ensure!(
+                scale.is_finite() && scale >= 0.0,
+                "--rollout-noise-scale must be finite and at least 0, got {scale}"
+            );
         }
         if let Some(p) = self.pessimism {
             anyhow::ensure!(

@@ -60,6 +60,7 @@ impl Args {
             (self.halt_penalty.is_some(), "--halt-penalty"),
             (self.state_box_margin.is_some(), "--state-box-margin"),
             (self.clip_observations, "--clip-observations"),
+            (self.rollout_noise_scale.is_some(), "--rollout-noise-scale"),
             (self.target_entropy.is_some(), "--target-entropy"),
         ];
         if let Some((_, flag)) = in_model_flags.iter().find(|(given, _)| *given) {
