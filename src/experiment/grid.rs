@@ -174,31 +174,25 @@ impl Budget {
         if self.model_buffer_factor == Some(0) {
             return Err("budget: model_buffer_factor = 0 must be at least 1".into());
         }
-        if let Some(m) = self.state_box_margin
-            && !(m.is_finite() && m >= 0.0)
-        {
-            return Err(format!(
-                "budget: state_box_margin = {m} must be finite and at least 0"
-            ));
-        }
         if let Some(h) = self.target_entropy
             && !h.is_finite()
         {
             return Err(format!("budget: target_entropy = {h} must be finite"));
         }
-        if let Some(p) = self.penalty
-            && !(p.is_finite() && p >= 0.0)
-        {
-            return Err(format!(
-                "budget: penalty = {p} must be finite and at least 0"
-            ));
-        }
-        if let Some(scale) = self.rollout_noise_scale
-            && !(scale.is_finite() && scale >= 0.0)
-        {
-            return Err(format!(
-                "budget: rollout_noise_scale = {scale} must be finite and at least 0"
-            ));
+        let non_negative = [
+            ("state_box_margin", self.state_box_margin),
+            ("penalty", self.penalty),
+            (
+                "rollout_noise_scale",
+                self.rollout_noise_scale.map(f64::from),
+            ),
+        ];
+        for (key, value) in non_negative {
+            if let Some(v) = value
+                && !(v.is_finite() && v >= 0.0)
+            {
+                return Err(format!("budget: {key} = {v} must be finite and at least 0"));
+            }
         }
         Ok(())
     }
