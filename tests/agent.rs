@@ -15,7 +15,8 @@ use nuno::artifact::{
 };
 use nuno::data::{Dataset, GenerateConfig, generate};
 use nuno::envs::{
-    ForwardVelocity, MujocoTask, ObservationLayout, Rules, System, TaskConfig, TaskName, TaskRules,
+    ForwardVelocity, MujocoTask, ObservationLayout, RootXReward, Rules, System, TaskConfig,
+    TaskName, TaskRules,
 };
 use nuno::infer::Kernel;
 use nuno::nn::{polyak_update, seeded_init, to_f32_vec};
@@ -788,17 +789,40 @@ fn the_known_reward_reads_the_velocity_it_is_told() {
     let after = rules.reward(&obs, &action, &next);
     assert!((after - (3.0 + 1.0 - cost)).abs() < 1e-6, "{after}");
     let mean = rules
-        .with_forward_velocity(ForwardVelocity::Mean)
+        .with_forward_reward(ForwardVelocity::Mean, RootXReward::Difference)
         .reward(&obs, &action, &next);
     assert!((mean - (2.0 + 1.0 - cost)).abs() < 1e-6, "{mean}");
-    // Where root x is observed (NeoRL), the reward is its finite difference either way.
+    // D4RL's observations hold no root x: asking for its velocity changes nothing.
+    let no_root_x = rules.with_forward_reward(ForwardVelocity::Mean, RootXReward::Velocity);
+    assert_eq!(no_root_x.reward(&obs, &action, &next), mean);
+    // NeoRL's hold root x (entry 0; its velocity at 6, dt 0.008): the finite
+    // difference, 0.016 / 0.008 = 2, whatever velocity is named, unless the run
+    // asks for the velocity itself (4 before the step, 6 after).
     let neorl = Rules::from(TaskRules::of_task(&TaskConfig::neorl(TaskName::Hopper)).unwrap());
     let (mut x, mut x_next) = (vec![0.0f32; 12], vec![0.0f32; 12]);
     (x[1], x_next[1], x_next[0]) = (1.25, 1.25, 0.016);
-    let moved = neorl.with_forward_velocity(ForwardVelocity::Mean);
+    (x[6], x_next[6]) = (4.0, 6.0);
+    let reward = |velocity, root_x| {
+        neorl
+            .with_forward_reward(velocity, root_x)
+            .reward(&x, &action, &x_next)
+    };
+    let by_hand = [
+        (ForwardVelocity::Next, RootXReward::Difference, 2.0),
+        (ForwardVelocity::Mean, RootXReward::Difference, 2.0),
+        (ForwardVelocity::Next, RootXReward::Velocity, 6.0),
+        (ForwardVelocity::Mean, RootXReward::Velocity, 5.0),
+    ];
+    for (velocity, root_x, forward) in by_hand {
+        let got = reward(velocity, root_x);
+        assert!(
+            (got - (forward + 1.0 - cost)).abs() < 1e-5,
+            "{velocity} {root_x}: {got}"
+        );
+    }
     assert_eq!(
-        moved.reward(&x, &action, &x_next),
-        neorl.reward(&x, &action, &x_next)
+        neorl.reward(&x, &action, &x_next),
+        reward(ForwardVelocity::Next, RootXReward::Difference)
     );
 }
 

@@ -33,7 +33,9 @@ use crate::data::{Dataset, StartStateSampler, TransitionSampler};
 use crate::ensemble::{
     AdversarialConfig, AdversarialEnsemble, AdversarialLosses, EnsembleDynamics,
 };
-use crate::envs::{EvaluationConfig, EvaluationReport, ForwardVelocity, Rules, System, evaluate};
+use crate::envs::{
+    EvaluationConfig, EvaluationReport, ForwardVelocity, RootXReward, Rules, System, evaluate,
+};
 use crate::infer::Kernel;
 use crate::sde::{CODE_MODEL_BUFFER_FACTOR, Recipe, ThresholdTable};
 use crate::shared::{
@@ -115,6 +117,13 @@ pub struct PolicyLoopConfig {
     /// before this field used the one after, and load so.
     #[config(default = "ForwardVelocity::Next")]
     pub forward_velocity: ForwardVelocity,
+    /// What the known reward reads on NeoRL's observations, which hold root x:
+    /// its difference (the data's own, NUNO's code's) or the velocity
+    /// `forward_velocity` picks, an ablation of the 1/dt the difference puts
+    /// on the SDE's noise in x. Runs saved before this field read the
+    /// difference, and load so.
+    #[config(default = "RootXReward::Difference")]
+    pub root_x_reward: RootXReward,
     /// How the actor's learning rate moves over the run (`sac.actor_lr` at the
     /// first epoch). Runs saved before this field kept it constant, and load so.
     #[config(default = "ActorLrDecay::Constant")]
@@ -713,7 +722,7 @@ impl PolicyTraining {
             dynamics,
             RolloutActions::Policy(policy.as_ref()),
             &ctx.rules
-                .with_forward_velocity(self.config.forward_velocity),
+                .with_forward_reward(self.config.forward_velocity, self.config.root_x_reward),
             &starts,
             &config,
             &mut self.rng,

@@ -23,7 +23,7 @@ use super::{ArtifactError, sha256_hex};
 use crate::agent::{
     ActorLrDecay, EpochRecord, PolicyLoopConfig, PolicyTraining, ReplayBuffer, SacConfig,
 };
-use crate::envs::ForwardVelocity;
+use crate::envs::{ForwardVelocity, RootXReward};
 use crate::nn::AdamState;
 use crate::shared::TransitionBatch;
 
@@ -186,7 +186,8 @@ fn buffer_tensors(buffer: &ReplayBuffer) -> NamedTensors {
 
 /// Fields of the `PolicyLoopConfig` at `pointer` that files written before
 /// them lack, with the meaning those runs had: a model buffer of 1 × its
-/// rollouts, the known reward on the velocity after the step, a constant actor
+/// rollouts, the known reward on the velocity after the step (on root x's
+/// difference where root x is observed), a constant actor
 /// learning rate, and (never used by those runs, which had a simulator) the
 /// in-model evaluation's default horizon; no state box, no observation clip.
 pub(super) fn fill_older_loop_fields(value: &mut serde_json::Value, pointer: &str) {
@@ -219,6 +220,9 @@ pub(super) fn fill_older_loop_fields(value: &mut serde_json::Value, pointer: &st
         fields
             .entry("rollout_noise_scale")
             .or_insert(serde_json::Value::Null);
+        fields
+            .entry("root_x_reward")
+            .or_insert(serde_json::json!(RootXReward::Difference));
         fields
             .entry("model_eval_horizon")
             .or_insert(serde_json::json!(

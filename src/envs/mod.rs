@@ -20,7 +20,9 @@ pub use evaluator::{
 };
 pub use modelled_system::{System, SystemShape};
 pub use mujoco_task::{MujocoTask, TaskConfig, Transition};
-pub use rules::{ForwardTerm, ForwardVelocity, ObservationClip, RuleTerms, Rules, TaskRules};
+pub use rules::{
+    ForwardTerm, ForwardVelocity, ObservationClip, RootXReward, RuleTerms, Rules, TaskRules,
+};
 pub use score::ScoreReference;
 pub use system::{ObservationBound, RewardExpression, SystemReward, SystemSpec};
 pub use task::{

@@ -55,6 +55,11 @@ impl TaskConfig {
         }
     }
 
+    /// Whether the observations hold root x, qpos[0] (NeoRL's layout).
+    pub fn observes_root_x(&self) -> bool {
+        self.layout.qpos_from(self.task.spec()) == 0
+    }
+
     /// The reference returns that define this variant's normalised score.
     pub fn score_reference(&self) -> ScoreReference {
         let spec = self.task.spec();

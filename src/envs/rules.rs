@@ -5,7 +5,8 @@
 //! The forward reward is Gymnasium's finite difference `(x' − x)/dt` where the
 //! observations hold the root x (NeoRL's layout, as NUNO's code does); D4RL's
 //! observations omit it, so there the observed root x velocity after the step
-//! stands in (see docs/paper-map.md, deviations).
+//! stands in (see docs/paper-map.md, deviations). A run may read that velocity
+//! on NeoRL's observations too ([`RootXReward::Velocity`], an ablation).
 
 use std::sync::Arc;
 
@@ -29,6 +30,22 @@ pub enum ForwardVelocity {
 
 crate::shared::named_enum!(ForwardVelocity, "forward velocity", ForwardVelocity::Next => "next", ForwardVelocity::Mean => "mean");
 
+/// What the forward reward reads where the observations hold root x (NeoRL's layout).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RootXReward {
+    /// `(x' − x)/dt` of the observed root x: Gymnasium's, the NeoRL data's own
+    /// and NUNO's code's.
+    #[default]
+    Difference,
+    /// The observed root x velocity, as [`ForwardVelocity`] picks it: a model's
+    /// noise in x then reaches the reward without the 1/dt (125 on walker2d)
+    /// the difference multiplies it by.
+    Velocity,
+}
+
+crate::shared::named_enum!(RootXReward, "root x reward", RootXReward::Difference => "difference", RootXReward::Velocity => "velocity");
+
 /// Reward and termination of one task variant, on observations.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TaskRules {
@@ -43,6 +60,8 @@ pub struct TaskRules {
     dt: f64,
     /// The velocity the reward reads where root x is not observed.
     forward_velocity: ForwardVelocity,
+    /// Whether the reward reads root x's difference or a velocity where root x is observed.
+    root_x_reward: RootXReward,
 }
 
 impl TaskRules {
@@ -64,21 +83,37 @@ impl TaskRules {
         let qpos_from = task.layout.qpos_from(spec);
         Self {
             x_velocity: spec.nq - qpos_from,
-            root_x: (qpos_from == 0).then_some(0),
+            root_x: task.observes_root_x().then_some(0),
             qpos_from,
             task: task.task.clone(),
             dt,
             forward_velocity: ForwardVelocity::Next,
+            root_x_reward: RootXReward::Difference,
         }
     }
 
-    /// These rules with the forward reward read from `velocity` (D4RL's layout;
-    /// where root x is observed the reward stays its finite difference).
+    /// These rules with the forward reward read from `velocity` where root x is
+    /// not observed, or where [`RootXReward::Velocity`] asks for it.
     pub fn with_forward_velocity(&self, velocity: ForwardVelocity) -> Self {
         Self {
             forward_velocity: velocity,
             ..self.clone()
         }
+    }
+
+    /// These rules with the forward reward read as `reward` says where root x
+    /// is observed (D4RL's layout observes no root x: unchanged there).
+    pub fn with_root_x_reward(&self, reward: RootXReward) -> Self {
+        Self {
+            root_x_reward: reward,
+            ..self.clone()
+        }
+    }
+
+    /// Root x's observation index where the reward reads its difference.
+    fn differenced_root_x(&self) -> Option<usize> {
+        self.root_x
+            .filter(|_| self.root_x_reward == RootXReward::Difference)
     }
 
     /// `r(s, a, s')`: forward velocity, healthy bonus (paid on every step, as in
@@ -87,7 +122,7 @@ impl TaskRules {
         let spec = self.task.spec();
         let control: f64 = action.iter().map(|&a| f64::from(a).powi(2)).sum();
         let after = f64::from(next_obs[self.x_velocity]);
-        let velocity = match (self.root_x, self.forward_velocity) {
+        let velocity = match (self.differenced_root_x(), self.forward_velocity) {
             (Some(x), _) => (f64::from(next_obs[x]) - f64::from(obs[x])) / self.dt,
             (None, ForwardVelocity::Next) => after,
             (None, ForwardVelocity::Mean) => 0.5 * (f64::from(obs[self.x_velocity]) + after),
@@ -117,7 +152,7 @@ impl TaskRules {
         let spec = self.task.spec();
         let x_velocity = self.x_velocity;
         RuleTerms {
-            forward: match (self.root_x, self.forward_velocity) {
+            forward: match (self.differenced_root_x(), self.forward_velocity) {
                 (Some(root_x), _) => ForwardTerm::Difference {
                     root_x,
                     dt: self.dt,
@@ -202,11 +237,17 @@ impl Rules {
         }
     }
 
-    /// A task's rules with the forward reward read from `velocity` (see
-    /// [`TaskRules::with_forward_velocity`]); a file's system has its own reward.
-    pub fn with_forward_velocity(&self, velocity: ForwardVelocity) -> Self {
+    /// A task's rules with the forward reward read from `velocity` where it
+    /// reads a velocity, and from root x as `root_x` says where root x is
+    /// observed (see [`TaskRules::with_forward_velocity`] and
+    /// [`TaskRules::with_root_x_reward`]); a file's system has its own reward.
+    pub fn with_forward_reward(&self, velocity: ForwardVelocity, root_x: RootXReward) -> Self {
         match self {
-            Self::Task(rules) => Self::Task(rules.with_forward_velocity(velocity)),
+            Self::Task(rules) => Self::Task(
+                rules
+                    .with_forward_velocity(velocity)
+                    .with_root_x_reward(root_x),
+            ),
             Self::System(_) => self.clone(),
         }
     }

@@ -14,6 +14,7 @@
 //! threshold_max_margin = 1.1 # fit-model's --threshold-max-margin, ε(h, α ≥ 1) (optional; default: the recipe's)
 //! model_buffer_factor = 10  # fit-policy's --model-buffer-factor (optional; default: the recipe's)
 //! forward_velocity = "mean" # NUNO's fit-policy --forward-velocity (optional; default: the recipe's)
+//! root_x_reward = "velocity" # NUNO's fit-policy --root-x-reward, on NeoRL's rows (optional; default: "difference")
 //! rollout_batch = 5000      # fit-policy's --rollout-batch, every method (optional; default: each method's)
 //! state_box_margin = 0.5    # fit-policy's --state-box-margin, every model-based method (optional; default: none)
 //! clip_observations = true  # fit-policy's --clip-observations, every model-based method (optional; default: false)
@@ -60,7 +61,7 @@ use serde::{Deserialize, Serialize};
 use super::ExperimentError;
 use crate::agent::{Method, MopoSettings, PolicyLoopConfig, SacConfig, preset};
 
-use crate::envs::{ForwardVelocity, ObservationLayout, TaskName};
+use crate::envs::{ForwardVelocity, ObservationLayout, RootXReward, TaskConfig, TaskName};
 use crate::sde::{DriftInputs, EtaLossForm, LikelihoodPath, Recipe, SampleNoise};
 
 /// The step budget every cell gets.
@@ -99,6 +100,10 @@ pub struct Budget {
     /// The SDE methods' fit-policy `--forward-velocity` (default: the recipe's).
     #[serde(default)]
     pub forward_velocity: Option<ForwardVelocity>,
+    /// The SDE methods' fit-policy `--root-x-reward` (default: root x's
+    /// difference). Results written before it had the difference, and read so.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub root_x_reward: Option<RootXReward>,
     /// A cap on fit-ensemble's epochs (MOPO; default: until its early stop).
     #[serde(default)]
     pub ensemble_max_epochs: Option<usize>,
@@ -218,6 +223,7 @@ impl Budget {
             threshold_max_margin: None,
             model_buffer_factor: None,
             forward_velocity: None,
+            root_x_reward: None,
             ensemble_max_epochs: None,
             policy_steps: 0,
             steps_per_epoch: default_steps_per_epoch(),
@@ -287,6 +293,7 @@ impl Budget {
             budget.threshold_max_margin = None;
             budget.model_drift_inputs = None;
             budget.forward_velocity = None;
+            budget.root_x_reward = None;
         } else {
             budget.ensemble_max_epochs = None;
         }
@@ -512,6 +519,20 @@ struct CheckedRow {
     file: PathBuf,
     system: RowSystem,
     methods: Vec<Method>,
+}
+
+impl CheckedRow {
+    /// Whether the row's observations hold root x (a built-in task in NeoRL's layout).
+    fn observes_root_x(&self) -> bool {
+        match &self.system {
+            RowSystem::Task { task, layout, .. } => TaskConfig {
+                layout: *layout,
+                ..TaskConfig::d4rl(*task)
+            }
+            .observes_root_x(),
+            RowSystem::File { .. } => false,
+        }
+    }
 }
 
 impl GridDataset {
@@ -868,7 +889,17 @@ impl Grid {
             if !names.insert(d.name.as_str()) {
                 return Err(format!("dataset `{}` is named twice", d.name));
             }
-            checked.push((d, d.checked(base)?));
+            let row = d.checked(base)?;
+            if self.budget.root_x_reward == Some(RootXReward::Velocity)
+                && row.methods.iter().any(|m| m.uses_sde())
+                && !row.observes_root_x()
+            {
+                return Err(format!(
+                    "dataset `{}`: budget root_x_reward = \"velocity\" changes the reward on observations that hold root x (NeoRL's layout); this row's do not",
+                    d.name
+                ));
+            }
+            checked.push((d, row));
         }
         // Seeds outermost (each dataset's first seed, then each one's second,
         // ...), then datasets in file order, then methods: a sweep cut short

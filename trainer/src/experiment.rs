@@ -490,6 +490,7 @@ fn policy_args(cell: &Cell, b: &Budget, model: Option<PathBuf>, dir: PathBuf) ->
         args.penalty = b.penalty.or(args.penalty);
         args.recipe = b.recipe;
         args.forward_velocity = b.forward_velocity;
+        args.root_x_reward = b.root_x_reward;
     }
     args
 }
@@ -617,6 +618,7 @@ mod tests {
     use std::path::Path;
 
     use clap::Parser;
+    use nuno::envs::RootXReward;
     use nuno::experiment::{Grid, fit_changes};
 
     use super::{cell_data, model_args, policy_args};
@@ -709,7 +711,7 @@ mod tests {
         ("threshold_max_margin", "threshold_max_margin = 1.3"),
     ];
     /// The budget keys that do not reach fit-model.
-    const OTHER_KEYS: [&str; 14] = [
+    const OTHER_KEYS: [&str; 15] = [
         "ensemble_max_epochs",
         "policy_steps",
         "steps_per_epoch",
@@ -724,6 +726,7 @@ mod tests {
         "hidden",
         "model_buffer_factor",
         "forward_velocity",
+        "root_x_reward",
     ];
 
     /// A model folder is checked against every budget key that shapes the fit:
@@ -849,6 +852,24 @@ mod tests {
                 half,
                 "{method}"
             );
+        }
+    }
+
+    /// The budget's root x reward reaches NUNO's loop; MOPO's ensemble learns
+    /// its rewards, and its cells run without it.
+    #[test]
+    fn the_root_x_reward_reaches_nunos_loop_only() {
+        let dir = tempfile::tempdir().unwrap();
+        for (method, reaches) in [("nuno", true), ("mopo", false)] {
+            let (mut grid, cell) = cell_of(dir.path(), method, "");
+            grid.budget.root_x_reward = Some(RootXReward::Velocity);
+            let runner = policy_args(&cell, &grid.budget_for(&cell), Some("m".into()), "c".into());
+            let plan = runner.plan().unwrap();
+            let fit_policy::Training::InModel(run) = &plan.training else {
+                panic!("{method} trains in a model");
+            };
+            let velocity = run.config.root_x_reward == RootXReward::Velocity;
+            assert_eq!(velocity, reaches, "{method}");
         }
     }
 }

@@ -235,6 +235,11 @@ fn bad_grids_are_refused_before_anything_runs() {
     for (i, (line, named)) in [
         ("recipe = \"codes\"", "recipe"),
         ("forward_velocity = \"sideways\"", "forward_velocity"),
+        ("root_x_reward = \"sideways\"", "root_x_reward"),
+        (
+            "root_x_reward = \"velocity\"",
+            "dataset `h`: budget root_x_reward = \"velocity\" changes the reward on observations that hold root x",
+        ),
         ("model_buffer_factor = 0", "model_buffer_factor = 0"),
         ("model_sample_noise = \"loud\"", "model_sample_noise"),
         ("model_step_discount = 0.0", "model_step_discount = 0"),

@@ -148,6 +148,14 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
         err.contains("unknown forward velocity \"sideways\""),
         "{err}"
     );
+    // hopper-random's observations hold no root x: a reward read from it is refused.
+    let err = fails(&fit(20, &["--root-x-reward", "velocity"]));
+    assert!(
+        err.contains(
+            "--root-x-reward velocity changes the reward on observations that hold root x"
+        ),
+        "{err}"
+    );
     let err = fails(&["evaluate", "--policy", dataset_s, "--episodes", "1"]);
     assert!(err.contains("loading policy"), "{err}");
 }
@@ -403,7 +411,11 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
     assert!(error.contains("--pessimism"), "{error}");
     // NUNO's code's loop settings are refused for MOPO's ensemble, by name.
     let (model_s, dataset_s, out) = (s(&model), s(&dataset), s(&tmp.path().join("y")));
-    for extra in [["--recipe", "code"], ["--forward-velocity", "mean"]] {
+    for extra in [
+        ["--recipe", "code"],
+        ["--forward-velocity", "mean"],
+        ["--root-x-reward", "velocity"],
+    ] {
         let mut args = vec![
             "fit-policy",
             "--algo",
@@ -666,6 +678,11 @@ fn model_free_methods_train_on_the_dataset_alone() {
     let err = fails(&fit("cql", "bad", &["--rollout-noise-scale", "0"]));
     assert!(
         err.contains("--rollout-noise-scale is for the model-based methods"),
+        "{err}"
+    );
+    let err = fails(&fit("cql", "bad", &["--root-x-reward", "difference"]));
+    assert!(
+        err.contains("--root-x-reward is for the model-based methods"),
         "{err}"
     );
     let err = fails(&fit("cql", "bad", &["--clip-observations"]));

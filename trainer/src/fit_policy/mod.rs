@@ -21,7 +21,7 @@ use nuno::artifact::{
 };
 use nuno::data::{DatasetFormat, read_system_dataset};
 use nuno::ensemble::EnsembleUncertainty;
-use nuno::envs::{ForwardVelocity, System, TaskConfig, TaskName};
+use nuno::envs::{ForwardVelocity, RootXReward, System, TaskConfig, TaskName};
 use nuno::infer::Kernel;
 use nuno::sde::{ComputeDevice, Recipe};
 use nuno::shared::{BatchDynamics, Metric, MetricsTable};
@@ -113,6 +113,11 @@ pub struct Args {
     /// step) or mean (over the step, NUNO's code) (default: the recipe's).
     #[arg(long)]
     pub forward_velocity: Option<ForwardVelocity>,
+    /// What the known reward reads on observations that hold root x (NeoRL's):
+    /// difference ((x′ − x)/dt, the data's own and NUNO's code's) or velocity
+    /// (the observed x velocity, as --forward-velocity picks it) (default: difference).
+    #[arg(long)]
+    pub root_x_reward: Option<RootXReward>,
     /// End a model rollout as diverged once its state leaves the dataset's range
     /// widened by this many times that range on each side (nuno's guard; default:
     /// none, as the paper and NUNO's code).
@@ -434,6 +439,7 @@ impl Args {
             .model_buffer_factor
             .unwrap_or(config.model_buffer_factor);
         config.forward_velocity = self.forward_velocity.unwrap_or(config.forward_velocity);
+        config.root_x_reward = self.root_x_reward.unwrap_or(config.root_x_reward);
         config.real_ratio = self.real_ratio.unwrap_or(config.real_ratio);
         config.state_box_margin = self.state_box_margin;
         config.clip_observations = self.clip_observations;
@@ -490,8 +496,11 @@ impl Args {
         );
         anyhow::ensure!(
             !self.algo.uses_ensemble()
-                || (self.recipe == Recipe::Paper && self.forward_velocity.is_none()),
-            "--recipe and --forward-velocity set NUNO's loop: mopo and tatu-mopo roll an ensemble that learns its rewards"
+                || (self.recipe == Recipe::Paper
+                    && self.forward_velocity.is_none()
+                    && self.root_x_reward.is_none()),
+            "--recipe, --forward-velocity and --root-x-reward set NUNO's loop: {} rolls an ensemble that learns its rewards",
+            self.algo
         );
         anyhow::ensure!(
             self.model_buffer_factor != Some(0),
@@ -772,6 +781,13 @@ fn load_model(
             dir.display()
         ),
     };
+    anyhow::ensure!(
+        run.config.root_x_reward == RootXReward::Difference
+            || system.task().is_some_and(|task| task.observes_root_x()),
+        "--root-x-reward velocity changes the reward on observations that hold root x (NeoRL's layout); \
+         those of {} do not",
+        system.name()
+    );
     if let Some(preset) = plan.preset {
         let matches = system
             .task()

@@ -55,6 +55,7 @@ impl Args {
             (self.rollout_batch.is_some(), "--rollout-batch"),
             (self.model_buffer_factor.is_some(), "--model-buffer-factor"),
             (self.forward_velocity.is_some(), "--forward-velocity"),
+            (self.root_x_reward.is_some(), "--root-x-reward"),
             (self.real_ratio.is_some(), "--real-ratio"),
             (self.combo_weight.is_some(), "--combo-weight"),
             (self.halt_penalty.is_some(), "--halt-penalty"),
