@@ -483,3 +483,39 @@ fn an_observation_clip_leaves_positions_and_non_finite_entries() {
     clip.apply(&mut nan);
     assert!(nan[1].is_nan());
 }
+
+/// A simulator put in the state an observation shows steps as the one that
+/// showed it: D4RL's root x (not observed) matters to none of the robots'
+/// dynamics, so the next observation agrees to rounding; NeoRL's observation
+/// is the whole state, which comes back exactly.
+#[test]
+fn a_simulator_set_to_an_observation_steps_as_the_one_that_showed_it() {
+    for config in [
+        TaskConfig::d4rl(TaskName::Hopper),
+        TaskConfig::d4rl(TaskName::Walker2d),
+        TaskConfig::neorl(TaskName::HalfCheetah),
+    ] {
+        let name = config.task.name().to_string();
+        let mut walked = MujocoTask::new(&config).unwrap();
+        walked.reset(Some(3));
+        let action: Vec<f64> = (0..walked.act_dim())
+            .map(|j| 0.3 - 0.2 * j as f64)
+            .collect();
+        for _ in 0..20 {
+            walked.step(&action).unwrap();
+        }
+        let shown = walked.observation();
+        let next = walked.step(&action).unwrap().observation;
+        let mut set = MujocoTask::new(&config).unwrap();
+        assert_eq!(set.set_observation(&shown).unwrap(), shown, "{name}");
+        let stepped = set.step(&action).unwrap().observation;
+        for (i, (got, want)) in stepped.iter().zip(&next).enumerate() {
+            assert!(
+                (got - want).abs() < 1e-9,
+                "{name}, entry {i}: {got} against {want}"
+            );
+        }
+        let error = set.set_observation(&shown[1..]).unwrap_err();
+        assert!(error.to_string().contains("observation"), "{name}: {error}");
+    }
+}

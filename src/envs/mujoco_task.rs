@@ -238,6 +238,19 @@ impl MujocoTask {
         Ok(self.observation())
     }
 
+    /// Puts the simulator in the state `observation` shows, the qpos entries
+    /// the layout omits (root x, D4RL's) at 0: the robots' dynamics do not
+    /// depend on where along the floor they stand. Returns the observation there.
+    pub fn set_observation(&mut self, observation: &[f64]) -> Result<Vec<f64>, EnvError> {
+        check_vector("observation", observation, self.obs_dim())?;
+        let (nq, from) = (self.init_qpos.len(), self.qpos_from());
+        let (observed_qpos, qvel) = observation.split_at(nq - from);
+        let qpos: Vec<f64> = std::iter::repeat_n(0.0, from)
+            .chain(observed_qpos.iter().copied())
+            .collect();
+        self.set_state(&qpos, qvel)
+    }
+
     fn write_state(&mut self, qpos: &[f64], qvel: &[f64]) {
         self.data.qpos_mut().copy_from_slice(qpos);
         self.data.qvel_mut().copy_from_slice(qvel);

@@ -151,6 +151,9 @@ pub enum ActionSource {
     /// Uniform over the task's action box.
     Random,
     Policy,
+    /// A corner of the action box, drawn uniformly: what a policy whose tanh
+    /// has saturated plays.
+    Saturated,
 }
 
 impl ActionSource {
@@ -159,6 +162,7 @@ impl ActionSource {
             ActionSource::Dataset => "dataset",
             ActionSource::Random => "random",
             ActionSource::Policy => "policy",
+            ActionSource::Saturated => "saturated",
         }
     }
 }

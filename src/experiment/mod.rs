@@ -1,9 +1,11 @@
 //! Experiments: a grid of datasets × methods × seeds under one budget
 //! ([`grid`]), each cell's result and the Table 1/2-style aggregate
 //! ([`results`]), the paper's published tables and nuno's cells laid out as
-//! them ([`paper_tables`]), and the paper's model analyses ([`analysis`]). Running cells (locally or as a Slurm array) is the
+//! them ([`paper_tables`]), and the paper's model analyses ([`analysis`]) and the models' answer to the
+//! action against the task's ([`action_sensitivity`]). Running cells (locally or as a Slurm array) is the
 //! trainer's `experiment` subcommand; it calls the other subcommands per cell.
 
+mod action_sensitivity;
 pub mod analysis;
 pub mod grid;
 mod linear_model;
@@ -12,6 +14,7 @@ pub mod results;
 
 use std::path::PathBuf;
 
+pub use action_sensitivity::{ActionSensitivity, SensitivityConfig, action_sensitivity};
 pub use analysis::{
     ActionSource, Exploitation, ExploitationConfig, PredictionConfig, PredictionError,
     exploitation, prediction_error, uncertainty_by_action,

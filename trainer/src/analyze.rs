@@ -8,7 +8,10 @@
 //!   random and (given --policy) the policy's actions;
 //! - `exploitation.csv|svg` (given --policy): the policy's return in each model,
 //!   with and without the penalty, against the real task, and the share of the
-//!   states it reaches in each that lie outside the dataset's range.
+//!   states it reaches in each that lie outside the dataset's range;
+//! - `action_sensitivity.csv` (a task with a simulator): each model's ∂s′/∂a
+//!   at dataset states against the simulator's, for the dataset's, random
+//!   and saturated actions.
 
 use std::path::{Path, PathBuf};
 
@@ -19,8 +22,8 @@ use nuno::artifact::{BEST_POLICY, ModelFolder, load_policy};
 use nuno::data::{Dataset, DatasetFormat, NormalizerConfig, Stats, read_system_dataset};
 use nuno::envs::{Rules, System, TaskConfig};
 use nuno::experiment::{
-    Exploitation, ExploitationConfig, LinearModel, PredictionConfig, exploitation,
-    prediction_error, uncertainty_by_action,
+    ActionSensitivity, Exploitation, ExploitationConfig, LinearModel, PredictionConfig,
+    SensitivityConfig, action_sensitivity, exploitation, prediction_error, uncertainty_by_action,
 };
 use nuno::infer::Kernel;
 use nuno::shared::{BatchDynamics, BatchPolicy, Metric, MetricsTable};
@@ -69,6 +72,9 @@ pub struct Args {
     /// λ of the penalised model return.
     #[arg(long, default_value_t = 1.0)]
     penalty: f64,
+    /// The action step of the ∂s′/∂a differences (one-sided at the box's bounds).
+    #[arg(long, default_value_t = 0.01)]
+    action_delta: f32,
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Also predict with a linear model, s' = W·[s, a, 1] fitted by least squares
@@ -106,6 +112,11 @@ impl Args {
             "--penalty must be a finite number ≥ 0, got {}",
             self.penalty
         );
+        anyhow::ensure!(
+            self.action_delta.is_finite() && self.action_delta > 0.0,
+            "--action-delta must be a finite number > 0, got {}",
+            self.action_delta
+        );
         Ok(())
     }
 }
@@ -130,6 +141,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let predictors: Vec<&Model> = models.iter().chain(&linear).collect();
     write_prediction_error(&args, &predictors, &dataset, ood.as_ref())?;
     write_uncertainty(&args, &models, system, &dataset, policy.as_deref())?;
+    if let Some(task) = system.simulator() {
+        write_action_sensitivity(&args, &predictors, &task, &dataset)?;
+    }
     match (&policy, system.simulator()) {
         (Some(policy), Some(task)) => {
             let data = StateBox::around(&dataset.observation_bounds(), 0.0);
@@ -292,6 +306,46 @@ fn write_uncertainty(
         "η",
         &series,
     )
+}
+
+/// Each model's ∂s′/∂a against the simulator's, at --probe-states dataset
+/// states, printed and written as action_sensitivity.csv.
+fn write_action_sensitivity(
+    args: &Args,
+    models: &[&Model],
+    task: &TaskConfig,
+    dataset: &Dataset,
+) -> anyhow::Result<()> {
+    let config = SensitivityConfig {
+        states: args.probe_states,
+        delta: args.action_delta,
+        seed: args.seed,
+    };
+    let mut rows: Vec<(String, ActionSensitivity)> = Vec::new();
+    for model in models {
+        for measured in action_sensitivity(model.dynamics.as_ref(), task, dataset, &config)? {
+            println!(
+                "{}: ‖∂s′/∂a‖ at {} actions: model {:.3}, task {:.3}, error {:.3}, median ratio {:.2}",
+                model.name,
+                measured.actions.as_str(),
+                measured.model,
+                measured.task,
+                measured.error,
+                measured.median_ratio
+            );
+            rows.push((model.name.clone(), measured));
+        }
+    }
+    type Row = (String, ActionSensitivity);
+    let table = MetricsTable::new()
+        .column("model", |r: &Row| r.0.as_str().into())
+        .column("actions", |r: &Row| r.1.actions.as_str().into())
+        .column("model_norm", |r: &Row| r.1.model.into())
+        .column("task_norm", |r: &Row| r.1.task.into())
+        .column("error_norm", |r: &Row| r.1.error.into())
+        .column("median_ratio", |r: &Row| r.1.median_ratio.into())
+        .column("states", |r: &Row| r.1.states.into());
+    write_text(&args.out.join("action_sensitivity.csv"), &table.csv(&rows))
 }
 
 /// A row of exploitation.csv.

@@ -115,9 +115,34 @@ fn analyze_writes_every_figure_for_both_model_kinds() {
     };
     let (sde, linear) = (step_one("nuno"), step_one("linear least squares"));
     assert!(sde < linear, "SDE {sde} against linear {linear}");
+    // ∂s′/∂a of each model against the simulator's, at dataset, random and
+    // saturated actions: the simulator's own is the same whichever model sits
+    // beside it, and a linear model's is one matrix wherever it is taken.
+    let sensitivity = csv("action_sensitivity.csv");
+    assert!(
+        sensitivity
+            .starts_with("model,actions,model_norm,task_norm,error_norm,median_ratio,states\n"),
+        "{sensitivity}"
+    );
+    assert_eq!(sensitivity.lines().count(), 1 + 3 * 3, "{sensitivity}");
+    let norms = |model: &str, column: usize| -> Vec<f64> {
+        (sensitivity.lines())
+            .filter(|l| l.starts_with(&format!("{model},")))
+            .map(|l| l.split(',').nth(column).unwrap().parse().unwrap())
+            .collect()
+    };
+    let (sde_task, linear_task) = (norms("nuno", 3), norms("linear least squares", 3));
+    assert_eq!(sde_task, linear_task, "{sensitivity}");
+    assert!(sde_task.iter().all(|&n| n > 0.0), "{sensitivity}");
+    let linear = norms("linear least squares", 2);
+    for n in &linear {
+        assert!((n / linear[0] - 1.0).abs() < 1e-2, "{sensitivity}");
+    }
     // Bad input, named.
     let error = fails(&analyze(&["--horizon", "0"]));
     assert!(error.contains("--horizon"), "{error}");
+    let error = fails(&analyze(&["--action-delta", "0"]));
+    assert!(error.contains("--action-delta"), "{error}");
     let error = fails(&[
         "analyze",
         "--model",
