@@ -6,7 +6,7 @@
 # behaviour policies and run snapshots under models/behaviour/. Run from the repository root
 # after a build (`make build`, or `cargo test --no-run` as `make test` builds):
 #
-#   experiments/carry-on.sh datasets GRID...   make every missing dataset the grids read
+#   experiments/carry-on.sh datasets GRID...   make every missing dataset the grids' unfinished cells read
 #   experiments/carry-on.sh start GRID...      run each grid's unfinished cells in the background
 #   experiments/carry-on.sh online TASK...     resume TASK's online SAC run from its snapshot
 #   experiments/carry-on.sh keep GRID...       copy the grids' newly finished cells into the repo
@@ -32,9 +32,39 @@ stem() {
     echo "${path%.toml}"
 }
 
-# The data files a grid reads (its `file = "../data/NAME.hdf5"` lines), as names.
+# Copies the cells a grid borrows and its kept ones into the folder $2 (the runner skips them).
+copy_finished() {
+    for borrowed in $(sed -n 's|^# borrows: *||p' "$1"); do
+        if [ ! -d "experiments/results/$borrowed" ]; then
+            echo "carry-on: $1 borrows experiments/results/$borrowed, which is not there" >&2
+            return 1
+        fi
+        cp -r "experiments/results/$borrowed/." "$2/"
+    done
+    kept=experiments/results/$(stem "$1")
+    if [ -d "$kept" ]; then cp -r "$kept/." "$2/"; fi
+}
+
+# The data files (names under data/, without `.hdf5`) that a grid's unfinished cells read: a
+# finished cell needs no data, so a fresh machine makes only these.
 grid_datasets() {
-    sed -n 's|^file *= *"\.\./data/\(.*\)\.hdf5"|\1|p' "$1"
+    scratch=$(mktemp -d)
+    copy_finished "$1" "$scratch"
+    "$trainer" experiment status --grid "$1" --out "$scratch" >"$scratch/.status"
+    python3 - "$1" "$scratch/.status" <<'PY'
+import pathlib, sys, tomllib
+grid, status = sys.argv[1:]
+# Status lines: "  INDEX DATASET/METHOD/seed-N  STATE".
+pending = {
+    fields[1].split("/")[0]
+    for fields in (line.split() for line in open(status))
+    if len(fields) > 2 and fields[1].count("/") == 2 and not fields[2].startswith("done")
+}
+for row in tomllib.load(open(grid, "rb"))["datasets"]:
+    if row["name"] in pending:
+        print(pathlib.PurePath(row["file"]).stem)
+PY
+    rm -rf "$scratch"
 }
 
 # Makes data/NAME.hdf5 by the recipe its name says (the grid files' own commands, seed 0).
@@ -79,16 +109,8 @@ datasets() {
 start() {
     for grid in "$@"; do
         out=runs/$(stem "$grid")
-        kept=experiments/results/$(stem "$grid")
         mkdir -p "$out"
-        for borrowed in $(sed -n 's|^# borrows: *||p' "$grid"); do
-            if [ ! -d "experiments/results/$borrowed" ]; then
-                echo "carry-on: $grid borrows experiments/results/$borrowed, which is not there" >&2
-                return 1
-            fi
-            cp -r "experiments/results/$borrowed/." "$out/"
-        done
-        if [ -d "$kept" ]; then cp -r "$kept/." "$out/"; fi
+        copy_finished "$grid" "$out"
         touch "$out/.carried-on"
         nohup nice -n 19 "$trainer" experiment run --grid "$grid" --out "$out" \
             >> "$out.log" 2>&1 &

@@ -160,13 +160,12 @@ fn table(args: TableArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The selected cells of the grid, every name checked, and each of their
-/// datasets read once and checked against its task.
-fn checked_cells(grid: &Path, select: &SelectArgs) -> anyhow::Result<(Grid, Vec<Cell>)> {
-    let (parsed, cells) = Grid::read(grid)?;
-    let cells = select.select(&cells)?;
+/// Each of `cells`' datasets, read once and checked against its task: the
+/// cells about to run (a finished cell needs no data, so a fresh machine makes
+/// only the files the grid's pending cells read).
+fn check_cell_data(grid: &Path, cells: &[Cell]) -> anyhow::Result<()> {
     let mut seen = BTreeSet::new();
-    for cell in &cells {
+    for cell in cells {
         if seen.insert(cell.dataset.clone()) {
             anyhow::ensure!(
                 cell.file.exists(),
@@ -181,7 +180,7 @@ fn checked_cells(grid: &Path, select: &SelectArgs) -> anyhow::Result<(Grid, Vec<
             })?;
         }
     }
-    Ok((parsed, cells))
+    Ok(())
 }
 
 /// The built-in task or the system file (read and checked) the cell's data is of.
@@ -196,7 +195,8 @@ fn cell_system(cell: &Cell) -> anyhow::Result<System> {
 
 fn run_grid(args: RunArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.jobs > 0, "--jobs must be at least 1");
-    let (grid, cells) = checked_cells(&args.grid.grid, &args.select)?;
+    let (grid, cells) = Grid::read(&args.grid.grid)?;
+    let cells = args.select.select(&cells)?;
     let mut pending = Vec::new();
     for cell in &cells {
         if !matches!(
@@ -215,6 +215,7 @@ fn run_grid(args: RunArgs) -> anyhow::Result<()> {
     if pending.is_empty() {
         return Ok(());
     }
+    check_cell_data(&args.grid.grid, &pending)?;
     match args.executor {
         Executor::Local => run_local(&args.grid, &pending, args.jobs),
         Executor::Slurm => submit_slurm(&args.grid, &pending, &args.slurm_arg),

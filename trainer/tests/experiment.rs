@@ -454,6 +454,12 @@ fn a_local_grid_runs_once_resumes_and_reports() {
     // Finished cells are never rerun.
     let again = ok(&run);
     assert!(again.contains("0 to run"), "{again}");
+    // Nor do they need their data: a fresh machine makes only the pending cells' files.
+    let (data, away) = (dir.join("hopper.hdf5"), dir.join("hopper.away"));
+    std::fs::rename(&data, &away).unwrap();
+    let without_data = ok(&run);
+    assert!(without_data.contains("0 to run"), "{without_data}");
+    std::fs::rename(&away, &data).unwrap();
     // A result names its dataset as the grid does, with the file's SHA-256
     // (coreutils' sha256sum, not nuno's hasher).
     let result: serde_json::Value = serde_json::from_slice(
