@@ -73,32 +73,7 @@ pub fn action_sensitivity(
     let observations: Vec<f32> = (rows.iter())
         .flat_map(|&t| dataset.observations.row(t).to_vec())
         .collect();
-    let sources = [
-        (
-            ActionSource::Dataset,
-            (rows.iter())
-                .flat_map(|&t| dataset.actions.row(t).to_vec())
-                .collect::<Vec<f32>>(),
-        ),
-        (
-            ActionSource::Random,
-            (0..rows.len() * act_dim)
-                .map(|i| {
-                    let (l, h) = bounds[i % act_dim];
-                    rng.random_range(l..=h)
-                })
-                .collect(),
-        ),
-        (
-            ActionSource::Saturated,
-            (0..rows.len() * act_dim)
-                .map(|i| {
-                    let (l, h) = bounds[i % act_dim];
-                    if rng.random_bool(0.5) { h } else { l }
-                })
-                .collect(),
-        ),
-    ];
+    let sources = action_sources(dataset, &rows, &bounds, &mut rng);
     let model_step = |states: &[f32], actions: &[f32]| -> Vec<f32> {
         let states = dynamics.states_from_observations(states);
         let noise = vec![0.0; actions.len() / act_dim * dynamics.noise_dim()];
@@ -130,6 +105,38 @@ pub fn action_sensitivity(
         measured.push(compare(source, &model, &task));
     }
     Ok(measured)
+}
+
+/// The actions the Jacobians are taken at, per source, one row per dataset
+/// row of `rows`: the dataset's own, uniform over `bounds`, and a uniformly
+/// drawn corner of the box.
+fn action_sources(
+    dataset: &Dataset,
+    rows: &[usize],
+    bounds: &[(f32, f32)],
+    rng: &mut ChaCha8Rng,
+) -> [(ActionSource, Vec<f32>); 3] {
+    let act_dim = bounds.len();
+    let dataset_actions = (rows.iter())
+        .flat_map(|&t| dataset.actions.row(t).to_vec())
+        .collect();
+    let random = (0..rows.len() * act_dim)
+        .map(|i| {
+            let (l, h) = bounds[i % act_dim];
+            rng.random_range(l..=h)
+        })
+        .collect();
+    let saturated = (0..rows.len() * act_dim)
+        .map(|i| {
+            let (l, h) = bounds[i % act_dim];
+            if rng.random_bool(0.5) { h } else { l }
+        })
+        .collect();
+    [
+        (ActionSource::Dataset, dataset_actions),
+        (ActionSource::Random, random),
+        (ActionSource::Saturated, saturated),
+    ]
 }
 
 /// The source's mean norms, mean error and median norm ratio over its states.
