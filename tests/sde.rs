@@ -304,6 +304,30 @@ fn model_settings_no_fit_can_use_are_refused_by_name_before_fitting() {
 }
 
 #[test]
+fn fit_schedules_no_fit_can_follow_are_refused_by_name_before_fitting() {
+    let dataset = hopper_dataset(300, 4);
+    let (train, valid) = dataset.split_by_trajectory(0.3, 0);
+    let device = Device::flex();
+    type Break = fn(&mut FitConfig);
+    let cases: [(Break, &str); 5] = [
+        (|c| c.h_bias_every = 0, "h_bias_every = 0"),
+        (|c| c.eval_every = 0, "eval_every = 0"),
+        (|c| c.log_every = 0, "log_every = 0"),
+        (|c| c.eta_lr = Some(0.0), "eta_lr = 0"),
+        (|c| c.eta_lr = Some(f64::NAN), "eta_lr = NaN"),
+    ];
+    for (break_it, named) in cases {
+        let mut config = small_config(10);
+        break_it(&mut config);
+        let err = fit(&train, &valid, hopper_spec(), &config, &device, &mut |_| {
+            panic!("fitting started")
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains(named), "{err} should name {named}");
+    }
+}
+
+#[test]
 fn hopper_fit_beats_constant_velocity_and_flags_random_actions() {
     let NarrowFit {
         model,

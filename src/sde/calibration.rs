@@ -174,6 +174,51 @@ pub fn calibration_report(
     config: &CalibrationConfig,
     device: &Device,
 ) -> Result<CalibrationReport, SdeError> {
+    check_inputs(model, held_out, radius, action_space, config)?;
+    let state_dim = model.constants.state_dim();
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    let batch = HeldOutBatch::draw(model, held_out, config.rows, &mut rng)?;
+    let data = terms_at(model, &batch.states, &batch.actions);
+    let dimensions = dimension_calibrations(model, &batch, &data);
+    let in_band = dimensions
+        .iter()
+        .filter(|d| d.z_std >= Z_STD_BAND.0 && d.z_std <= Z_STD_BAND.1)
+        .count();
+    let (median_eta, h_share_at_median_eta) = h_share_around_median_eta(&data, state_dim);
+    let diffusion = diffusion_profile(model, &batch, &data, radius, config, &mut rng);
+    let (eta_next_real, eta_next_model) = eta_one_step_ahead(model, &batch, &mut rng);
+    let horizons = thresholds.map_or_else(Vec::new, |table| {
+        open_loop_calibration(
+            model,
+            held_out,
+            table,
+            action_space,
+            config,
+            &mut rng,
+            device,
+        )
+    });
+    Ok(CalibrationReport {
+        rows: batch.rows,
+        z_std_in_band: in_band as f32 / state_dim as f32,
+        dimensions,
+        median_eta,
+        h_share_at_median_eta,
+        diffusion,
+        eta_next_real,
+        eta_next_model,
+        horizons,
+    })
+}
+
+/// Refuses a report that cannot be made, naming what is wrong.
+fn check_inputs(
+    model: &NeuralSde,
+    held_out: &Dataset,
+    radius: f32,
+    action_space: &[(f32, f32)],
+    config: &CalibrationConfig,
+) -> Result<(), SdeError> {
     check_dims(model, held_out)?;
     config.validate()?;
     if !(radius.is_finite() && radius > 0.0) {
@@ -181,59 +226,93 @@ pub fn calibration_report(
             "calibration: radius {radius} must be > 0"
         )));
     }
-    if action_space.len() != model.constants.spec.act_dim
+    let act_dim = model.constants.spec.act_dim;
+    if action_space.len() != act_dim
         || !action_space
             .iter()
             .all(|(low, high)| low.is_finite() && high.is_finite() && low <= high)
     {
         return Err(SdeError::Config(format!(
-            "calibration: action space {action_space:?} is not {} (low, high) pairs",
-            model.constants.spec.act_dim
+            "calibration: action space {action_space:?} is not {act_dim} (low, high) pairs"
         )));
     }
-    // Rows with a next action in the same trajectory (for η at the next state).
-    let continued: Vec<usize> = held_out
-        .trajectories()
-        .iter()
-        .flat_map(|t| t.start..t.end - 1)
-        .collect();
-    if continued.is_empty() {
-        return Err(SdeError::Config(
-            "calibration: the held-out data has no trajectory of two or more steps".into(),
-        ));
-    }
-    let c = &model.constants;
-    let (obs_dim, act_dim, state_dim) = (c.spec.obs_dim, c.spec.act_dim, c.state_dim());
-    let reward_model = c.config.reward_model;
-    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
-    let rows: Vec<usize> = (0..config.rows)
-        .map(|_| continued[rng.random_range(0..continued.len())])
-        .collect();
-    let n = rows.len();
-    let mut states = Vec::with_capacity(n * state_dim);
-    let mut targets = Vec::with_capacity(n * state_dim);
-    let mut actions = Vec::with_capacity(n * act_dim);
-    let mut next_actions = Vec::with_capacity(n * act_dim);
-    for &i in &rows {
-        states.extend(held_out.observations.row(i).iter());
-        targets.extend(held_out.next_observations.row(i).iter());
-        if reward_model {
-            // r_c starts at 0 and gains the step's reward.
-            states.push(0.0);
-            targets.push(held_out.rewards[i]);
-        }
-        actions.extend(held_out.actions.row(i).iter());
-        next_actions.extend(held_out.actions.row(i + 1).iter());
-    }
+    Ok(())
+}
 
-    // z per dimension, and h(η)'s share of Σ.
-    let data = terms_at(model, &states, &actions);
+/// Held-out rows drawn for the one-step measures, laid out as the model's batches.
+struct HeldOutBatch {
+    rows: usize,
+    /// Integrated states (with r_c = 0 appended for NUNO^R).
+    states: Vec<f32>,
+    /// The real next states (r_c: the step's reward).
+    targets: Vec<f32>,
+    actions: Vec<f32>,
+    /// The action the dataset takes at the next state (for η one step ahead).
+    next_actions: Vec<f32>,
+}
+
+impl HeldOutBatch {
+    /// `rows` transitions drawn uniformly, with replacement, among those with a next
+    /// action in the same trajectory.
+    fn draw(
+        model: &NeuralSde,
+        held_out: &Dataset,
+        rows: usize,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Self, SdeError> {
+        let continued: Vec<usize> = held_out
+            .trajectories()
+            .iter()
+            .flat_map(|t| t.start..t.end - 1)
+            .collect();
+        if continued.is_empty() {
+            return Err(SdeError::Config(
+                "calibration: the held-out data has no trajectory of two or more steps".into(),
+            ));
+        }
+        let c = &model.constants;
+        let (act_dim, state_dim) = (c.spec.act_dim, c.state_dim());
+        let mut batch = HeldOutBatch {
+            rows,
+            states: Vec::with_capacity(rows * state_dim),
+            targets: Vec::with_capacity(rows * state_dim),
+            actions: Vec::with_capacity(rows * act_dim),
+            next_actions: Vec::with_capacity(rows * act_dim),
+        };
+        for _ in 0..rows {
+            let i = continued[rng.random_range(0..continued.len())];
+            batch.states.extend(held_out.observations.row(i).iter());
+            batch
+                .targets
+                .extend(held_out.next_observations.row(i).iter());
+            if c.config.reward_model {
+                // r_c starts at 0 and gains the step's reward.
+                batch.states.push(0.0);
+                batch.targets.push(held_out.rewards[i]);
+            }
+            batch.actions.extend(held_out.actions.row(i).iter());
+            batch
+                .next_actions
+                .extend(held_out.actions.row(i + 1).iter());
+        }
+        Ok(batch)
+    }
+}
+
+/// z per integrated dimension, and h(η)'s share of Σ, from the model's `data` terms.
+fn dimension_calibrations(
+    model: &NeuralSde,
+    batch: &HeldOutBatch,
+    data: &ModelStep,
+) -> Vec<DimensionCalibration> {
+    let c = &model.constants;
+    let (n, state_dim) = (batch.rows, c.state_dim());
     let sqrt_dt = c.spec.dt.sqrt() as f32;
-    let dimensions: Vec<DimensionCalibration> = (0..state_dim)
+    (0..state_dim)
         .map(|d| {
             let column =
                 |v: &[f32]| -> Vec<f32> { v.iter().skip(d).step_by(state_dim).copied().collect() };
-            let (target, mu) = (column(&targets), column(&data.means));
+            let (target, mu) = (column(&batch.targets), column(&data.means));
             let (sigma, h) = (column(&data.sigma), column(&data.h_eta));
             let z: Vec<f32> = (0..n)
                 .map(|r| (target[r] - mu[r]) / ((sigma[r] + h[r]) * sqrt_dt))
@@ -251,13 +330,13 @@ pub fn calibration_report(
                 h_share: mean(&h_share),
             }
         })
-        .collect();
-    let in_band = dimensions
-        .iter()
-        .filter(|d| d.z_std >= Z_STD_BAND.0 && d.z_std <= Z_STD_BAND.1)
-        .count();
+        .collect()
+}
 
-    // h(η)'s share around the median η.
+/// The median η on the data, and h(η)'s share of Σ at the rows around it (the 45th–55th
+/// percentile).
+fn h_share_around_median_eta(data: &ModelStep, state_dim: usize) -> (f32, f32) {
+    let n = data.eta.len();
     let row_share = |r: usize| -> f32 {
         let span = r * state_dim..(r + 1) * state_dim;
         let shares: Vec<f32> = data.h_eta[span.clone()]
@@ -269,11 +348,23 @@ pub fn calibration_report(
     };
     let mut by_eta: Vec<usize> = (0..n).collect();
     by_eta.sort_by(|&a, &b| data.eta[a].total_cmp(&data.eta[b]));
-    let median_eta = data.eta[by_eta[n / 2]];
     let middle = &by_eta[(n * 45 / 100).min(n - 1)..(n * 55 / 100 + 1).min(n)];
-    let h_share_at_median_eta = mean(&middle.iter().map(|&r| row_share(r)).collect::<Vec<_>>());
+    let shares: Vec<f32> = middle.iter().map(|&r| row_share(r)).collect();
+    (data.eta[by_eta[n / 2]], mean(&shares))
+}
 
-    // Σ on the data, at perturbations and far.
+/// Mean Σ (each dimension in units of its diffusion scale) on the data, then at the data
+/// moved by N(0, (k·r)²) in normalised (s, a) for each configured k and far.
+fn diffusion_profile(
+    model: &NeuralSde,
+    batch: &HeldOutBatch,
+    data: &ModelStep,
+    radius: f32,
+    config: &CalibrationConfig,
+    rng: &mut ChaCha8Rng,
+) -> Vec<DiffusionAt> {
+    let c = &model.constants;
+    let (obs_dim, act_dim, state_dim) = (c.spec.obs_dim, c.spec.act_dim, c.state_dim());
     let scale = &c.scales.diffusion[..state_dim];
     let mean_sigma = |t: &ModelStep| -> f32 {
         let relative: Vec<f32> = t
@@ -285,7 +376,7 @@ pub fn calibration_report(
             .collect();
         mean(&relative)
     };
-    let data_sigma = mean_sigma(&data);
+    let data_sigma = mean_sigma(data);
     let normalizer = &c.scales.normalizer;
     let mut diffusion = vec![DiffusionAt {
         radii: 0.0,
@@ -300,16 +391,16 @@ pub fn calibration_report(
     {
         // Moved in normalised (s, a), mapped back to physical units.
         let shift = k * radius;
-        let mut moved_states = states.clone();
-        let mut moved_actions = actions.clone();
+        let mut moved_states = batch.states.clone();
+        let mut moved_actions = batch.actions.clone();
         for row in moved_states.chunks_exact_mut(state_dim) {
-            let noise = standard_normal(obs_dim, &mut rng);
+            let noise = standard_normal(obs_dim, rng);
             for (d, e) in noise.iter().enumerate() {
                 row[d] += e * shift * normalizer.state.std[d];
             }
         }
         for row in moved_actions.chunks_exact_mut(act_dim) {
-            let noise = standard_normal(act_dim, &mut rng);
+            let noise = standard_normal(act_dim, rng);
             for (d, e) in noise.iter().enumerate() {
                 row[d] += e * shift * normalizer.action.std[d];
             }
@@ -323,41 +414,21 @@ pub fn calibration_report(
             ratio_to_data: sigma / data_sigma,
         });
     }
+    diffusion
+}
 
-    // η one step ahead: at the real next state and at a model sample, drawn at
-    // the scale the model's rollouts sample at.
+/// Mean η one step ahead, with the dataset's next action: at the real next states, and at
+/// model samples drawn at the scale the model's rollouts sample at.
+fn eta_one_step_ahead(model: &NeuralSde, batch: &HeldOutBatch, rng: &mut ChaCha8Rng) -> (f32, f32) {
     let scale = model.sample_noise_scale();
-    let noise: Vec<f32> = standard_normal(n * state_dim, &mut rng)
+    let noise: Vec<f32> = standard_normal(batch.states.len(), rng)
         .into_iter()
         .map(|e| e * scale)
         .collect();
-    let sampled = BatchDynamics::step(model, &states, &actions, &noise).next_states;
-    let eta_next_real = mean(&terms_at(model, &targets, &next_actions).eta);
-    let eta_next_model = mean(&terms_at(model, &sampled, &next_actions).eta);
-
-    let horizons = thresholds.map_or_else(Vec::new, |table| {
-        open_loop_calibration(
-            model,
-            held_out,
-            table,
-            action_space,
-            config,
-            &mut rng,
-            device,
-        )
-    });
-
-    Ok(CalibrationReport {
-        rows: n,
-        z_std_in_band: in_band as f32 / state_dim as f32,
-        dimensions,
-        median_eta,
-        h_share_at_median_eta,
-        diffusion,
-        eta_next_real,
-        eta_next_model,
-        horizons,
-    })
+    let sampled = BatchDynamics::step(model, &batch.states, &batch.actions, &noise).next_states;
+    let real = mean(&terms_at(model, &batch.targets, &batch.next_actions).eta);
+    let modelled = mean(&terms_at(model, &sampled, &batch.next_actions).eta);
+    (real, modelled)
 }
 
 /// Open-loop accumulated η and truncation rates, per horizon of `table` that

@@ -421,6 +421,28 @@ pub struct FitConfig {
 }
 
 impl FitConfig {
+    /// Refuses a fit that cannot run on states of `obs_dim` observations, naming the
+    /// field: the model's and the loss's settings, and every period and learning rate.
+    pub fn validate(&self, obs_dim: usize) -> Result<(), super::SdeError> {
+        self.model
+            .validate(obs_dim + usize::from(self.model.reward_model))?;
+        self.loss.validate()?;
+        let bad = |message: String| super::SdeError::Config(format!("fit config: {message}"));
+        for (name, value) in [
+            ("h_bias_every", self.h_bias_every),
+            ("eval_every", self.eval_every),
+            ("log_every", self.log_every),
+        ] {
+            if value == 0 {
+                return Err(bad(format!("{name} = 0: must be at least 1")));
+            }
+        }
+        if let Some(lr) = self.eta_lr.filter(|lr| !(lr.is_finite() && *lr > 0.0)) {
+            return Err(bad(format!("eta_lr = {lr}: must be finite and > 0")));
+        }
+        Ok(())
+    }
+
     /// Adam's learning rate at `step`: linear from `lr_start` to `lr_end` over
     /// `lr_decay_steps`, then constant.
     pub fn learning_rate(&self, step: usize) -> f64 {

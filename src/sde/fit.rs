@@ -180,32 +180,11 @@ pub fn fit_from(
     on_evaluation: &mut dyn FnMut(&SdeFitState) -> Result<(), SdeError>,
 ) -> Result<(NeuralSde, FitSummary), SdeError> {
     spec.validate()?;
-    config
-        .model
-        .validate(spec.obs_dim + usize::from(config.model.reward_model))?;
-    config.loss.validate()?;
-    if config.h_bias_every == 0 {
-        return Err(SdeError::Config(
-            "fit config: h_bias_every = 0: must be at least 1".into(),
-        ));
-    }
-    if let Some(lr) = config.eta_lr.filter(|lr| !(lr.is_finite() && *lr > 0.0)) {
-        return Err(SdeError::Config(format!(
-            "fit config: eta_lr = {lr}: must be finite and > 0"
-        )));
-    }
+    config.validate(spec.obs_dim)?;
     let started = Instant::now();
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let train_windows = WindowSampler::new(train, config.horizon)?;
-    let valid_windows = WindowSampler::new(valid, config.horizon)?;
-    let valid_starts: Vec<usize> = {
-        let all = valid_windows.starts();
-        let mut pick =
-            ChaCha8Rng::seed_from_u64(derive_seed(config.seed, SeedStream::ValidWindows));
-        (0..config.valid_windows.min(all.len()))
-            .map(|_| all[pick.random_range(0..all.len())])
-            .collect()
-    };
+    let validation = Validation::new(valid, config, device)?;
 
     // Scales from the training data; networks initialised from the seed.
     let scales = PhysicalScales::measure(
@@ -219,10 +198,13 @@ pub fn fit_from(
     let model = seeded_init(&train_device, config.seed, || {
         NeuralSde::init(spec, scales, config.model.clone(), &train_device)
     });
-    let state_dim = model.constants.state_dim();
-    let input_dim = model.spec().obs_dim + model.spec().act_dim;
     let reference = training_inputs(&model, train, config.loss.far_reference, &mut rng);
-    let far_field = FarField::new(reference.clone(), input_dim, &config.loss);
+    let input_dim = model.spec().obs_dim + model.spec().act_dim;
+    let draws = DrawShapes {
+        state_dim: model.constants.state_dim(),
+        far_field: FarField::new(reference.clone(), input_dim, &config.loss),
+        input_dim,
+    };
     let settings = StepSettings::of(config);
     let mut trainer: Box<dyn SdeTrainer> = match config.kernel {
         Kernel::Burn => Box::new(BurnSdeTrainer::new(model, settings, train_device)),
@@ -230,113 +212,178 @@ pub fn fit_from(
     };
     trainer.calibrate_h_bias(&reference);
 
-    let mut best = trainer.model();
-    let mut best_nll = validation_nll(
-        &best,
-        &valid_windows,
-        &valid_starts,
-        &config.loss,
-        config.seed,
-        device,
-    );
-    let (mut best_step, mut evals_without_improvement, mut step) = (0, 0, 0);
-    let mut records = Vec::new();
-    if let Some(state) = resume {
-        let fresh = &best.constants;
-        if state.current.constants.spec != fresh.spec
-            || state.current.constants.scales != fresh.scales
-        {
-            return Err(SdeError::Config(
-                "the checkpoint was fitted on other data (its scales differ)".into(),
-            ));
-        }
-        trainer.restore(&state.current, state.adam);
-        (best, best_nll, best_step) = (state.best, state.best_nll, state.best_step);
-        (evals_without_improvement, step) = (state.evals_without_improvement, state.step);
-        (rng, records) = (state.rng, state.records);
+    let mut state = SdeFitState::start(trainer.model(), &validation, rng);
+    if let Some(resumed) = resume {
+        state.resume_from(resumed, trainer.as_mut())?;
     }
-    let stopped = |evals: usize| evals >= config.patience;
-    while step < config.max_steps && !stopped(evals_without_improvement) {
+    while state.step < config.max_steps && state.evals_without_improvement < config.patience {
         // eq. 7 on a batch of windows of horizon H.
-        let lr = config.learning_rate(step);
-        let windows = train_windows.sample(config.batch_size, &mut rng);
-        let step_noise = standard_normal(config.batch_size * config.horizon * state_dim, &mut rng);
-        let samples = config.batch_size * config.loss.convexity_samples;
-        let ball_noise = standard_normal(samples * input_dim, &mut rng);
-        // Off, L_far's points are drawn (the same stream either way) but none is far.
-        let (far_points, far_mask) = if config.loss.lambda_far > 0.0 {
-            far_field.sample_values(config.batch_size, &mut rng)
-        } else {
-            let points = far_field.sample_points(config.batch_size, &mut rng);
-            (points, vec![0.0; config.batch_size])
-        };
-        let draws = StepDraws {
-            windows,
-            step_noise,
-            ball_noise,
-            far_points,
-            far_mask,
-        };
-        let terms = trainer.step(&draws, lr);
-        step += 1;
-        if step % config.h_bias_every == 0 {
+        let lr = config.learning_rate(state.step);
+        let step_draws = draws.draw(config, &train_windows, &mut state.rng);
+        let terms = trainer.step(&step_draws, lr);
+        state.step += 1;
+        let step = state.step;
+        if step.is_multiple_of(config.h_bias_every) {
             trainer.calibrate_h_bias(&reference);
         }
 
         // Logging and early stopping, kept apart from the algorithm above.
-        let evaluate = step % config.eval_every == 0 || step == config.max_steps;
-        if step % config.log_every == 0 || evaluate {
+        let evaluate = step.is_multiple_of(config.eval_every) || step == config.max_steps;
+        if step.is_multiple_of(config.log_every) || evaluate {
             let mut record = FitRecord {
                 step,
                 learning_rate: lr,
                 losses: terms,
                 valid_nll: None,
             };
-            let current = evaluate.then(|| trainer.model());
-            if let Some(current) = &current {
-                let nll = validation_nll(
-                    current,
-                    &valid_windows,
-                    &valid_starts,
-                    &config.loss,
-                    config.seed,
-                    device,
-                );
+            if evaluate {
+                state.current = trainer.model();
+                let nll = validation.nll(&state.current);
                 record.valid_nll = Some(nll);
-                if nll < best_nll {
-                    (best, best_nll, best_step, evals_without_improvement) =
-                        (current.clone(), nll, step, 0);
-                } else {
-                    evals_without_improvement += 1;
-                }
+                state.offer_current(nll);
             }
             on_record(&record);
-            records.push(record);
-            if let Some(current) = current {
-                on_evaluation(&SdeFitState {
-                    step,
-                    records: records.clone(),
-                    current,
-                    best: best.clone(),
-                    best_nll,
-                    best_step,
-                    evals_without_improvement,
-                    adam: trainer.optimizer_state(),
-                    rng: rng.clone(),
-                })?;
+            state.records.push(record);
+            if evaluate {
+                state.adam = trainer.optimizer_state();
+                on_evaluation(&state)?;
             }
         }
     }
     let summary = FitSummary {
-        steps: step,
-        best_step,
-        best_valid_nll: best_nll,
-        stopped_early: step < config.max_steps,
+        steps: state.step,
+        best_step: state.best_step,
+        best_valid_nll: state.best_nll,
+        stopped_early: state.step < config.max_steps,
         seconds: started.elapsed().as_secs_f64(),
         train_transitions: train.len(),
         valid_transitions: valid.len(),
     };
-    Ok((best, summary))
+    Ok((state.best, summary))
+}
+
+/// The fixed validation windows every evaluation scores, with the fit's noise.
+struct Validation<'a> {
+    windows: WindowSampler<'a>,
+    starts: Vec<usize>,
+    loss: &'a LossConfig,
+    seed: u64,
+    device: &'a Device,
+}
+
+impl<'a> Validation<'a> {
+    /// `config.valid_windows` windows of `valid`, drawn (with replacement) from their own stream.
+    fn new(
+        valid: &'a Dataset,
+        config: &'a FitConfig,
+        device: &'a Device,
+    ) -> Result<Self, SdeError> {
+        let windows = WindowSampler::new(valid, config.horizon)?;
+        let all = windows.starts();
+        let mut pick =
+            ChaCha8Rng::seed_from_u64(derive_seed(config.seed, SeedStream::ValidWindows));
+        let starts = (0..config.valid_windows.min(all.len()))
+            .map(|_| all[pick.random_range(0..all.len())])
+            .collect();
+        Ok(Self {
+            windows,
+            starts,
+            loss: &config.loss,
+            seed: config.seed,
+            device,
+        })
+    }
+
+    fn nll(&self, model: &NeuralSde) -> f32 {
+        validation_nll(
+            model,
+            &self.windows,
+            &self.starts,
+            self.loss,
+            self.seed,
+            self.device,
+        )
+    }
+}
+
+/// The sizes of one step's random draws, and L_far's sampler.
+struct DrawShapes {
+    state_dim: usize,
+    input_dim: usize,
+    far_field: FarField,
+}
+
+impl DrawShapes {
+    /// One gradient step's draws, in the fit's order: windows, the particles' noise,
+    /// L_sc's ball offsets, L_far's points.
+    fn draw(&self, config: &FitConfig, windows: &WindowSampler, rng: &mut ChaCha8Rng) -> StepDraws {
+        let batch = config.batch_size;
+        let windows = windows.sample(batch, rng);
+        let step_noise = standard_normal(batch * config.horizon * self.state_dim, rng);
+        let samples = batch * config.loss.convexity_samples;
+        let ball_noise = standard_normal(samples * self.input_dim, rng);
+        // Off, L_far's points are drawn (the same stream either way) but none is far.
+        let (far_points, far_mask) = if config.loss.lambda_far > 0.0 {
+            self.far_field.sample_values(batch, rng)
+        } else {
+            (self.far_field.sample_points(batch, rng), vec![0.0; batch])
+        };
+        StepDraws {
+            windows,
+            step_noise,
+            ball_noise,
+            far_points,
+            far_mask,
+        }
+    }
+}
+
+impl SdeFitState {
+    /// Before the first step: the initial model is the best so far, at its validation NLL.
+    fn start(model: NeuralSde, validation: &Validation, rng: ChaCha8Rng) -> Self {
+        let best_nll = validation.nll(&model);
+        Self {
+            step: 0,
+            records: Vec::new(),
+            current: model.clone(),
+            best: model,
+            best_nll,
+            best_step: 0,
+            evals_without_improvement: 0,
+            adam: AdamState::default(),
+            rng,
+        }
+    }
+
+    /// Continues from `resumed`, refusing one fitted on other data, and hands its model and
+    /// Adam's moments to `trainer`.
+    fn resume_from(
+        &mut self,
+        resumed: SdeFitState,
+        trainer: &mut dyn SdeTrainer,
+    ) -> Result<(), SdeError> {
+        let fresh = &self.best.constants;
+        if resumed.current.constants.spec != fresh.spec
+            || resumed.current.constants.scales != fresh.scales
+        {
+            return Err(SdeError::Config(
+                "the checkpoint was fitted on other data (its scales differ)".into(),
+            ));
+        }
+        trainer.restore(&resumed.current, resumed.adam.clone());
+        *self = resumed;
+        Ok(())
+    }
+
+    /// Early stopping's bookkeeping for the model just evaluated at `nll`.
+    fn offer_current(&mut self, nll: f32) {
+        if nll < self.best_nll {
+            (self.best, self.best_nll, self.best_step) = (self.current.clone(), nll, self.step);
+            self.evals_without_improvement = 0;
+        } else {
+            self.evals_without_improvement += 1;
+        }
+    }
 }
 
 /// A fixed random subset of the training data's normalised `(s, a)`, row-major:
