@@ -107,36 +107,16 @@ pub fn sample_particles(
     let sqrt_dt = dynamics.dt().sqrt() as f32;
     // A model that draws more than its additive noise (an ensemble picking a
     // member per sample) steps every particle through its networks.
-    let sampled = (noise_dim != state_dim).then(|| {
-        let repeat = |values: &[f32], width: usize| -> Vec<f32> {
-            values
-                .chunks_exact(width)
-                .flat_map(|row| std::iter::repeat_n(row, particles).flatten().copied())
-                .collect()
-        };
-        dynamics
-            .step(
-                &repeat(&states, state_dim),
-                &repeat(actions, act_dim),
-                &noise,
-            )
-            .next_states
-    });
-
-    let observation_columns = |values: &[f32]| -> Vec<f32> {
-        values
-            .chunks_exact(state_dim)
-            .flat_map(|row| &row[..obs_dim])
-            .copied()
-            .collect()
-    };
+    let sampled = (noise_dim != state_dim)
+        .then(|| step_every_particle(dynamics, &states, actions, particles, &noise));
+    let columns = |values: &[f32]| observation_columns(values, state_dim, obs_dim);
     let mut out = ParticleStep {
         batch,
         particles,
         obs_dim,
-        mean: observation_columns(&terms.means),
-        sigma: observation_columns(&terms.sigma),
-        h_eta: observation_columns(&terms.h_eta),
+        mean: columns(&terms.means),
+        sigma: columns(&terms.sigma),
+        h_eta: columns(&terms.h_eta),
         eta: terms.eta.clone(),
         next_states: Vec::with_capacity(rows * obs_dim),
         rewards: Vec::with_capacity(rows),
@@ -179,4 +159,34 @@ pub fn sample_particles(
         out.terminals.push(rules.terminal(next_obs));
     }
     out
+}
+
+/// Each item's state and action repeated `particles` times, stepped with each particle's
+/// `noise`: the next states `[b · p, state_dim]`.
+fn step_every_particle(
+    dynamics: &dyn BatchDynamics,
+    states: &[f32],
+    actions: &[f32],
+    particles: usize,
+    noise: &[f32],
+) -> Vec<f32> {
+    let repeat = |values: &[f32], width: usize| -> Vec<f32> {
+        values
+            .chunks_exact(width)
+            .flat_map(|row| std::iter::repeat_n(row, particles).flatten().copied())
+            .collect()
+    };
+    let (state_dim, act_dim) = (dynamics.state_dim(), dynamics.act_dim());
+    dynamics
+        .step(&repeat(states, state_dim), &repeat(actions, act_dim), noise)
+        .next_states
+}
+
+/// The first `obs_dim` columns of each `state_dim`-wide row (NUNO^R's r_c dropped).
+fn observation_columns(values: &[f32], state_dim: usize, obs_dim: usize) -> Vec<f32> {
+    values
+        .chunks_exact(state_dim)
+        .flat_map(|row| &row[..obs_dim])
+        .copied()
+        .collect()
 }
