@@ -22,6 +22,7 @@ use nuno::shared::{Metric, MetricsTable};
 use crate::data_source::{simulation_of, system_of};
 use crate::output::{with_sac_losses, write_text};
 use crate::plot::{Series, line_chart};
+use crate::resume::claim_output;
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
@@ -154,6 +155,7 @@ fn online_sac(args: OnlineArgs) -> anyhow::Result<()> {
         .with_eval_episodes(args.eval_episodes);
     let device = ComputeDevice::Cpu.device().map_err(anyhow::Error::msg)?;
     let mut run = OnlineSac::new(config, task, &device)?;
+    let _claim = claim_output(&args.out)?;
     let has_run = args.out.join("run.json").exists();
     anyhow::ensure!(
         args.resume || !has_run,

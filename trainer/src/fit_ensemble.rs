@@ -21,7 +21,7 @@ use crate::data_source::DataSource;
 use crate::flag_defaults::with_defaults;
 use crate::output::write_text;
 use crate::plot::{Series, line_chart};
-use crate::resume::checkpoint_to_resume;
+use crate::resume::{checkpoint_to_resume, claim_output};
 use crate::run_record::write_run_record;
 
 #[derive(Debug, clap::Args)]
@@ -118,6 +118,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// Fits the ensemble (from the last checkpoint under --resume) and writes it
 /// with its metrics and holdout plot.
 pub fn fit(plan: &Plan) -> anyhow::Result<()> {
+    let _claim = claim_output(&plan.out)?;
     let dataset = plan.data.read(&plan.system)?;
     let device = ComputeDevice::Cpu.device().map_err(anyhow::Error::msg)?;
     let checkpoints = plan.out.join("ensemble-checkpoints");

@@ -27,7 +27,7 @@ use crate::data_source::DataSource;
 use crate::eta_report::{calibration_charts, print_calibration};
 use crate::flag_defaults::with_defaults;
 use crate::plot::{Series, line_chart};
-use crate::resume::checkpoint_to_resume;
+use crate::resume::{checkpoint_to_resume, claim_output};
 use crate::run_record::write_run_record;
 
 /// The fit's checkpoints, in --out.
@@ -260,6 +260,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// Fits the SDE (from the last checkpoint under --resume), measures it and
 /// writes the artifact, its metrics and plots.
 pub fn fit(plan: &Plan) -> anyhow::Result<()> {
+    let _claim = claim_output(&plan.out)?;
     let dataset = plan.data.read(&plan.system)?;
     let (train, valid) = dataset.split_by_trajectory(plan.fit.valid_fraction, plan.fit.seed);
     let device = plan.device.device().map_err(anyhow::Error::msg)?;

@@ -1,8 +1,40 @@
-//! `--resume` for every command that checkpoints: which checkpoint to continue.
+//! `--resume` for every command that checkpoints: which checkpoint to continue,
+//! and the claim that keeps two processes from writing one `--out`.
 
+use std::fs::{File, TryLockError};
 use std::path::{Path, PathBuf};
 
+use anyhow::Context;
 use nuno::artifact::latest_checkpoint;
+
+/// The file in `--out` whose lock a writing command holds.
+pub const OUTPUT_CLAIM: &str = ".writing";
+
+/// A command's hold on its `--out` folder, released when dropped or when the process ends
+/// (the operating system drops the lock of a killed process).
+#[must_use = "the claim holds only while it lives"]
+pub struct OutputClaim {
+    _locked: File,
+}
+
+/// Claims `out` (created if missing) for this process, refusing it while another holds it:
+/// two fits or runs into one folder (the same `--resume` started twice) would interleave
+/// their checkpoints, metrics and artifact.
+pub fn claim_output(out: &Path) -> anyhow::Result<OutputClaim> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let path = out.join(OUTPUT_CLAIM);
+    let file = File::create(&path).with_context(|| format!("creating {}", path.display()))?;
+    match file.try_lock() {
+        Ok(()) => Ok(OutputClaim { _locked: file }),
+        Err(TryLockError::WouldBlock) => anyhow::bail!(
+            "{} is being written by another process; wait for it to end or choose another --out",
+            out.display()
+        ),
+        Err(TryLockError::Error(e)) => {
+            Err(e).with_context(|| format!("locking {}", path.display()))
+        }
+    }
+}
 
 /// The checkpoint in `checkpoints` to continue from: the latest when
 /// `resume` is given (none, said so, when there is none yet); an error naming

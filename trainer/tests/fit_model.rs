@@ -137,6 +137,18 @@ fn fit_model_checkpoints_and_resumes() {
         serde_json::from_slice(&std::fs::read(out.join("model.json")).unwrap()).unwrap();
     assert_eq!(model["training"]["steps"], 30);
 
+    // While another process writes the folder (its claim held here), a second fit into it
+    // is refused before it writes anything; once released, the folder is free again.
+    let held = std::fs::File::open(out.join(".writing")).unwrap();
+    held.lock().unwrap();
+    let busy = fails(&args("40", &["--resume"]));
+    assert!(busy.contains("being written by another process"), "{busy}");
+    assert_eq!(
+        record()["plan"]["fit"]["max_steps"],
+        30,
+        "the refused fit wrote"
+    );
+    drop(held);
     let other = fails(&args("40", &["--resume", "--lambda-grad", "0.5"]));
     assert!(other.contains("other settings"), "{other}");
 }

@@ -30,7 +30,7 @@ use serde::Serialize;
 use crate::flag_defaults::with_defaults;
 use crate::output::{with_sac_losses, write_text};
 use crate::plot::{Series, line_chart};
-use crate::resume::checkpoint_to_resume;
+use crate::resume::{checkpoint_to_resume, claim_output};
 use crate::run_record::write_run_record;
 
 /// The policy loop's defaults (Appendix C), which the flags' defaults read.
@@ -537,6 +537,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// Trains as the plan says: in its model, or on the dataset alone.
 pub fn train(plan: &Plan) -> anyhow::Result<()> {
+    let _claim = claim_output(&plan.out)?;
     match &plan.training {
         Training::InModel(run) => train_in_model(plan, run),
         Training::ModelFree(run) => model_free::train(plan, run),
