@@ -17,6 +17,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use super::config::zero_count;
 use super::eta_report::{check_dims, mean, uniform_actions};
 use super::threshold::{
     ThresholdConfig, ThresholdTable, accumulated_eta_along, window_starts_and_actions,
@@ -56,14 +57,12 @@ impl CalibrationConfig {
     /// Refuses settings no report can be made from, naming the field.
     pub fn validate(&self) -> Result<(), SdeError> {
         let bad = |message: String| SdeError::Config(format!("calibration: {message}"));
-        for (name, value) in [
+        if let Some(message) = zero_count(&[
             ("rows", self.rows),
             ("windows", self.windows),
             ("particles", self.particles),
-        ] {
-            if value == 0 {
-                return Err(bad(format!("{name} = 0: must be at least 1")));
-            }
+        ]) {
+            return Err(bad(message));
         }
         let scales = self.radii.iter().chain(std::iter::once(&self.far_radii));
         if let Some(k) = scales.into_iter().find(|k| !(k.is_finite() && **k > 0.0)) {

@@ -428,14 +428,12 @@ impl FitConfig {
             .validate(obs_dim + usize::from(self.model.reward_model))?;
         self.loss.validate()?;
         let bad = |message: String| super::SdeError::Config(format!("fit config: {message}"));
-        for (name, value) in [
+        if let Some(message) = zero_count(&[
             ("h_bias_every", self.h_bias_every),
             ("eval_every", self.eval_every),
             ("log_every", self.log_every),
-        ] {
-            if value == 0 {
-                return Err(bad(format!("{name} = 0: must be at least 1")));
-            }
+        ]) {
+            return Err(bad(message));
         }
         if let Some(lr) = self.eta_lr.filter(|lr| !(lr.is_finite() && *lr > 0.0)) {
             return Err(bad(format!("eta_lr = {lr}: must be finite and > 0")));
@@ -449,4 +447,10 @@ impl FitConfig {
         let t = (step as f64 / self.lr_decay_steps.max(1) as f64).min(1.0);
         self.lr_start + t * (self.lr_end - self.lr_start)
     }
+}
+
+/// "NAME = 0: must be at least 1" for the first of `fields` (name, value) that is 0.
+pub(super) fn zero_count(fields: &[(&str, usize)]) -> Option<String> {
+    let (name, _) = fields.iter().find(|(_, value)| *value == 0)?;
+    Some(format!("{name} = 0: must be at least 1"))
 }

@@ -13,6 +13,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::SdeError;
+use super::config::zero_count;
 use super::model::NeuralSde;
 use super::rollout::OpenLoop;
 use crate::data::{Dataset, WindowSampler};
@@ -87,14 +88,12 @@ impl ThresholdConfig {
         if self.alphas.is_empty() {
             return Err(bad("alphas: need at least one level".into()));
         }
-        for (name, value) in [
+        if let Some(message) = zero_count(&[
             ("particles", self.particles),
             ("max_windows", self.max_windows),
             ("chunk", self.chunk),
-        ] {
-            if value == 0 {
-                return Err(bad(format!("{name} = 0: must be at least 1")));
-            }
+        ]) {
+            return Err(bad(message));
         }
         if !(self.max_margin.is_finite() && self.max_margin >= 1.0) {
             return Err(bad(format!(
