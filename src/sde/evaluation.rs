@@ -135,33 +135,67 @@ pub fn compare_with_task(
     config: &TaskComparisonConfig,
     cancel: &Cancel,
 ) -> Result<TaskComparison, EnvError> {
-    let (obs_dim, act_dim) = (dynamics.obs_dim(), dynamics.act_dim());
-    let state_dim = dynamics.state_dim();
-    let particles = config.particles.max(1);
+    let obs_dim = dynamics.obs_dim();
+    let act_dim = dynamics.act_dim();
+    let real_states = real_open_loop(&task, config.seed, actions, act_dim, cancel)?;
+    let start = &real_states[..obs_dim];
+    let real_steps = real_states.len() / obs_dim - 1;
+    let actions = &actions[..real_steps * act_dim];
+    let model_states = model_open_loop(dynamics, rules, start, actions, config, cancel)?;
+    let steps = model_states.len() / obs_dim - 1;
+    let real_states = real_states[..(steps + 1) * obs_dim].to_vec();
+    Ok(TaskComparison {
+        obs_dim,
+        steps,
+        rmse: rmse_per_step(&model_states, &real_states, obs_dim, &|_| 1.0),
+        normalized_rmse: rmse_per_step(&model_states, &real_states, obs_dim, &|i| state_std[i]),
+        real_states,
+        model_states,
+    })
+}
 
-    let mut real_task = MujocoTask::new(&task)?;
-    let start: Vec<f32> = real_task
-        .reset(Some(config.seed))
-        .iter()
-        .map(|&x| x as f32)
-        .collect();
-    let mut real_states = start.clone();
+/// The real task's observations from its reset with `seed` under `actions` (`act_dim`
+/// wide), until they end or the task terminates: `[steps + 1, obs_dim]`.
+fn real_open_loop(
+    task: &TaskConfig,
+    seed: u64,
+    actions: &[f32],
+    act_dim: usize,
+    cancel: &Cancel,
+) -> Result<Vec<f32>, EnvError> {
+    let mut real_task = MujocoTask::new(task)?;
+    let to_f32 = |values: &[f64]| values.iter().map(|&x| x as f32).collect::<Vec<_>>();
+    let mut states = to_f32(&real_task.reset(Some(seed)));
     for action in actions.chunks_exact(act_dim) {
         cancel.check()?;
         let action: Vec<f64> = action.iter().map(|&a| f64::from(a)).collect();
         let step = real_task.step(&action)?;
-        real_states.extend(step.observation.iter().map(|&x| x as f32));
+        states.extend(to_f32(&step.observation));
         if step.terminated {
             break;
         }
     }
-    let real_steps = real_states.len() / obs_dim - 1;
+    Ok(states)
+}
 
-    // The particles step in lockstep; the comparison ends where the first one does.
+/// The model's particle-mean observations from `start` under `actions`: the particles step
+/// in lockstep, and the rollout ends where the first one terminates or leaves the finite
+/// numbers (as a rollout drops it): `[steps + 1, obs_dim]`.
+fn model_open_loop(
+    dynamics: &dyn BatchDynamics,
+    rules: &Rules,
+    start: &[f32],
+    actions: &[f32],
+    config: &TaskComparisonConfig,
+    cancel: &Cancel,
+) -> Result<Vec<f32>, EnvError> {
+    let (obs_dim, act_dim) = (dynamics.obs_dim(), dynamics.act_dim());
+    let state_dim = dynamics.state_dim();
+    let particles = config.particles.max(1);
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let mut observations: Vec<f32> = start.repeat(particles);
-    let mut model_states = start.clone();
-    for action in actions.chunks_exact(act_dim).take(real_steps) {
+    let mut model_states = start.to_vec();
+    for action in actions.chunks_exact(act_dim) {
         cancel.check()?;
         let states = dynamics.states_from_observations(&observations);
         let noise = scaled_noise(
@@ -170,7 +204,6 @@ pub fn compare_with_task(
             &mut rng,
         );
         let step = dynamics.step(&states, &action.repeat(particles), &noise);
-        // A step that left the finite numbers is not compared (as a rollout drops it).
         if !(step.eta.iter().chain(&step.next_states)).all(|x| x.is_finite()) {
             break;
         }
@@ -189,26 +222,26 @@ pub fn compare_with_task(
             break;
         }
     }
+    Ok(model_states)
+}
+
+/// RMSE over the observation entries after each step, each divided by `scale(entry)`.
+fn rmse_per_step(
+    model_states: &[f32],
+    real_states: &[f32],
+    obs_dim: usize,
+    scale: &dyn Fn(usize) -> f32,
+) -> Vec<f32> {
     let steps = model_states.len() / obs_dim - 1;
-    let rmse = |scale: &dyn Fn(usize) -> f32| -> Vec<f32> {
-        (1..=steps)
-            .map(|k| {
-                let sum: f32 = (0..obs_dim)
-                    .map(|i| {
-                        let at = k * obs_dim + i;
-                        ((model_states[at] - real_states[at]) / scale(i)).powi(2)
-                    })
-                    .sum();
-                (sum / obs_dim as f32).sqrt()
-            })
-            .collect()
-    };
-    Ok(TaskComparison {
-        obs_dim,
-        steps,
-        rmse: rmse(&|_| 1.0),
-        normalized_rmse: rmse(&|i| state_std[i]),
-        real_states: real_states[..(steps + 1) * obs_dim].to_vec(),
-        model_states,
-    })
+    (1..=steps)
+        .map(|k| {
+            let sum: f32 = (0..obs_dim)
+                .map(|i| {
+                    let at = k * obs_dim + i;
+                    ((model_states[at] - real_states[at]) / scale(i)).powi(2)
+                })
+                .sum();
+            (sum / obs_dim as f32).sqrt()
+        })
+        .collect()
 }
