@@ -771,6 +771,32 @@ mod tests {
         }
     }
 
+    /// The flags a user types for `cell_of`'s cell and budget, besides the model, dataset
+    /// and method.
+    const TYPED_BUDGET: [&str; 21] = [
+        "--preset",
+        "hopper-medium",
+        "--out",
+        "c/policy",
+        "--policies",
+        "c",
+        "--seed",
+        "4",
+        "--resume",
+        "--steps",
+        "4500",
+        "--steps-per-epoch",
+        "500",
+        "--eval-episodes",
+        "3",
+        "--hidden",
+        "64,32",
+        "--rollout-batch",
+        "700",
+        "--model-buffer-factor",
+        "3",
+    ];
+
     #[test]
     fn a_cell_trains_the_policy_the_same_flags_typed_would_train() {
         let dir = tempfile::tempdir().unwrap();
@@ -809,30 +835,10 @@ mod tests {
                 "m",
                 "--dataset",
                 &file,
-                "--preset",
-                "hopper-medium",
-                "--out",
-                "c/policy",
-                "--policies",
-                "c",
                 "--algo",
                 method,
-                "--seed",
-                "4",
-                "--resume",
-                "--steps",
-                "4500",
-                "--steps-per-epoch",
-                "500",
-                "--eval-episodes",
-                "3",
-                "--hidden",
-                "64,32",
-                "--rollout-batch",
-                "700",
-                "--model-buffer-factor",
-                "3",
             ];
+            typed.extend(TYPED_BUDGET);
             typed.extend(own);
             let Typed::FitPolicy(typed) = Typed::parse_from(typed) else {
                 unreachable!()
