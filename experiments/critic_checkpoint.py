@@ -2,7 +2,7 @@
 checkpoint: where a diverging critic's values and TD errors come from.
 
 Usage (the test venv's Python):
-    .venv/bin/python experiments/critic_checkpoint.py DATA.hdf5 CHECKPOINT_DIR [CHECKPOINT_DIR ...]
+    .venv/bin/python experiments/critic_checkpoint.py [--root-x INDEX] DATA.hdf5 CHECKPOINT_DIR [...]
 
 CHECKPOINT_DIR is a `fit-policy` checkpoint (`…/policy/checkpoints/epoch-NNNNNN`: its
 networks.safetensors, model_buffer.safetensors and state.json). For every transition of the
@@ -20,7 +20,11 @@ fixed seed; the buffer's rewards are the penalised ones), and prints one row per
 - outside: the share of next states beyond the data's range widened by 10 % of it;
 - frontier: the rows whose next state starts no row of the buffer (a rollout's last step: its
   Q̄′ is the critics' extrapolation, never regressed on), with Q̄′ − Q and TD² on them against
-  the other (inner) rows.
+  the other (inner) rows;
+- with `--root-x INDEX` (NeoRL's layouts observe root x, at 0): the median slope ∂Q₁/∂x of the
+  critic in that observation (a difference of 0.1 at every row) and its mean share of a step,
+  ∂Q₁/∂x · (x′ − x). The task's rewards do not depend on where the robot stands, so a slope
+  there is one the critic learnt from the data's spread of positions.
 """
 
 import json
@@ -56,7 +60,10 @@ def tanh_gaussian(weights, config, observations, rng):
     return np.tanh(u), gaussian.sum(1) - squash.sum(1)
 
 
-def row(data_low, data_high, checkpoint):
+ROOT_X_STEP = 0.1
+
+
+def row(data_low, data_high, checkpoint, root_x):
     checkpoint = pathlib.Path(checkpoint)
     weights = load_file(checkpoint / "networks.safetensors")
     buffer = load_file(checkpoint / "model_buffer.safetensors")
@@ -78,28 +85,42 @@ def row(data_low, data_high, checkpoint):
     starts = {state.tobytes() for state in s}
     frontier = np.array([state.tobytes() not in starts for state in s_next])
     split = lambda v: f"{v[frontier].mean():.3g} / {v[~frontier].mean():.3g}"
+    slope = ""
+    if root_x is not None:
+        moved = s.copy()
+        moved[:, root_x] += ROOT_X_STEP
+        dq_dx = (critic("critic.q1", moved, a) - q1) / ROOT_X_STEP
+        share = dq_dx * (s_next[:, root_x] - s[:, root_x])
+        slope = f" {np.median(dq_dx):.2f} / {share.mean():.3f} |"
     return (
         f"| {checkpoint} | {soft.mean():.2f} | {q1.mean():.1f} | {q_next.mean():.1f} | {y.mean():.1f} "
         f"| {np.median(np.abs(q1 - q2)):.2f} | {np.mean(td ** 2):.3g} "
         f"| {saturated.mean():.2f} / {saturated[big].mean():.2f} | {outside.mean():.3f} "
-        f"| {frontier.mean():.2f} | {split(q_next - q1)} | {split(td ** 2)} |"
+        f"| {frontier.mean():.2f} | {split(q_next - q1)} | {split(td ** 2)} |{slope}"
     )
 
 
 def main():
-    data, checkpoints = sys.argv[1], sys.argv[2:]
-    if not checkpoints:
+    args = sys.argv[1:]
+    root_x = None
+    if args[:1] == ["--root-x"]:
+        root_x, args = int(args[1]), args[2:]
+    if len(args) < 2:
         sys.exit(__doc__)
+    data, checkpoints = args[0], args[1:]
     with h5py.File(data, "r") as f:
         observations = f["observations"][:]
     low, high = observations.min(0), observations.max(0)
-    print(
+    columns = (
         "| checkpoint | soft reward | Q | Q̄′ | y | median abs(Q₁ − Q₂) | TD² | saturated (all / big TD) "
         "| outside | frontier | Q̄′ − Q (frontier / inner) | TD² (frontier / inner) |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    if root_x is not None:
+        columns += " ∂Q/∂x (median) / its share of a step |"
+    print(columns)
+    print("|---" * (columns.count("|") - 1) + "|")
     for checkpoint in checkpoints:
-        print(row(low, high, checkpoint))
+        print(row(low, high, checkpoint, root_x))
 
 
 if __name__ == "__main__":
