@@ -14,24 +14,33 @@ pub const OUTPUT_CLAIM: &str = ".writing";
 /// (the operating system drops the lock of a killed process).
 #[must_use = "the claim holds only while it lives"]
 pub struct OutputClaim {
-    _locked: File,
+    _locked: Option<File>,
 }
 
 /// Claims `out` (created if missing) for this process, refusing it while another holds it:
 /// two fits or runs into one folder (the same `--resume` started twice) would interleave
-/// their checkpoints, metrics and artifact.
+/// their checkpoints, metrics and artifact. On a file system that cannot lock (some network
+/// mounts) it warns and goes on unclaimed: the claim guards against a mistake, and a run
+/// should not fail for want of it.
 pub fn claim_output(out: &Path) -> anyhow::Result<OutputClaim> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let path = out.join(OUTPUT_CLAIM);
     let file = File::create(&path).with_context(|| format!("creating {}", path.display()))?;
     match file.try_lock() {
-        Ok(()) => Ok(OutputClaim { _locked: file }),
+        Ok(()) => Ok(OutputClaim {
+            _locked: Some(file),
+        }),
         Err(TryLockError::WouldBlock) => anyhow::bail!(
             "{} is being written by another process; wait for it to end or choose another --out",
             out.display()
         ),
         Err(TryLockError::Error(e)) => {
-            Err(e).with_context(|| format!("locking {}", path.display()))
+            eprintln!(
+                "warning: cannot lock {} ({e}); nothing stops a second process writing {}",
+                path.display(),
+                out.display()
+            );
+            Ok(OutputClaim { _locked: None })
         }
     }
 }
