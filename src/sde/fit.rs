@@ -205,11 +205,7 @@ pub fn fit_from(
         far_field: FarField::new(reference.clone(), input_dim, &config.loss),
         input_dim,
     };
-    let settings = StepSettings::of(config);
-    let mut trainer: Box<dyn SdeTrainer> = match config.kernel {
-        Kernel::Burn => Box::new(BurnSdeTrainer::new(model, settings, train_device)),
-        Kernel::Fused => Box::new(FusedSdeTrainer::new(model.valid(), settings)),
-    };
+    let mut trainer = sde_trainer(model, config, train_device);
     trainer.calibrate_h_bias(&reference);
 
     let mut state = SdeFitState::start(trainer.model(), &validation, rng);
@@ -227,28 +223,21 @@ pub fn fit_from(
             trainer.calibrate_h_bias(&reference);
         }
 
-        // Logging and early stopping, kept apart from the algorithm above.
-        let evaluate = step.is_multiple_of(config.eval_every) || step == config.max_steps;
-        if step.is_multiple_of(config.log_every) || evaluate {
-            let mut record = FitRecord {
-                step,
-                learning_rate: lr,
-                losses: terms,
-                valid_nll: None,
-            };
-            if evaluate {
-                state.current = trainer.model();
-                let nll = validation.nll(&state.current);
-                record.valid_nll = Some(nll);
-                state.offer_current(nll);
-            }
-            on_record(&record);
-            state.records.push(record);
-            if evaluate {
-                state.adam = trainer.optimizer_state();
-                on_evaluation(&state)?;
-            }
-        }
+        let record = FitRecord {
+            step,
+            learning_rate: lr,
+            losses: terms,
+            valid_nll: None,
+        };
+        log_step(
+            &mut state,
+            trainer.as_ref(),
+            &validation,
+            config,
+            record,
+            on_record,
+            on_evaluation,
+        )?;
     }
     let summary = FitSummary {
         steps: state.step,
@@ -260,6 +249,47 @@ pub fn fit_from(
         valid_transitions: valid.len(),
     };
     Ok((state.best, summary))
+}
+
+/// The kernel `config` names, taking its gradient steps from `model`.
+fn sde_trainer(model: NeuralSde, config: &FitConfig, train_device: Device) -> Box<dyn SdeTrainer> {
+    let settings = StepSettings::of(config);
+    match config.kernel {
+        Kernel::Burn => Box::new(BurnSdeTrainer::new(model, settings, train_device)),
+        Kernel::Fused => Box::new(FusedSdeTrainer::new(model.valid(), settings)),
+    }
+}
+
+/// Logging and early stopping after a step, kept apart from the algorithm: `record` every
+/// `log_every` steps and, at every evaluation, the validation NLL, the best model so far and
+/// the state handed to `on_evaluation`.
+fn log_step(
+    state: &mut SdeFitState,
+    trainer: &dyn SdeTrainer,
+    validation: &Validation,
+    config: &FitConfig,
+    mut record: FitRecord,
+    on_record: &mut dyn FnMut(&FitRecord),
+    on_evaluation: &mut dyn FnMut(&SdeFitState) -> Result<(), SdeError>,
+) -> Result<(), SdeError> {
+    let step = state.step;
+    let evaluate = step.is_multiple_of(config.eval_every) || step == config.max_steps;
+    if !(step.is_multiple_of(config.log_every) || evaluate) {
+        return Ok(());
+    }
+    if evaluate {
+        state.current = trainer.model();
+        let nll = validation.nll(&state.current);
+        record.valid_nll = Some(nll);
+        state.offer_current(nll);
+    }
+    on_record(&record);
+    state.records.push(record);
+    if evaluate {
+        state.adam = trainer.optimizer_state();
+        on_evaluation(state)?;
+    }
+    Ok(())
 }
 
 /// The fixed validation windows every evaluation scores, with the fit's noise.
