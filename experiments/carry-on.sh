@@ -16,8 +16,9 @@
 # experiments/results/NAME (experiments/results/ablation/NAME). A grid that borrows finished
 # cells from other experiments names their kept folders in `# borrows: DIR` lines (relative
 # to experiments/results/); `start` copies them in before the grid's own. Everything runs single-threaded
-# at `nice -n 19` so builds and tests stay usable. Start a grid once per machine (two runners
-# of one grid would train the same cells): `pgrep -af 'experiment run'` lists what runs.
+# at `nice -n 19` so builds and tests stay usable; NUNO_JOBS=N runs N of a grid's cells at
+# once (one by default). Start a grid once per machine (a second runner of one grid would be
+# refused each cell the first holds): `pgrep -af 'experiment run'` lists what runs.
 set -eu
 
 trainer=${NUNO_TRAINER:-$(cargo metadata --format-version 1 --no-deps |
@@ -113,7 +114,7 @@ start() {
         copy_finished "$grid" "$out"
         touch "$out/.carried-on"
         nohup nice -n 19 "$trainer" experiment run --grid "$grid" --out "$out" \
-            >> "$out.log" 2>&1 &
+            --jobs "${NUNO_JOBS:-1}" >> "$out.log" 2>&1 &
         echo "carry-on: $grid running in $out (log $out.log, pid $!)"
     done
 }
