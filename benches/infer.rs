@@ -22,7 +22,8 @@ use burn::tensor::{Device, Tensor, TensorData};
 use common::{ACT, Hopper, OBS, seconds_per_call};
 use nuno::agent::FusedActor;
 use nuno::agent::{
-    ActionMode, ActorConfig, ActorPolicy, RolloutActions, RolloutConfig, rollout_model,
+    ActionMode, ActorConfig, ActorPolicy, RolloutActions, RolloutConfig, TruncatedStep,
+    rollout_model,
 };
 use nuno::ensemble::{
     EnsembleDynamics, EnsembleFit, EnsembleUncertainty, GaussianEnsemble, Scaler,
@@ -234,6 +235,7 @@ fn main() {
         halt: None,
         state_box: None,
         observation_clip: None,
+        truncated_step: TruncatedStep::Drop,
     };
     println!();
     println!("| 10-step rollout with policy (hopper) | batch | transitions/s |");

@@ -18,7 +18,7 @@ use std::path::Path;
 
 use burn::tensor::Device;
 use common::seconds_per_call;
-use nuno::agent::{RolloutActions, RolloutConfig, rollout_model};
+use nuno::agent::{RolloutActions, RolloutConfig, TruncatedStep, rollout_model};
 use nuno::artifact::{NamedTensors, load_dynamics, safetensors_bytes};
 use nuno::envs::{Rules, TaskConfig, TaskName, TaskRules};
 use nuno::planning::{Candidates, Cost, ScoreConfig, score_sequences};
@@ -126,6 +126,7 @@ fn steps_taken(
         halt: None,
         state_box: None,
         observation_clip: None,
+        truncated_step: TruncatedStep::Drop,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(SEED);
     let actions = RolloutActions::Sequence(candidates);

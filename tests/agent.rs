@@ -6,8 +6,8 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 use nuno::agent::{
     ActorConfig, LoopContext, MopoSettings, PRESETS, PolicyLoopConfig, PolicyTraining,
-    PortableActor, RolloutActions, RolloutConfig, Sac, SacConfig, StateBox, StepOutcome, preset,
-    rollout_model,
+    PortableActor, RolloutActions, RolloutConfig, Sac, SacConfig, StateBox, StepOutcome,
+    TruncatedStep, preset, rollout_model,
 };
 use nuno::artifact::{
     BEST_POLICY, collect_tensors, latest_checkpoint, load_checkpoint, load_dynamics, load_policy,
@@ -363,6 +363,7 @@ fn a_rollout_with_the_tasks_clip_keeps_velocities_where_the_task_observes_them()
     start[5..].fill(9.998);
     let clipped = RolloutConfig {
         observation_clip: rules.observation_clip(),
+        truncated_step: TruncatedStep::Drop,
         ..plain_rollouts(2, 1, 0.0)
     };
     let out = hopper.roll(&dynamics, &start, &clipped);
@@ -487,6 +488,7 @@ fn plain_rollouts(horizon: usize, particles: usize, penalty: f64) -> RolloutConf
         halt: None,
         state_box: None,
         observation_clip: None,
+        truncated_step: TruncatedStep::Drop,
     }
 }
 
@@ -575,6 +577,58 @@ fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
     assert_eq!(out.trace.kept, vec![1, 1]);
     assert_eq!(out.transitions.terminals, vec![1.0, 1.0]);
     assert_eq!(out.stats.terminated, 2);
+}
+
+/// NUNO's code's form: the step that takes accumulated η past ε is kept as a
+/// terminal transition, its reward penalised like the others, and the row
+/// still ends there; the steps before it are what the dropping form keeps.
+#[test]
+fn a_truncated_step_kept_as_terminal_ends_its_row_with_a_terminal_transition() {
+    let hopper = HopperRollouts::new();
+    let (spec, rules) = (&hopper.spec, &hopper.rules);
+    let dynamics = ConstantEta { spec: spec.clone() };
+    let starts = hopper.upright().repeat(4);
+    let config = RolloutConfig {
+        threshold: Some(1.0),
+        truncated_step: TruncatedStep::Terminal,
+        ..plain_rollouts(10, 2, 2.0)
+    };
+    let out = hopper.roll(&dynamics, &starts, &config);
+    // η = 0.3 per step: 0.3, 0.6, 0.9 continue, 1.2 > ε is kept as terminal.
+    assert_eq!(out.trace.kept, vec![4; 8]);
+    assert!(
+        out.trace
+            .outcome
+            .iter()
+            .all(|&o| o == StepOutcome::Truncated)
+    );
+    assert_eq!(out.stats.truncated, 8);
+    assert_eq!(out.transitions.len(), 32);
+    // Transitions go step by step over the rows: the 8 truncating steps come last.
+    let terminals: Vec<f32> = [vec![0.0; 24], vec![1.0; 8]].concat();
+    assert_eq!(out.transitions.terminals, terminals);
+    let obs_dim = spec.obs_dim;
+    for i in 0..out.transitions.len() {
+        let obs = &out.transitions.observations[i * obs_dim..(i + 1) * obs_dim];
+        let next = &out.transitions.next_observations[i * obs_dim..(i + 1) * obs_dim];
+        // r̃ = r − λ·η = r − 2 · 0.3 on the truncating step as on the others.
+        let reward = rules.reward(obs, &HOPPER_ACTION, next);
+        assert!((out.transitions.rewards[i] - (reward - 0.6)).abs() < 1e-5);
+    }
+    let dropped = hopper.roll(
+        &dynamics,
+        &starts,
+        &RolloutConfig {
+            truncated_step: TruncatedStep::Drop,
+            ..config
+        },
+    );
+    assert_eq!(dropped.transitions.len(), 24);
+    assert_eq!(dropped.transitions.terminals, vec![0.0; 24]);
+    assert_eq!(
+        dropped.transitions.next_observations,
+        out.transitions.next_observations[..24 * obs_dim]
+    );
 }
 
 /// Steps `task` 3000 times with random actions, checking the known terminal rule
@@ -1077,6 +1131,7 @@ fn sde_rollouts_with_truncation_keep_nothing_past_epsilon() {
         halt: None,
         state_box: None,
         observation_clip: None,
+        truncated_step: TruncatedStep::Drop,
     };
     let out = rollout_model(
         &model,
@@ -1241,6 +1296,7 @@ fn cancelled_rollouts_and_evaluations_stop_at_the_next_step() {
         halt: None,
         state_box: None,
         observation_clip: None,
+        truncated_step: TruncatedStep::Drop,
     };
     let dynamics = Kernel::Fused.dynamics(&model);
     let out = rollout_model_or_cancel(

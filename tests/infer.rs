@@ -7,7 +7,8 @@ use std::path::Path;
 
 use burn::tensor::Device;
 use nuno::agent::{
-    ActionMode, ActorConfig, ActorPolicy, RolloutActions, RolloutConfig, rollout_model,
+    ActionMode, ActorConfig, ActorPolicy, RolloutActions, RolloutConfig, TruncatedStep,
+    rollout_model,
 };
 use nuno::agent::{FusedActor, PortableActor};
 use nuno::artifact::{BEST_POLICY, load_dynamics, load_policy};
@@ -305,6 +306,7 @@ fn fused_ten_step_rollouts_match_burn_with_fixed_noise() {
         halt: None,
         state_box: None,
         observation_clip: None,
+        truncated_step: TruncatedStep::Drop,
     };
     let run = |model: &dyn BatchDynamics, policy: &dyn BatchPolicy| {
         rollout_model(

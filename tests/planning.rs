@@ -7,7 +7,7 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use nuno::agent::{RolloutActions, RolloutConfig, StepOutcome, rollout_model};
+use nuno::agent::{RolloutActions, RolloutConfig, StepOutcome, TruncatedStep, rollout_model};
 use nuno::envs::{Rules, SystemSpec};
 use nuno::planning::{
     CandidateScore, Candidates, CemConfig, Cost, CostTerm, IcemConfig, MppiConfig, Optimizer, Plan,
@@ -414,6 +414,7 @@ fn scores_from_trace(
         halt: None,
         state_box: None,
         observation_clip: None,
+        truncated_step: TruncatedStep::Drop,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let actions = RolloutActions::Sequence(sequences);

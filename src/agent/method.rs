@@ -168,6 +168,17 @@ pub enum Truncation {
     Halt,
 }
 
+impl Truncation {
+    /// Whether rollouts end once an accumulated signal passes a threshold
+    /// (NUNO's, NUNO^al's and TATU's truncation; not MOReL's per-step HALT).
+    pub fn accumulates(self) -> bool {
+        matches!(
+            self,
+            Truncation::ModelTable | Truncation::AleatoricCvar | Truncation::DatasetDisagreement
+        )
+    }
+}
+
 impl Method {
     /// Where this method's rollouts truncate.
     pub fn truncation(self) -> Truncation {

@@ -43,7 +43,7 @@ pub use model_free_loop::{
 };
 pub use model_rollout::{
     Halt, JudgedRow, ModelRollout, RolloutActions, RolloutConfig, RolloutStats, RolloutTrace,
-    StateBox, StepOutcome, judge_row, rollout_model, rollout_model_or_cancel,
+    StateBox, StepOutcome, TruncatedStep, judge_row, rollout_model, rollout_model_or_cancel,
 };
 pub use model_step::{
     ParticleConfig, ParticleStep, particle_terms, penalized_reward, sample_particles,

@@ -45,6 +45,10 @@ pub struct RolloutConfig {
     /// configurations written before it (none clipped).
     #[serde(default)]
     pub observation_clip: Option<ObservationClip>,
+    /// What becomes of the step that takes the accumulated signal past the
+    /// threshold. Absent from configurations written before it (dropped).
+    #[serde(default)]
+    pub truncated_step: TruncatedStep,
 }
 
 impl RolloutConfig {
@@ -60,9 +64,27 @@ impl RolloutConfig {
             halt: None,
             state_box: None,
             observation_clip: None,
+            truncated_step: TruncatedStep::Drop,
         }
     }
 }
+
+/// What a rollout keeps of the step that takes its accumulated signal past
+/// ε(h, α); either way the rollout ends there.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TruncatedStep {
+    /// Dropped: the paper's "truncate the trajectory and do not use it for
+    /// policy optimization" (Section 4.3).
+    #[default]
+    Drop,
+    /// Kept as a terminal transition, its reward penalised as any other, so
+    /// the critics bootstrap nothing past it: NUNO's and TATU's code
+    /// (`FakeEnv_SDE_Trunc.step` stores the halting transition with done).
+    Terminal,
+}
+
+crate::shared::named_enum!(TruncatedStep, "truncated step", TruncatedStep::Drop => "drop", TruncatedStep::Terminal => "terminal");
 
 /// Per observation dimension, the range a model's state may reach before its
 /// rollout counts as diverged: the data's range widened by a margin. nuno's
@@ -122,7 +144,8 @@ pub enum StepOutcome {
     Continued,
     /// The task's rules say the robot fell; the transition is kept as terminal.
     Terminal,
-    /// Accumulated η passed ε(h, α); the transition is dropped.
+    /// Accumulated η passed ε(h, α); the transition is dropped, or kept as
+    /// terminal where [`RolloutConfig::truncated_step`] says so.
     Truncated,
     /// The model's next state, reward or η was not finite, or the next state
     /// left the rollout's [`StateBox`] (its drift diverged off the data); the
@@ -335,7 +358,7 @@ impl Rollout {
                 &mut self.accumulated[r],
                 (config.threshold, config.halt, config.state_box.as_ref()),
             );
-            if self.record(r, (from, action), &row, config.penalty) {
+            if self.record(r, (from, action), &row, config) {
                 self.active.push(r);
             }
         }
@@ -348,7 +371,7 @@ impl Rollout {
         r: usize,
         (from, action): (&[f32], &[f32]),
         row: &JudgedRow,
-        penalty: f64,
+        config: &RolloutConfig,
     ) -> bool {
         let trace = &mut self.trace;
         trace.actions[r].extend_from_slice(action);
@@ -359,16 +382,17 @@ impl Rollout {
         trace.eta[r].push(row.eta);
         trace.accumulated_eta[r].push(self.accumulated[r]);
         trace.rewards[r].push(row.reward);
-        if row.fate == StepOutcome::Truncated {
-            return false;
-        }
-        let terminal = matches!(row.fate, StepOutcome::Terminal | StepOutcome::Halted);
+        let terminal = match row.fate {
+            StepOutcome::Truncated if config.truncated_step == TruncatedStep::Drop => return false,
+            StepOutcome::Terminal | StepOutcome::Halted | StepOutcome::Truncated => true,
+            StepOutcome::Continued | StepOutcome::Diverged => false,
+        };
         let t = &mut self.transitions;
         t.observations.extend_from_slice(from);
         t.actions.extend_from_slice(action);
         // Penalised reward r − λ_pen·η(s, a).
         t.rewards
-            .push(penalized_reward(row.reward, penalty, row.eta));
+            .push(penalized_reward(row.reward, config.penalty, row.eta));
         t.next_observations.extend_from_slice(row.next_obs);
         t.terminals.push(if terminal { 1.0 } else { 0.0 });
         trace.kept[r] += 1;

@@ -24,7 +24,7 @@ use super::cql::ConservativeTerm;
 use super::fused_sac::FusedSac;
 use super::mobile::BellmanPenalty;
 use super::model_rollout::{
-    Halt, RolloutActions, RolloutConfig, RolloutStats, StateBox, rollout_model,
+    Halt, RolloutActions, RolloutConfig, RolloutStats, StateBox, TruncatedStep, rollout_model,
 };
 use super::presets::Preset;
 use super::rambo::{RamboConfig, adversarial_phase, behaviour_clone};
@@ -168,6 +168,12 @@ pub struct PolicyLoopConfig {
     /// saved before this field clipped nothing, and load so.
     #[config(default = false)]
     pub clip_observations: bool,
+    /// What the rollouts keep of the step that takes the accumulated signal
+    /// past ε: dropped (the paper's Section 4.3, the default) or kept as
+    /// terminal (NUNO's code). Runs saved before this field dropped it, and
+    /// load so.
+    #[config(default = "TruncatedStep::Drop")]
+    pub truncated_step: TruncatedStep,
     /// The scale of the model's noise in the policy's rollouts; `None` (the
     /// paper's and NUNO's code's rollouts) samples at the model's own scale, 0
     /// rolls its drift (the ensemble's mean) alone, to separate the diffusion's
@@ -346,6 +352,7 @@ impl PolicyLoopConfig {
             halt,
             state_box: state_box.cloned(),
             observation_clip: rules.observation_clip().filter(|_| self.clip_observations),
+            truncated_step: self.truncated_step,
         }
     }
 }

@@ -22,6 +22,7 @@ use super::tensors::{NamedTensors, collect_tensors, load_tensors};
 use super::{ArtifactError, sha256_hex};
 use crate::agent::{
     ActorLrDecay, EpochRecord, PolicyLoopConfig, PolicyTraining, ReplayBuffer, SacConfig,
+    TruncatedStep,
 };
 use crate::envs::{ForwardVelocity, RootXReward};
 use crate::nn::AdamState;
@@ -217,6 +218,9 @@ pub(super) fn fill_older_loop_fields(value: &mut serde_json::Value, pointer: &st
         fields
             .entry("clip_observations")
             .or_insert(serde_json::json!(false));
+        fields
+            .entry("truncated_step")
+            .or_insert(serde_json::json!(TruncatedStep::Drop));
         fields
             .entry("rollout_noise_scale")
             .or_insert(serde_json::Value::Null);

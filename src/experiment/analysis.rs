@@ -14,7 +14,9 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::ExperimentError;
-use crate::agent::{RolloutActions, RolloutConfig, RolloutTrace, StateBox, rollout_model};
+use crate::agent::{
+    RolloutActions, RolloutConfig, RolloutTrace, StateBox, TruncatedStep, rollout_model,
+};
 use crate::data::{Dataset, WindowBatch, WindowSampler};
 use crate::envs::{MujocoTask, Rules, TaskConfig};
 use crate::shared::{BatchDynamics, BatchPolicy, SeedStream, derive_seed};
@@ -337,6 +339,7 @@ pub fn exploitation(
             halt: None,
             state_box: None,
             observation_clip: None,
+            truncated_step: TruncatedStep::Drop,
         },
         &mut rng,
     );

@@ -21,6 +21,7 @@
 //! target_entropy = -3.0     # fit-policy's --target-entropy, every model-based method (optional; default: −|A|)
 //! penalty = 5.0             # NUNO's fit-policy --penalty, λ_pen over every row's (optional; default: the row's)
 //! rollout_noise_scale = 0.0 # fit-policy's --rollout-noise-scale, every model-based method (optional; default: the model's)
+//! truncated_step = "terminal" # fit-policy's --truncated-step, NUNO's methods and TATU+MOPO (optional; default: "drop")
 //! mopo_settings = "nuno"    # MOPO's and NUNO's fit-policy --mopo-settings (optional; default: each method's own)
 //! ensemble_max_epochs = 100 # fit-ensemble's --max-epochs (optional)
 //! policy_steps = 100000     # fit-policy's --steps (the same for every method)
@@ -59,7 +60,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::ExperimentError;
-use crate::agent::{Method, MopoSettings, PolicyLoopConfig, SacConfig, preset};
+use crate::agent::{Method, MopoSettings, PolicyLoopConfig, SacConfig, TruncatedStep, preset};
 
 use crate::envs::{ForwardVelocity, ObservationLayout, RootXReward, TaskConfig, TaskName};
 use crate::sde::{DriftInputs, EtaLossForm, LikelihoodPath, Recipe, SampleNoise};
@@ -136,6 +137,11 @@ pub struct Budget {
     /// (default: the model's own). Results written before it had the model's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rollout_noise_scale: Option<f32>,
+    /// fit-policy's `--truncated-step`, for the methods whose rollouts truncate
+    /// on accumulated uncertainty (default: drop). Results written before it
+    /// dropped the step, and read so.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub truncated_step: Option<TruncatedStep>,
     /// fit-policy's `--mopo-settings` for MOPO, TATU+MOPO and NUNO's methods
     /// (default: each method's own, OfflineRL-Kit's for MOPO, NUNO's for
     /// NUNO). The grids run before it existed name "nuno".
@@ -234,6 +240,7 @@ impl Budget {
             target_entropy: None,
             penalty: None,
             rollout_noise_scale: None,
+            truncated_step: None,
             mopo_settings: None,
             hidden: None,
         }
@@ -282,6 +289,9 @@ impl Budget {
         if !method.uses_sde() {
             budget.penalty = None;
         }
+        // Dropping is the default: naming it is leaving it out.
+        budget.truncated_step = (self.truncated_step)
+            .filter(|&s| s != TruncatedStep::Drop && method.truncation().accumulates());
         budget.rollout_batch = Some(self.rollout_batch.unwrap_or(policy_loop.rollout_batch));
         if method.uses_ensemble() {
             budget.model_steps = 0;

@@ -485,6 +485,9 @@ fn policy_args(cell: &Cell, b: &Budget, model: Option<PathBuf>, dir: PathBuf) ->
     args.clip_observations = b.clip_observations;
     args.target_entropy = b.target_entropy;
     args.rollout_noise_scale = b.rollout_noise_scale;
+    args.truncated_step = b
+        .truncated_step
+        .filter(|_| cell.method.truncation().accumulates());
     // The method's budget names settings only where the method takes them.
     args.mopo_settings = b.mopo_settings;
     if cell.method.uses_sde() {
@@ -619,6 +622,7 @@ mod tests {
     use std::path::Path;
 
     use clap::Parser;
+    use nuno::agent::TruncatedStep;
     use nuno::envs::RootXReward;
     use nuno::experiment::{Grid, fit_changes};
 
@@ -712,7 +716,7 @@ mod tests {
         ("threshold_max_margin", "threshold_max_margin = 1.3"),
     ];
     /// The budget keys that do not reach fit-model.
-    const OTHER_KEYS: [&str; 15] = [
+    const OTHER_KEYS: [&str; 16] = [
         "ensemble_max_epochs",
         "policy_steps",
         "steps_per_epoch",
@@ -728,6 +732,7 @@ mod tests {
         "model_buffer_factor",
         "forward_velocity",
         "root_x_reward",
+        "truncated_step",
     ];
 
     /// A model folder is checked against every budget key that shapes the fit:
@@ -758,7 +763,7 @@ mod tests {
             dir.path(),
             "nuno",
             "state_box_margin = 0.1\nclip_observations = true\ntarget_entropy = -3.0\npenalty = 5.0\n\
-             rollout_noise_scale = 0.0",
+             rollout_noise_scale = 0.0\ntruncated_step = \"terminal\"",
         )
         .0;
         let serde_json::Value::Object(keys) = json(&every_key.budget) else {
@@ -878,5 +883,34 @@ mod tests {
             let velocity = run.config.root_x_reward == RootXReward::Velocity;
             assert_eq!(velocity, reaches, "{method}");
         }
+    }
+
+    /// The budget's truncated step reaches the methods that truncate on an
+    /// accumulated signal, and is no part of MOPO's budget, so naming it leaves
+    /// MOPO's finished cells finished; naming the default is leaving it out.
+    #[test]
+    fn the_truncated_step_reaches_the_truncating_methods_only() {
+        let dir = tempfile::tempdir().unwrap();
+        let key = "truncated_step = \"terminal\"";
+        for (method, reaches) in [("nuno", true), ("tatu-mopo", true), ("mopo", false)] {
+            let (grid, cell) = cell_of(dir.path(), method, key);
+            let runner = policy_args(&cell, &grid.budget_for(&cell), Some("m".into()), "c".into());
+            let plan = runner.plan().unwrap();
+            let fit_policy::Training::InModel(run) = &plan.training else {
+                panic!("{method} trains in a model");
+            };
+            let terminal = run.config.truncated_step == TruncatedStep::Terminal;
+            assert_eq!(terminal, reaches, "{method}");
+            let (plain, _) = cell_of(dir.path(), method, "");
+            let unchanged =
+                plain.budget.for_method(cell.method) == grid.budget.for_method(cell.method);
+            assert_eq!(unchanged, !reaches, "{method}");
+        }
+        let (named_default, cell) = cell_of(dir.path(), "nuno", "truncated_step = \"drop\"");
+        let (plain, _) = cell_of(dir.path(), "nuno", "");
+        assert_eq!(
+            named_default.budget.for_method(cell.method),
+            plain.budget.for_method(cell.method)
+        );
     }
 }

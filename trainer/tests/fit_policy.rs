@@ -143,6 +143,16 @@ fn fit_policy_runs_resumes_and_its_policy_evaluates() {
     assert!(err.contains("--state-box-margin"), "{err}");
     let err = fails(&fit(20, &["--target-entropy", "inf"]));
     assert!(err.contains("--target-entropy must be finite"), "{err}");
+    let err = fails(&fit(
+        20,
+        &["--no-truncation", "--truncated-step", "terminal"],
+    ));
+    assert!(
+        err.contains("--truncated-step") && err.contains("--no-truncation"),
+        "{err}"
+    );
+    let err = fails(&fit(20, &["--truncated-step", "kept"]));
+    assert!(err.contains("unknown truncated step \"kept\""), "{err}");
     let err = fails(&fit(20, &["--forward-velocity", "sideways"]));
     assert!(
         err.contains("unknown forward velocity \"sideways\""),
@@ -356,7 +366,9 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
     };
     let (lax, strict) = (tmp.path().join("tatu-1"), tmp.path().join("tatu-50"));
     tatu(&lax, 20, &["--pessimism", "1"]);
-    tatu(&strict, 20, &["--pessimism", "50"]);
+    // NUNO's and TATU's code's form of the truncating step: kept as terminal.
+    let strict_flags = ["--pessimism", "50", "--truncated-step", "terminal"];
+    tatu(&strict, 20, &strict_flags);
     let threshold = |out: &Path| saved(out)["threshold"].as_f64().unwrap();
     assert_eq!(saved(&lax)["algorithm"], "tatu-mopo");
     assert!(threshold(&lax) > 0.0);
@@ -367,6 +379,7 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
     assert!((policy["truncation_threshold"].as_f64().unwrap() - threshold(&strict)).abs() < 1e-6);
     assert_eq!(policy["training"]["penalty"], 5.0);
     assert_eq!(policy["training"]["truncate"], true);
+    assert_eq!(policy["training"]["truncated_step"], "terminal");
     let rollouts = |out: &Path| -> Vec<serde_json::Value> {
         std::fs::read_to_string(out.join("metrics.jsonl"))
             .unwrap()
@@ -390,7 +403,7 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
     );
     // A resumed run truncates where it did (its checkpoint holds ε; the
     // dataset pass is not repeated).
-    let stdout = tatu(&strict, 30, &["--pessimism", "50", "--resume"]);
+    let stdout = tatu(&strict, 30, &[&strict_flags[..], &["--resume"]].concat());
     let printed = format!("truncation threshold {:.4}", threshold(&strict));
     assert!(stdout.contains(&printed), "{stdout}");
     let error = fails(&[
@@ -409,6 +422,27 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
         &s(&tmp.path().join("x")),
     ]);
     assert!(error.contains("--pessimism"), "{error}");
+    // MOPO never truncates, so it keeps no truncating step either way.
+    let error = fails(&[
+        "fit-policy",
+        "--algo",
+        "mopo",
+        "--truncated-step",
+        "terminal",
+        "--model",
+        &s(&model),
+        "--dataset",
+        &s(&dataset),
+        "--preset",
+        "hopper-medium",
+        "--out",
+        &s(&tmp.path().join("x")),
+    ]);
+    assert!(
+        error.contains("--truncated-step says what a truncating rollout keeps")
+            && error.contains("mopo never truncates"),
+        "{error}"
+    );
     // NUNO's code's loop settings are refused for MOPO's ensemble, by name.
     let (model_s, dataset_s, out) = (s(&model), s(&dataset), s(&tmp.path().join("y")));
     for extra in [

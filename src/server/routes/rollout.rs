@@ -13,8 +13,8 @@ use utoipa::ToSchema;
 
 use super::fields::{integer, one, unit, yes};
 use crate::agent::{
-    ActionMode, RolloutActions, RolloutConfig, RolloutTrace, StepOutcome, penalized_reward,
-    rollout_model_or_cancel,
+    ActionMode, RolloutActions, RolloutConfig, RolloutTrace, StepOutcome, TruncatedStep,
+    penalized_reward, rollout_model_or_cancel,
 };
 use crate::artifact::NamedTensors;
 use crate::sde::requested_threshold;
@@ -194,6 +194,7 @@ pub async fn rollout(
         halt: None,
         state_box: None,
         observation_clip: None,
+        truncated_step: TruncatedStep::Drop,
     };
     let (seed, mode) = (r.seed, r.policy_mode);
     let worker = model.clone();

@@ -12,8 +12,8 @@ use burn::tensor::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{
     ActionMode, AleatoricAsEta, EpochRecord, LoopContext, MOREL_PESSIMISM, Method, MopoSettings,
-    PolicyLoopConfig, PolicyTraining, Preset, SacConfig, Truncation, combo_preset, mobile_preset,
-    mopo_preset, preset, rambo_preset, run_threshold, tatu_pessimism,
+    PolicyLoopConfig, PolicyTraining, Preset, SacConfig, TruncatedStep, Truncation, combo_preset,
+    mobile_preset, mopo_preset, preset, rambo_preset, run_threshold, tatu_pessimism,
 };
 use nuno::artifact::{
     BEST_POLICY, LAST_POLICY, ModelFolder, PolicyProvenance, latest_checkpoint, load_checkpoint,
@@ -128,6 +128,11 @@ pub struct Args {
     /// (nuno's guard; default: off, as the paper and NUNO's code).
     #[arg(long)]
     pub clip_observations: bool,
+    /// What a truncating rollout keeps of the step that takes its accumulated
+    /// uncertainty past the threshold: drop (the paper's) or terminal (kept as a
+    /// terminal transition, NUNO's and TATU's code) (default: drop).
+    #[arg(long)]
+    pub truncated_step: Option<TruncatedStep>,
     /// The scale of the model's noise in the policy's rollouts (default: the
     /// model's own; 0 rolls the drift, or the ensemble's mean, alone).
     #[arg(long)]
@@ -443,6 +448,7 @@ impl Args {
         config.real_ratio = self.real_ratio.unwrap_or(config.real_ratio);
         config.state_box_margin = self.state_box_margin;
         config.clip_observations = self.clip_observations;
+        config.truncated_step = self.truncated_step.unwrap_or(config.truncated_step);
         config.rollout_noise_scale = self.rollout_noise_scale;
         config.steps_per_epoch = self.steps_per_epoch;
         config.epochs = self.steps.div_ceil(self.steps_per_epoch);
@@ -501,6 +507,17 @@ impl Args {
                     && self.root_x_reward.is_none()),
             "--recipe, --forward-velocity and --root-x-reward set NUNO's loop: {} rolls an ensemble that learns its rewards",
             self.algo
+        );
+        anyhow::ensure!(
+            self.truncated_step.is_none()
+                || (self.algo.truncation().accumulates() && !self.no_truncation),
+            "--truncated-step says what a truncating rollout keeps of its last step: {} {}",
+            self.algo,
+            if self.no_truncation {
+                "runs with --no-truncation"
+            } else {
+                "never truncates on accumulated uncertainty"
+            }
         );
         anyhow::ensure!(
             self.model_buffer_factor != Some(0),
