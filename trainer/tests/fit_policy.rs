@@ -406,50 +406,9 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
     let stdout = tatu(&strict, 30, &[&strict_flags[..], &["--resume"]].concat());
     let printed = format!("truncation threshold {:.4}", threshold(&strict));
     assert!(stdout.contains(&printed), "{stdout}");
-    let error = fails(&[
-        "fit-policy",
-        "--algo",
-        "mopo",
-        "--pessimism",
-        "2",
-        "--model",
-        &s(&model),
-        "--dataset",
-        &s(&dataset),
-        "--preset",
-        "hopper-medium",
-        "--out",
-        &s(&tmp.path().join("x")),
-    ]);
-    assert!(error.contains("--pessimism"), "{error}");
-    // MOPO never truncates, so it keeps no truncating step either way.
-    let error = fails(&[
-        "fit-policy",
-        "--algo",
-        "mopo",
-        "--truncated-step",
-        "terminal",
-        "--model",
-        &s(&model),
-        "--dataset",
-        &s(&dataset),
-        "--preset",
-        "hopper-medium",
-        "--out",
-        &s(&tmp.path().join("x")),
-    ]);
-    assert!(
-        error.contains("--truncated-step says what a truncating rollout keeps")
-            && error.contains("mopo never truncates"),
-        "{error}"
-    );
-    // NUNO's code's loop settings are refused for MOPO's ensemble, by name.
-    let (model_s, dataset_s, out) = (s(&model), s(&dataset), s(&tmp.path().join("y")));
-    for extra in [
-        ["--recipe", "code"],
-        ["--forward-velocity", "mean"],
-        ["--root-x-reward", "velocity"],
-    ] {
+    // MOPO on its ensemble with `extra` flags, which it refuses before writing.
+    let (model_s, dataset_s, out) = (s(&model), s(&dataset), s(&tmp.path().join("x")));
+    let mopo_fails = |extra: &[&str]| {
         let mut args = vec![
             "fit-policy",
             "--algo",
@@ -464,7 +423,24 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
             &out,
         ];
         args.extend(extra);
-        let error = fails(&args);
+        fails(&args)
+    };
+    let error = mopo_fails(&["--pessimism", "2"]);
+    assert!(error.contains("--pessimism"), "{error}");
+    // MOPO never truncates, so it keeps no truncating step either way.
+    let error = mopo_fails(&["--truncated-step", "terminal"]);
+    assert!(
+        error.contains("--truncated-step says what a truncating rollout keeps")
+            && error.contains("mopo never truncates"),
+        "{error}"
+    );
+    // NUNO's code's loop settings are refused for MOPO's ensemble, by name.
+    for extra in [
+        ["--recipe", "code"],
+        ["--forward-velocity", "mean"],
+        ["--root-x-reward", "velocity"],
+    ] {
+        let error = mopo_fails(&extra);
         assert!(
             error.contains(extra[0]) && error.contains("ensemble"),
             "{error}"
