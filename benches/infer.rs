@@ -194,24 +194,7 @@ fn main() {
     let kernels: [(&str, &dyn BatchDynamics); 2] =
         [("burn flex", &burn_model), ("fused", &fused_model)];
 
-    println!();
-    println!("| EM step (hopper) | batch | transitions/s | µs per step |");
-    println!("|---|---|---|---|");
-    for batch in [1usize, 256, 4096, 50_000] {
-        let states = hopper.states(batch);
-        let actions = hopper.actions(batch);
-        let noise = random(batch * OBS, &mut rng);
-        for (name, model) in kernels {
-            let seconds = seconds_per_call(|| {
-                let _ = model.step(&states, &actions, &noise);
-            });
-            println!(
-                "| {name} | {batch} | {:.0} | {:.1} |",
-                batch as f64 / seconds,
-                seconds * 1e6
-            );
-        }
-    }
+    em_steps(&hopper, &kernels, &mut rng);
 
     let actor = ActorConfig::new(OBS, ACT, vec![-1.0; ACT], vec![1.0; ACT]).init(&device);
     let burn_policy = ActorPolicy {
@@ -256,6 +239,28 @@ fn main() {
         );
     }
     system_rules(&hopper, &fused_model, &fused_policy, &starts, &plan);
+}
+
+/// One Euler–Maruyama step of each kernel at growing batch sizes.
+fn em_steps(hopper: &Hopper, kernels: &[(&str, &dyn BatchDynamics)], rng: &mut ChaCha8Rng) {
+    println!();
+    println!("| EM step (hopper) | batch | transitions/s | µs per step |");
+    println!("|---|---|---|---|");
+    for batch in [1usize, 256, 4096, 50_000] {
+        let states = hopper.states(batch);
+        let actions = hopper.actions(batch);
+        let noise = random(batch * OBS, rng);
+        for &(name, model) in kernels {
+            let seconds = seconds_per_call(|| {
+                let _ = model.step(&states, &actions, &noise);
+            });
+            println!(
+                "| {name} | {batch} | {:.0} | {:.1} |",
+                batch as f64 / seconds,
+                seconds * 1e6
+            );
+        }
+    }
 }
 
 /// Hopper's D4RL reward and termination as a system file would write them.

@@ -475,6 +475,24 @@ impl HopperRollouts {
         let actions = RolloutActions::Policy(&self.policy);
         rollout_model(dynamics, actions, &self.rules, starts, config, rng)
     }
+
+    /// Every transition's reward is the task's known reward of its step at
+    /// the constant action, less `penalty` (λ·η: r̃ = r − λ·η).
+    fn assert_penalised_by(&self, transitions: &TransitionBatch, penalty: f32) {
+        let obs_dim = self.spec.obs_dim;
+        for i in 0..transitions.len() {
+            let at = i * obs_dim..(i + 1) * obs_dim;
+            let reward = self.rules.reward(
+                &transitions.observations[at.clone()],
+                &HOPPER_ACTION,
+                &transitions.next_observations[at],
+            );
+            assert!(
+                (transitions.rewards[i] - (reward - penalty)).abs() < 1e-5,
+                "transition {i}"
+            );
+        }
+    }
 }
 
 /// Rollouts with no truncation, HALT or state box, at the sampler's own noise.
@@ -530,7 +548,7 @@ fn morels_halt_keeps_the_halting_step_as_terminal_less_kappa() {
 #[test]
 fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
     let hopper = HopperRollouts::new();
-    let (spec, rules) = (&hopper.spec, &hopper.rules);
+    let spec = &hopper.spec;
     let dynamics = ConstantEta { spec: spec.clone() };
     let start = hopper.upright();
     let starts = start.repeat(4);
@@ -556,14 +574,9 @@ fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
         assert!(acc[..kept].iter().all(|&a| a <= 1.0));
         assert!(acc[kept] > 1.0);
     }
-    // r̃ = r − λ·η with the task's known reward on the next observation.
-    for i in 0..out.transitions.len() {
-        let next = &out.transitions.next_observations[i * spec.obs_dim..(i + 1) * spec.obs_dim];
-        let obs = &out.transitions.observations[i * spec.obs_dim..(i + 1) * spec.obs_dim];
-        let reward = rules.reward(obs, &HOPPER_ACTION, next);
-        assert!((out.transitions.rewards[i] - (reward - 0.6)).abs() < 1e-5);
-        assert_eq!(out.transitions.terminals[i], 0.0);
-    }
+    // r̃ = r − λ·η = r − 2 · 0.3 with the task's known reward on the next observation.
+    hopper.assert_penalised_by(&out.transitions, 0.6);
+    assert_eq!(out.transitions.terminals, vec![0.0; 24]);
     // Without a threshold every step is kept; a fallen start ends at once as terminal.
     let free = RolloutConfig {
         threshold: None,
@@ -585,7 +598,7 @@ fn truncation_drops_the_step_that_passes_epsilon_and_penalises_rewards() {
 #[test]
 fn a_truncated_step_kept_as_terminal_ends_its_row_with_a_terminal_transition() {
     let hopper = HopperRollouts::new();
-    let (spec, rules) = (&hopper.spec, &hopper.rules);
+    let spec = &hopper.spec;
     let dynamics = ConstantEta { spec: spec.clone() };
     let starts = hopper.upright().repeat(4);
     let config = RolloutConfig {
@@ -607,14 +620,8 @@ fn a_truncated_step_kept_as_terminal_ends_its_row_with_a_terminal_transition() {
     // Transitions go step by step over the rows: the 8 truncating steps come last.
     let terminals: Vec<f32> = [vec![0.0; 24], vec![1.0; 8]].concat();
     assert_eq!(out.transitions.terminals, terminals);
-    let obs_dim = spec.obs_dim;
-    for i in 0..out.transitions.len() {
-        let obs = &out.transitions.observations[i * obs_dim..(i + 1) * obs_dim];
-        let next = &out.transitions.next_observations[i * obs_dim..(i + 1) * obs_dim];
-        // r̃ = r − λ·η = r − 2 · 0.3 on the truncating step as on the others.
-        let reward = rules.reward(obs, &HOPPER_ACTION, next);
-        assert!((out.transitions.rewards[i] - (reward - 0.6)).abs() < 1e-5);
-    }
+    // r̃ = r − λ·η = r − 2 · 0.3 on the truncating step as on the others.
+    hopper.assert_penalised_by(&out.transitions, 0.6);
     let dropped = hopper.roll(
         &dynamics,
         &starts,
@@ -627,7 +634,7 @@ fn a_truncated_step_kept_as_terminal_ends_its_row_with_a_terminal_transition() {
     assert_eq!(dropped.transitions.terminals, vec![0.0; 24]);
     assert_eq!(
         dropped.transitions.next_observations,
-        out.transitions.next_observations[..24 * obs_dim]
+        out.transitions.next_observations[..24 * spec.obs_dim]
     );
 }
 
@@ -1347,7 +1354,7 @@ impl BatchDynamics for TwoSignals {
 #[test]
 fn rollouts_penalise_eta_but_truncate_on_the_models_own_signal() {
     let hopper = HopperRollouts::new();
-    let (spec, rules) = (&hopper.spec, &hopper.rules);
+    let spec = &hopper.spec;
     let dynamics = TwoSignals {
         inner: ConstantEta { spec: spec.clone() },
     };
@@ -1362,15 +1369,7 @@ fn rollouts_penalise_eta_but_truncate_on_the_models_own_signal() {
     assert_eq!(out.stats.truncated, 3);
     assert_eq!(out.trace.accumulated_eta[0], vec![1.0, 2.0, 3.0]);
     // ... while the penalty is still λ·η = 2·0.3.
-    for i in 0..out.transitions.len() {
-        let at = i * spec.obs_dim..(i + 1) * spec.obs_dim;
-        let reward = rules.reward(
-            &out.transitions.observations[at.clone()],
-            &HOPPER_ACTION,
-            &out.transitions.next_observations[at],
-        );
-        assert!((out.transitions.rewards[i] - (reward - 0.6)).abs() < 1e-5);
-    }
+    hopper.assert_penalised_by(&out.transitions, 0.6);
 
     // NUNO^al: the same model reporting ‖σ‖ = 5 as η penalises by λ·5.
     let aleatoric = nuno::agent::AleatoricAsEta::new(&dynamics.inner);

@@ -186,27 +186,11 @@ pub fn fit_from(
     let train_windows = WindowSampler::new(train, config.horizon)?;
     let validation = Validation::new(valid, config, device)?;
 
-    // Scales from the training data; networks initialised from the seed.
-    let scales = PhysicalScales::measure(
-        train,
-        &spec,
-        &NormalizerConfig {
-            std_floor: config.std_floor,
-        },
-    );
-    let train_device = device.clone().autodiff();
-    let model = seeded_init(&train_device, config.seed, || {
-        NeuralSde::init(spec, scales, config.model.clone(), &train_device)
-    });
-    let reference = training_inputs(&model, train, config.loss.far_reference, &mut rng);
-    let input_dim = model.spec().obs_dim + model.spec().act_dim;
-    let draws = DrawShapes {
-        state_dim: model.constants.state_dim(),
-        far_field: FarField::new(reference.clone(), input_dim, &config.loss),
-        input_dim,
-    };
-    let mut trainer = sde_trainer(model, config, train_device);
-    trainer.calibrate_h_bias(&reference);
+    let FitStart {
+        mut trainer,
+        reference,
+        draws,
+    } = FitStart::new(train, spec, config, device, &mut rng);
 
     let mut state = SdeFitState::start(trainer.model(), &validation, rng);
     if let Some(resumed) = resume {
@@ -249,6 +233,52 @@ pub fn fit_from(
         valid_transitions: valid.len(),
     };
     Ok((state.best, summary))
+}
+
+/// What a fit starts from: the kernel with the seed's networks on the training
+/// data's scales, the reference inputs h's bias is calibrated on (calibrated
+/// once already), and the shapes of each step's draws.
+struct FitStart {
+    trainer: Box<dyn SdeTrainer>,
+    reference: Vec<f32>,
+    draws: DrawShapes,
+}
+
+impl FitStart {
+    fn new(
+        train: &Dataset,
+        spec: DynamicsSpec,
+        config: &FitConfig,
+        device: &Device,
+        rng: &mut ChaCha8Rng,
+    ) -> Self {
+        // Scales from the training data; networks initialised from the seed.
+        let scales = PhysicalScales::measure(
+            train,
+            &spec,
+            &NormalizerConfig {
+                std_floor: config.std_floor,
+            },
+        );
+        let train_device = device.clone().autodiff();
+        let model = seeded_init(&train_device, config.seed, || {
+            NeuralSde::init(spec, scales, config.model.clone(), &train_device)
+        });
+        let reference = training_inputs(&model, train, config.loss.far_reference, rng);
+        let input_dim = model.spec().obs_dim + model.spec().act_dim;
+        let draws = DrawShapes {
+            state_dim: model.constants.state_dim(),
+            far_field: FarField::new(reference.clone(), input_dim, &config.loss),
+            input_dim,
+        };
+        let mut trainer = sde_trainer(model, config, train_device);
+        trainer.calibrate_h_bias(&reference);
+        Self {
+            trainer,
+            reference,
+            draws,
+        }
+    }
 }
 
 /// The kernel `config` names, taking its gradient steps from `model`.

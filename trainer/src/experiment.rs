@@ -622,7 +622,7 @@ mod tests {
     use std::path::Path;
 
     use clap::Parser;
-    use nuno::agent::TruncatedStep;
+    use nuno::agent::{PolicyLoopConfig, TruncatedStep};
     use nuno::envs::RootXReward;
     use nuno::experiment::{Grid, fit_changes};
 
@@ -875,13 +875,17 @@ mod tests {
         for (method, reaches) in [("nuno", true), ("mopo", false)] {
             let (mut grid, cell) = cell_of(dir.path(), method, "");
             grid.budget.root_x_reward = Some(RootXReward::Velocity);
-            let runner = policy_args(&cell, &grid.budget_for(&cell), Some("m".into()), "c".into());
-            let plan = runner.plan().unwrap();
-            let fit_policy::Training::InModel(run) = &plan.training else {
-                panic!("{method} trains in a model");
-            };
-            let velocity = run.config.root_x_reward == RootXReward::Velocity;
+            let velocity = loop_config(&grid, &cell).root_x_reward == RootXReward::Velocity;
             assert_eq!(velocity, reaches, "{method}");
+        }
+    }
+
+    /// The policy loop the runner would train `cell` with, in a model.
+    fn loop_config(grid: &Grid, cell: &super::Cell) -> PolicyLoopConfig {
+        let runner = policy_args(cell, &grid.budget_for(cell), Some("m".into()), "c".into());
+        match runner.plan().unwrap().training {
+            fit_policy::Training::InModel(run) => run.config,
+            fit_policy::Training::ModelFree(_) => panic!("{} trains in a model", cell.method),
         }
     }
 
@@ -894,12 +898,7 @@ mod tests {
         let key = "truncated_step = \"terminal\"";
         for (method, reaches) in [("nuno", true), ("tatu-mopo", true), ("mopo", false)] {
             let (grid, cell) = cell_of(dir.path(), method, key);
-            let runner = policy_args(&cell, &grid.budget_for(&cell), Some("m".into()), "c".into());
-            let plan = runner.plan().unwrap();
-            let fit_policy::Training::InModel(run) = &plan.training else {
-                panic!("{method} trains in a model");
-            };
-            let terminal = run.config.truncated_step == TruncatedStep::Terminal;
+            let terminal = loop_config(&grid, &cell).truncated_step == TruncatedStep::Terminal;
             assert_eq!(terminal, reaches, "{method}");
             let (plain, _) = cell_of(dir.path(), method, "");
             let unchanged =
