@@ -49,8 +49,8 @@ enum Command {
     FitEnsemble(fit_ensemble::Args),
     /// Fit the neural SDE on a dataset and write the model artifact.
     FitModel(fit_model::Args),
-    /// Train a policy with SAC on a model's penalised, truncated rollouts (NUNO, NUNO^R,
-    /// NUNO^al, MOPO, TATU+MOPO).
+    /// Train a policy offline: NUNO's SAC on a model's penalised, truncated rollouts, or one
+    /// of the paper's baselines (--algo).
     FitPolicy(fit_policy::Args),
     /// Run, follow and report grids of datasets × methods × seeds, locally or on Slurm.
     #[command(subcommand)]
