@@ -9,7 +9,7 @@
 #   experiments/carry-on.sh datasets GRID...   make every missing dataset the grids' unfinished cells read
 #   experiments/carry-on.sh start GRID...      run each grid's unfinished cells in the background
 #   experiments/carry-on.sh online TASK...     resume TASK's online SAC run from its snapshot
-#   experiments/carry-on.sh keep GRID...       copy the grids' newly finished cells into the repo
+#   experiments/carry-on.sh keep GRID...       copy the grids' newly finished cells and report into the repo
 #
 # GRID is a grid file (experiments/NAME.toml, or experiments/ablation/NAME.toml); its cells
 # run under runs/NAME (runs/ablation/NAME), logged to runs/NAME.log, and are kept in
@@ -127,6 +127,9 @@ keep() {
         mkdir -p "$kept"
         (cd "$out" && find . -name result.json -newer .carried-on -exec cp --parents {} "$kept/" \;)
         echo "carry-on: $(cd "$out" && find . -name result.json -newer .carried-on | wc -l) cells of $grid kept in $kept"
+        # The grid's report (borrowed cells included) kept beside its cells, never older than they.
+        "$trainer" experiment report --grid "$grid" --out "$out" >/dev/null
+        cp "$out/results.md" "$out/results.csv" "$out"/curves-*.svg "$kept/"
     done
 }
 
