@@ -211,7 +211,30 @@ fn nullable_answers(spec: &mut Value) {
 
 /// This server's limits on request fields, as schema keywords.
 fn state_limits(spec: &mut Value, limits: &Limits) {
-    let stated = [
+    let schemas = &mut spec["components"]["schemas"];
+    request_rules(schemas, limits);
+    for (schema, property, keyword, limit) in stated_limits(limits) {
+        let property = &mut schemas[schema]["properties"][property];
+        debug_assert!(
+            property.is_object(),
+            "{schema}.{property} is not in the spec"
+        );
+        // Optional fields are `oneOf [null, T]`: the keyword goes on T.
+        match property.get_mut("oneOf").and_then(Value::as_array_mut) {
+            Some(variants) => {
+                for variant in variants.iter_mut().filter(|v| v["type"] != "null") {
+                    variant[keyword] = json!(limit);
+                }
+            }
+            None => property[keyword] = json!(limit),
+        }
+    }
+    kserve_constraints(schemas, limits);
+}
+
+/// (schema, property, keyword, limit) for each field a limit bounds.
+fn stated_limits(limits: &Limits) -> Vec<(&'static str, &'static str, &'static str, usize)> {
+    vec![
         ("StepRequest", "states", "maxItems", limits.max_batch),
         ("StepRequest", "actions", "maxItems", limits.max_batch),
         ("StepRequest", "particles", "maximum", limits.max_particles),
@@ -257,9 +280,13 @@ fn state_limits(spec: &mut Value, limits: &Limits) {
             "maximum",
             limits.max_episodes,
         ),
-    ];
-    let schemas = &mut spec["components"]["schemas"];
-    // One truncation rule at a time (null is the same as absent).
+    ]
+}
+
+/// The rules between fields: one truncation rule at a time, one way to give
+/// a score's candidates, and no start with more candidates than a batch has rows.
+fn request_rules(schemas: &mut Value, limits: &Limits) {
+    // Null is the same as absent.
     let one_rule = json!({
         "required": ["alpha", "threshold"],
         "properties": { "alpha": { "type": "number" }, "threshold": { "type": "number" } },
@@ -267,8 +294,6 @@ fn state_limits(spec: &mut Value, limits: &Limits) {
     schemas["RolloutRequest"]["not"] = one_rule.clone();
     schemas["ScoreRequest"]["not"] = one_rule.clone();
     plan_request_rules(schemas, one_rule);
-    // Exactly one of the two ways to give candidates; each start's no more
-    // candidates than a batch has rows.
     let given =
         |field: &str| json!({ "required": [field], "properties": { field: { "type": "array" } } });
     schemas["ScoreRequest"]["oneOf"] = json!([given("actions"), given("shared_actions")]);
@@ -279,23 +304,6 @@ fn state_limits(spec: &mut Value, limits: &Limits) {
     per_start["minItems"] = json!(1);
     per_start["items"]["minItems"] = json!(1);
     per_start["items"]["maxItems"] = json!(limits.max_batch);
-    for (schema, property, keyword, limit) in stated {
-        let property = &mut schemas[schema]["properties"][property];
-        debug_assert!(
-            property.is_object(),
-            "{schema}.{property} is not in the spec"
-        );
-        // Optional fields are `oneOf [null, T]`: the keyword goes on T.
-        match property.get_mut("oneOf").and_then(Value::as_array_mut) {
-            Some(variants) => {
-                for variant in variants.iter_mut().filter(|v| v["type"] != "null") {
-                    variant[keyword] = json!(limit);
-                }
-            }
-            None => property[keyword] = json!(limit),
-        }
-    }
-    kserve_constraints(schemas, limits);
 }
 
 /// What a plan request may not combine: each planner's own settings with the
