@@ -470,6 +470,13 @@ impl Args {
     }
 
     fn check(&self) -> anyhow::Result<()> {
+        self.check_sizes()?;
+        self.check_values()?;
+        self.check_method_flags()
+    }
+
+    /// Counts and layer sizes: each at least 1.
+    fn check_sizes(&self) -> anyhow::Result<()> {
         anyhow::ensure!(self.steps > 0, "--steps must be at least 1");
         anyhow::ensure!(
             self.steps_per_epoch > 0,
@@ -479,22 +486,57 @@ impl Args {
             self.rollout_batch != Some(0),
             "--rollout-batch must be at least 1"
         );
-        anyhow::ensure!(
-            self.mopo_settings.is_none() || self.algo.takes_mopo_settings(),
-            "--mopo-settings sets the SAC settings of MOPO's or NUNO's policy step: it needs --algo mopo, tatu-mopo, nuno, nuno-r or nuno-al ({} runs its own)",
-            self.algo
-        );
         anyhow::ensure!(self.particles > 0, "--particles must be at least 1");
         anyhow::ensure!(self.batch_size > 0, "--batch-size must be at least 1");
+        anyhow::ensure!(
+            (self.hidden.as_ref()).is_none_or(|h| !h.is_empty() && h.iter().all(|&h| h > 0)),
+            "--hidden needs positive layer sizes"
+        );
+        anyhow::ensure!(
+            self.model_buffer_factor != Some(0),
+            "--model-buffer-factor must be at least 1"
+        );
+        Ok(())
+    }
+
+    /// Ratios, margins and coefficients: finite and in their range.
+    fn check_values(&self) -> anyhow::Result<()> {
         if let Some(ratio) = self.real_ratio {
             anyhow::ensure!(
                 (0.0..=1.0).contains(&ratio),
                 "--real-ratio must lie in [0, 1], got {ratio}"
             );
         }
+        if let Some(m) = self.state_box_margin {
+            anyhow::ensure!(
+                m.is_finite() && m >= 0.0,
+                "--state-box-margin must be finite and at least 0, got {m}"
+            );
+        }
+        if let Some(h) = self.target_entropy {
+            anyhow::ensure!(h.is_finite(), "--target-entropy must be finite, got {h}");
+        }
+        if let Some(scale) = self.rollout_noise_scale {
+            anyhow::ensure!(
+                scale.is_finite() && scale >= 0.0,
+                "--rollout-noise-scale must be finite and at least 0, got {scale}"
+            );
+        }
+        if let Some(p) = self.pessimism {
+            anyhow::ensure!(
+                p.is_finite() && p > 0.0,
+                "--pessimism must be positive, got {p}"
+            );
+        }
+        Ok(())
+    }
+
+    /// Flags that set one method's mechanism, refused for the others.
+    fn check_method_flags(&self) -> anyhow::Result<()> {
         anyhow::ensure!(
-            (self.hidden.as_ref()).is_none_or(|h| !h.is_empty() && h.iter().all(|&h| h > 0)),
-            "--hidden needs positive layer sizes"
+            self.mopo_settings.is_none() || self.algo.takes_mopo_settings(),
+            "--mopo-settings sets the SAC settings of MOPO's or NUNO's policy step: it needs --algo mopo, tatu-mopo, nuno, nuno-r or nuno-al ({} runs its own)",
+            self.algo
         );
         anyhow::ensure!(
             self.pessimism.is_none() || matches!(self.algo, Method::TatuMopo | Method::Morel),
@@ -519,31 +561,6 @@ impl Args {
                 "never truncates on accumulated uncertainty"
             }
         );
-        anyhow::ensure!(
-            self.model_buffer_factor != Some(0),
-            "--model-buffer-factor must be at least 1"
-        );
-        if let Some(m) = self.state_box_margin {
-            anyhow::ensure!(
-                m.is_finite() && m >= 0.0,
-                "--state-box-margin must be finite and at least 0, got {m}"
-            );
-        }
-        if let Some(h) = self.target_entropy {
-            anyhow::ensure!(h.is_finite(), "--target-entropy must be finite, got {h}");
-        }
-        if let Some(scale) = self.rollout_noise_scale {
-            anyhow::ensure!(
-                scale.is_finite() && scale >= 0.0,
-                "--rollout-noise-scale must be finite and at least 0, got {scale}"
-            );
-        }
-        if let Some(p) = self.pessimism {
-            anyhow::ensure!(
-                p.is_finite() && p > 0.0,
-                "--pessimism must be positive, got {p}"
-            );
-        }
         Ok(())
     }
 }
