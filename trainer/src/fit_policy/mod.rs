@@ -771,8 +771,15 @@ fn load_model(
     let dir = &run.model;
     let folder = ModelFolder::load(dir, device)
         .with_context(|| format!("loading the model in {}", dir.display()))?;
-    let algo = plan.method;
-    let folder = match folder {
+    let folder = for_method(folder, plan.method, dir)?;
+    let system = system_of(&folder, plan, run, dir)?;
+    Ok((folder, system))
+}
+
+/// The model folder as `algo` rolls it (TATU's and MOReL's truncation signal
+/// set on the ensemble), or why `algo` cannot train in it.
+fn for_method(folder: ModelFolder, algo: Method, dir: &Path) -> anyhow::Result<ModelFolder> {
+    Ok(match folder {
         ModelFolder::NeuralSde { .. } if algo.uses_ensemble() => anyhow::bail!(
             "--algo {algo} trains in a Gaussian ensemble (ensemble.json, from fit-ensemble); {} holds a neural SDE",
             dir.display()
@@ -803,7 +810,17 @@ fn load_model(
             }
         }
         folder => folder,
-    };
+    })
+}
+
+/// The task or system the model was fitted on, checked against the plan's
+/// preset and reward.
+fn system_of(
+    folder: &ModelFolder,
+    plan: &Plan,
+    run: &InModel,
+    dir: &Path,
+) -> anyhow::Result<System> {
     let system = match (folder.system()?, plan.preset) {
         (Some(system), _) => system,
         // A model.json from before tasks were recorded: the preset's.
@@ -837,7 +854,7 @@ fn load_model(
             system.task().map(|t| t.layout)
         );
     }
-    Ok((folder, system))
+    Ok(system)
 }
 
 /// What the run's rollouts truncate at (`agent::run_threshold`). A threshold
