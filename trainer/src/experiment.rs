@@ -8,7 +8,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs::OpenOptions;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command as Process, Stdio};
+use std::process::{Child, Command as Process, ExitStatus, Stdio};
 use std::time::Instant;
 
 use anyhow::Context;
@@ -234,51 +234,14 @@ fn run_local(grid: &GridArgs, cells: &[Cell], jobs: usize) -> anyhow::Result<()>
     loop {
         while running.len() < jobs {
             let Some(cell) = queue.next() else { break };
-            let dir = cell_dir(&grid.out, cell);
-            std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-            let log = OpenOptions::new()
-                .create(true)
-                .append(true)
-                .open(dir.join("log.txt"))?;
-            let mut command = Process::new(&exe);
-            // The cell's record names the binary as the runner was invoked.
-            #[cfg(unix)]
-            if let Some(name) = std::env::args_os().next() {
-                std::os::unix::process::CommandExt::arg0(&mut command, name);
-            }
-            let child = command
-                .args(["experiment", "run-cell", "--cell", &cell.index.to_string()])
-                .arg("--grid")
-                .arg(&grid.grid)
-                .arg("--out")
-                .arg(&grid.out)
-                .stdout(Stdio::from(log.try_clone()?))
-                .stderr(Stdio::from(log))
-                .spawn()
-                .context("starting a cell")?;
+            let child = spawn_cell(grid, cell, &exe)?;
             println!("started {}", cell.id());
             running.push((cell.clone(), child, Instant::now()));
         }
         if running.is_empty() {
             break;
         }
-        // Whichever cell ends first frees its slot for the next.
-        let (cell, status, started) = loop {
-            let mut ended = None;
-            for (i, (_, child, _)) in running.iter_mut().enumerate() {
-                if let Some(status) = child.try_wait()? {
-                    ended = Some((i, status));
-                    break;
-                }
-            }
-            match ended {
-                Some((i, status)) => {
-                    let (cell, _, started) = running.remove(i);
-                    break (cell, status, started);
-                }
-                None => std::thread::sleep(CELL_POLL),
-            }
-        };
+        let (cell, status, started) = first_to_end(&mut running)?;
         if status.success() {
             println!(
                 "finished {} in {:.1} min",
@@ -301,6 +264,49 @@ fn run_local(grid: &GridArgs, cells: &[Cell], jobs: usize) -> anyhow::Result<()>
         failed.join(", ")
     );
     Ok(())
+}
+
+/// `experiment run-cell` for `cell` in a child process, its output appended
+/// to the cell's log.txt.
+fn spawn_cell(grid: &GridArgs, cell: &Cell, exe: &Path) -> anyhow::Result<Child> {
+    let dir = cell_dir(&grid.out, cell);
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let log = OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(dir.join("log.txt"))?;
+    let mut command = Process::new(exe);
+    // The cell's record names the binary as the runner was invoked.
+    #[cfg(unix)]
+    if let Some(name) = std::env::args_os().next() {
+        std::os::unix::process::CommandExt::arg0(&mut command, name);
+    }
+    command
+        .args(["experiment", "run-cell", "--cell", &cell.index.to_string()])
+        .arg("--grid")
+        .arg(&grid.grid)
+        .arg("--out")
+        .arg(&grid.out)
+        .stdout(Stdio::from(log.try_clone()?))
+        .stderr(Stdio::from(log))
+        .spawn()
+        .context("starting a cell")
+}
+
+/// Waits for whichever running cell ends first (freeing its slot for the
+/// next) and takes it out of `running`.
+fn first_to_end(
+    running: &mut Vec<(Cell, Child, Instant)>,
+) -> anyhow::Result<(Cell, ExitStatus, Instant)> {
+    loop {
+        for i in 0..running.len() {
+            if let Some(status) = running[i].1.try_wait()? {
+                let (cell, _, started) = running.remove(i);
+                return Ok((cell, status, started));
+            }
+        }
+        std::thread::sleep(CELL_POLL);
+    }
 }
 
 /// Writes one array job over `cells` and submits it with sbatch.
