@@ -1646,6 +1646,31 @@ async fn the_binary_serves_and_stops_cleanly_on_sigterm() {
     assert!(exit.success(), "graceful shutdown exits 0, got {exit:?}");
 }
 
+#[test]
+fn the_binary_refuses_a_zero_limit_by_flag() {
+    // A zero limit would refuse every request, or keep no plan session: the
+    // binary names the flag and exits. (--print-openapi exits once the flags
+    // parse, so a binary that took the 0 ends at once too, with status 0.)
+    for flag in [
+        "--max-batch",
+        "--compute-slots",
+        "--request-timeout",
+        "--plan-sessions",
+    ] {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_nuno-server"))
+            .args(["--print-openapi", flag, "0"])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{flag}: {stderr}");
+        assert!(
+            stderr.contains(&format!("invalid value '0' for '{flag}")),
+            "{stderr}"
+        );
+        assert!(out.stdout.is_empty(), "{flag}: the spec was printed");
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_burn_kernel_answers_with_burns_numbers() {
     let server = Server::start_with_config(limits(), |config| config.kernel = Kernel::Burn).await;

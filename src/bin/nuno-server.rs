@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
+use clap::builder::RangedU64ValueParser;
 use nuno::infer::Kernel;
 use nuno::server::{AppState, Limits, ServerConfig, openapi_json, serve, serve_grpc};
 
@@ -23,38 +24,38 @@ struct Args {
     /// Bearer token required on every route except health (gRPC: `authorization` metadata).
     #[arg(long, env = "NUNO_TOKEN", hide_env_values = true)]
     token: Option<String>,
-    #[arg(long, default_value_t = Limits::default().max_batch)]
+    #[arg(long, default_value_t = Limits::default().max_batch, value_parser = at_least_one())]
     max_batch: usize,
-    #[arg(long, default_value_t = Limits::default().max_particles)]
+    #[arg(long, default_value_t = Limits::default().max_particles, value_parser = at_least_one())]
     max_particles: usize,
-    #[arg(long, default_value_t = Limits::default().max_horizon)]
+    #[arg(long, default_value_t = Limits::default().max_horizon, value_parser = at_least_one())]
     max_horizon: usize,
-    #[arg(long, default_value_t = Limits::default().max_rollout_steps)]
+    #[arg(long, default_value_t = Limits::default().max_rollout_steps, value_parser = at_least_one())]
     max_rollout_steps: usize,
-    #[arg(long, default_value_t = Limits::default().max_episodes)]
+    #[arg(long, default_value_t = Limits::default().max_episodes, value_parser = at_least_one())]
     max_episodes: usize,
-    #[arg(long, default_value_t = Limits::default().max_body_bytes)]
+    #[arg(long, default_value_t = Limits::default().max_body_bytes, value_parser = at_least_one())]
     max_body_bytes: usize,
     /// Largest answer in bytes (4 a number in binary, 16 as JSON), checked before any work.
-    #[arg(long, default_value_t = Limits::default().max_answer_bytes)]
+    #[arg(long, default_value_t = Limits::default().max_answer_bytes, value_parser = at_least_one())]
     max_answer_bytes: usize,
     /// Seconds before a request is answered with a timeout error.
-    #[arg(long, default_value_t = Limits::default().request_timeout_s)]
+    #[arg(long, default_value_t = Limits::default().request_timeout_s, value_parser = clap::value_parser!(u64).range(1..))]
     request_timeout: u64,
     /// Requests handled at once.
-    #[arg(long, default_value_t = Limits::default().concurrency)]
+    #[arg(long, default_value_t = Limits::default().concurrency, value_parser = at_least_one())]
     concurrency: usize,
     /// Model computations at once (default: the number of cores).
-    #[arg(long, default_value_t = Limits::default().compute_slots)]
+    #[arg(long, default_value_t = Limits::default().compute_slots, value_parser = at_least_one())]
     compute_slots: usize,
     /// Iterations of one `plan` call.
-    #[arg(long, default_value_t = Limits::default().max_plan_iterations)]
+    #[arg(long, default_value_t = Limits::default().max_plan_iterations, value_parser = at_least_one())]
     max_plan_iterations: usize,
     /// `plan` sessions kept at once (the least recently used goes first).
-    #[arg(long, default_value_t = Limits::default().plan_sessions)]
+    #[arg(long, default_value_t = Limits::default().plan_sessions, value_parser = at_least_one())]
     plan_sessions: usize,
     /// Seconds a `plan` session is kept after its last use.
-    #[arg(long, default_value_t = Limits::default().plan_session_ttl_s)]
+    #[arg(long, default_value_t = Limits::default().plan_session_ttl_s, value_parser = clap::value_parser!(u64).range(1..))]
     plan_session_ttl: u64,
     /// Microseconds a `step` request waits for others to the same model, so
     /// their networks run as one call (dynamic batching); 0 runs each alone.
@@ -68,6 +69,40 @@ struct Args {
     print_openapi: bool,
 }
 
+/// A limit of 0 would refuse every request (or keep nothing), so it is refused
+/// at the start, by flag, instead.
+fn at_least_one() -> RangedU64ValueParser<usize> {
+    RangedU64ValueParser::new().range(1..)
+}
+
+impl Args {
+    /// The server's configuration as the flags give it.
+    fn config(&self) -> ServerConfig {
+        ServerConfig {
+            models_dir: self.models.clone(),
+            limits: Limits {
+                max_batch: self.max_batch,
+                max_particles: self.max_particles,
+                max_horizon: self.max_horizon,
+                max_rollout_steps: self.max_rollout_steps,
+                max_episodes: self.max_episodes,
+                max_body_bytes: self.max_body_bytes,
+                max_answer_bytes: self.max_answer_bytes,
+                request_timeout_s: self.request_timeout,
+                concurrency: self.concurrency,
+                compute_slots: self.compute_slots,
+                max_plan_iterations: self.max_plan_iterations,
+                batch_delay_us: self.batch_delay_us,
+                plan_sessions: self.plan_sessions,
+                plan_session_ttl_s: self.plan_session_ttl,
+            },
+            token: self.token.clone().filter(|t| !t.is_empty()),
+            kernel: self.kernel,
+            before_compute: None,
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let args = Args::parse();
     if args.print_openapi {
@@ -75,29 +110,7 @@ fn main() -> ExitCode {
         return ExitCode::SUCCESS;
     }
     init_logging();
-    let config = ServerConfig {
-        models_dir: args.models.clone(),
-        limits: Limits {
-            max_batch: args.max_batch,
-            max_particles: args.max_particles,
-            max_horizon: args.max_horizon,
-            max_rollout_steps: args.max_rollout_steps,
-            max_episodes: args.max_episodes,
-            max_body_bytes: args.max_body_bytes,
-            max_answer_bytes: args.max_answer_bytes,
-            request_timeout_s: args.request_timeout,
-            concurrency: args.concurrency,
-            compute_slots: args.compute_slots,
-            max_plan_iterations: args.max_plan_iterations,
-            batch_delay_us: args.batch_delay_us,
-            plan_sessions: args.plan_sessions,
-            plan_session_ttl_s: args.plan_session_ttl,
-        },
-        token: args.token.filter(|t| !t.is_empty()),
-        kernel: args.kernel,
-        before_compute: None,
-    };
-    let (state, report) = AppState::new(config);
+    let (state, report) = AppState::new(args.config());
     for failure in &report.failed {
         tracing::warn!("not serving `{}`: {}", failure.id, failure.error);
     }
