@@ -9,7 +9,8 @@ use clap::{Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use nuno::agent::{ActionMode, ActorPolicy, OnlineSacConfig, PortableActor};
 use nuno::artifact::{
-    Behaviour, load_behaviour, read_online_run, read_run_transitions, run_policies,
+    Behaviour, OnlineRunInfo, RunPolicy, load_behaviour, read_online_run, read_run_transitions,
+    run_policies,
 };
 use nuno::data::{
     BehaviourLevel, Budget, Dataset, DatasetFormat, DatasetMetadata, GenerateConfig, generate,
@@ -383,7 +384,17 @@ fn rerun_hint(task: TaskName, medium: &Behaviour) -> String {
 fn medium_replay(run: &Path, medium: &Behaviour, accept_rerun: bool) -> anyhow::Result<Dataset> {
     let info =
         read_online_run(run).with_context(|| format!("reading the run in {}", run.display()))?;
-    // The same run, possibly extended since (more steps).
+    ensure_medium_run(run, &info, medium)?;
+    let (saved, reproduced) = medium_checkpoint(run, medium, accept_rerun)?;
+    let step = medium.entry.pick.step;
+    let dataset = read_run_transitions(run, step)?;
+    let metadata = medium_replay_metadata(&dataset, run, &info, medium, &saved, reproduced);
+    Ok(dataset.with_metadata(metadata))
+}
+
+/// That `run` has the medium policy's task and online configuration (it may
+/// have run more steps since).
+fn ensure_medium_run(run: &Path, info: &OnlineRunInfo, medium: &Behaviour) -> anyhow::Result<()> {
     let same_run = medium
         .metadata
         .provenance
@@ -401,6 +412,16 @@ fn medium_replay(run: &Path, medium: &Behaviour, accept_rerun: bool) -> anyhow::
         run.display(),
         medium.entry.run
     );
+    Ok(())
+}
+
+/// The policy `run` saved at the medium step, and whether it is the medium
+/// policy itself (refused where it is not, unless `accept_rerun`).
+fn medium_checkpoint(
+    run: &Path,
+    medium: &Behaviour,
+    accept_rerun: bool,
+) -> anyhow::Result<(RunPolicy, bool)> {
     let step = medium.entry.pick.step;
     // The same configuration is not the same run where the float arithmetic
     // differs (gemm blocks, and so rounds, by the CPU's cache sizes; a kernel
@@ -427,7 +448,20 @@ fn medium_replay(run: &Path, medium: &Behaviour, accept_rerun: bool) -> anyhow::
         saved.metadata.weights_sha256,
         medium.metadata.weights_sha256
     );
-    let mut dataset = read_run_transitions(run, step)?;
+    Ok((saved, reproduced))
+}
+
+/// The medium-replay recipe's record: the run, its seed, the medium step and
+/// the policy there.
+fn medium_replay_metadata(
+    dataset: &Dataset,
+    run: &Path,
+    info: &OnlineRunInfo,
+    medium: &Behaviour,
+    saved: &RunPolicy,
+    reproduced: bool,
+) -> DatasetMetadata {
+    let step = medium.entry.pick.step;
     let mut metadata = dataset.metadata.clone();
     metadata.insert("kind".into(), "medium-replay".into());
     metadata.insert(
@@ -454,8 +488,7 @@ fn medium_replay(run: &Path, medium: &Behaviour, accept_rerun: bool) -> anyhow::
         "generator".into(),
         format!("nuno {}", env!("CARGO_PKG_VERSION")),
     );
-    dataset = dataset.with_metadata(metadata);
-    Ok(dataset)
+    metadata
 }
 
 /// Generates with a progress bar, adding `extra` to the dataset's metadata.
