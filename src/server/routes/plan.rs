@@ -199,16 +199,7 @@ pub async fn plan_route(
     let config = plan_config(&r, &state, &model)?;
     let start = checked_state(&r.state, model.obs_dim())?;
     let sessions = state.plan_sessions.clone();
-    let session = match (&r.session, r.open_session) {
-        (Some(_), true) => {
-            return Err(ApiError::Invalid(
-                "give `session` (continue one) or `open_session` (start one), not both".into(),
-            ));
-        }
-        (Some(name), false) => Some(name.clone()),
-        (None, true) => Some(PlanSessions::new_id()),
-        (None, false) => None,
-    };
+    let session = session_name(&r)?;
     let warm = match &r.session {
         Some(name) => Some(sessions.warm(name, &id, r.horizon, arrived)?),
         None => None,
@@ -256,6 +247,19 @@ pub async fn plan_route(
             })
         })
         .await
+}
+
+/// The session this plan is kept in: the one it continues, a new one it
+/// opens, or none.
+fn session_name(r: &PlanRequest) -> Result<Option<String>, ApiError> {
+    match (&r.session, r.open_session) {
+        (Some(_), true) => Err(ApiError::Invalid(
+            "give `session` (continue one) or `open_session` (start one), not both".into(),
+        )),
+        (Some(name), false) => Ok(Some(name.clone())),
+        (None, true) => Ok(Some(PlanSessions::new_id())),
+        (None, false) => Ok(None),
+    }
 }
 
 /// The request's planner and scoring, with the defaults filled and the
