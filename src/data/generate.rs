@@ -67,6 +67,19 @@ pub fn generate(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Dataset, DataError> {
     let probe = MujocoTask::new(&config.task)?;
+    check_policy_fits(config, policy, &probe)?;
+    let recorded = record_episodes(config, policy, &probe, progress)?;
+    let metadata = generated_metadata(config, policy_description);
+    recorded.into_dataset(metadata, std::path::Path::new("<generated>"))
+}
+
+/// That `policy` reads the task's observations, as `config.policy_layout`
+/// gives them, and acts in its action space.
+fn check_policy_fits(
+    config: &GenerateConfig,
+    policy: &dyn BatchPolicy,
+    probe: &MujocoTask,
+) -> Result<(), DataError> {
     let root_x = config.root_x_dropped();
     let expected = (probe.obs_dim() - root_x, probe.act_dim());
     if config.task.layout == ObservationLayout::D4rl && root_x == 1 {
@@ -86,7 +99,18 @@ pub fn generate(
             expected.1
         )));
     }
-    let mut all = Recording::for_task(&probe);
+    Ok(())
+}
+
+/// Whole episodes, `config.episodes_per_round` at a time on the cores, until
+/// the budget is met; the last one kept is cut to a transition budget.
+fn record_episodes(
+    config: &GenerateConfig,
+    policy: &dyn BatchPolicy,
+    probe: &MujocoTask,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<Recording, DataError> {
+    let mut all = Recording::for_task(probe);
     let mut episodes_kept = 0;
     let done = |recorded: usize, episodes: usize| match config.budget {
         Budget::Transitions(n) => recorded >= n,
@@ -117,7 +141,11 @@ pub fn generate(
             all.append(episode);
         }
     }
+    Ok(all)
+}
 
+/// The recipe's record: task, layouts, kind, seed, policy and generator.
+fn generated_metadata(config: &GenerateConfig, policy_description: &str) -> DatasetMetadata {
     let mut metadata = DatasetMetadata::new();
     metadata.insert("task".into(), config.task.task.to_string());
     metadata.insert(
@@ -131,11 +159,13 @@ pub fn generate(
         "policy_observation_layout".into(),
         format!("{:?}", config.policy_layout).to_lowercase(),
     );
-    metadata.insert(
-        "generator".into(),
-        format!("nuno {}", env!("CARGO_PKG_VERSION")),
-    );
-    all.into_dataset(metadata, std::path::Path::new("<generated>"))
+    metadata.insert("generator".into(), generator());
+    metadata
+}
+
+/// The `generator` every dataset nuno writes records: this library's version.
+pub fn generator() -> String {
+    format!("nuno {}", env!("CARGO_PKG_VERSION"))
 }
 
 /// One full episode of `policy`, seeded by `(config.seed, episode)`.

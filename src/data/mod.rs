@@ -23,7 +23,7 @@ pub use csv_log::read_csv_log;
 pub use d4rl::{read_d4rl, write_d4rl};
 pub use dataset::{Dataset, DatasetMetadata, DatasetParts, Trajectory};
 pub use format::{DatasetFormat, read_dataset, read_system_dataset};
-pub use generate::{Budget, GenerateConfig, generate};
+pub use generate::{Budget, GenerateConfig, generate, generator};
 pub use minari::read_minari;
 pub use neorl::{read_neorl, write_neorl};
 pub use normalizer::{Normalizer, NormalizerConfig, Stats};

@@ -14,7 +14,7 @@ use nuno::artifact::{
 };
 use nuno::data::{
     BehaviourLevel, Budget, Dataset, DatasetFormat, DatasetMetadata, GenerateConfig, generate,
-    read_dataset, write_d4rl, write_neorl,
+    generator, read_dataset, write_d4rl, write_neorl,
 };
 use nuno::envs::{MujocoTask, System, TaskConfig, TaskName};
 use nuno::sde::ComputeDevice;
@@ -484,10 +484,7 @@ fn medium_replay_metadata(
     if let Some(r) = eval_return {
         metadata.insert("behaviour_eval_return".into(), format!("{r:.3}"));
     }
-    metadata.insert(
-        "generator".into(),
-        format!("nuno {}", env!("CARGO_PKG_VERSION")),
-    );
+    metadata.insert("generator".into(), generator());
     metadata
 }
 
