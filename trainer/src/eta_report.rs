@@ -6,8 +6,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use nuno::artifact::{DYNAMICS_METADATA, load_dynamics, sha256_file};
-use nuno::data::{DatasetFormat, read_dataset, read_system_dataset};
+use nuno::artifact::{DYNAMICS_METADATA, DynamicsProvenance, load_dynamics, sha256_file};
+use nuno::data::{Dataset, DatasetFormat, read_dataset, read_system_dataset};
 use nuno::envs::System;
 use nuno::sde::{
     CalibrationConfig, CalibrationReport, ComputeDevice, EtaReport, EtaReportConfig, LossConfig,
@@ -52,27 +52,35 @@ struct Report<'a> {
     calibration: &'a CalibrationReport,
 }
 
+impl Args {
+    /// The separation's and the calibration's configurations, checked.
+    fn configs(&self) -> anyhow::Result<(EtaReportConfig, CalibrationConfig)> {
+        let eta_config = EtaReportConfig {
+            rows: self.rows,
+            radii: self.radii.clone(),
+            seed: self.seed,
+        };
+        let calibration_config = CalibrationConfig {
+            rows: self.rows,
+            radii: self.radii.clone(),
+            windows: self.windows,
+            seed: self.seed,
+            ..CalibrationConfig::new()
+        };
+        calibration_config
+            .validate()
+            .context("check --rows, --radii and --windows")?;
+        Ok((eta_config, calibration_config))
+    }
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let (eta_config, calibration_config) = args.configs()?;
     let device = ComputeDevice::Cpu.device().map_err(anyhow::Error::msg)?;
-    let eta_config = EtaReportConfig {
-        rows: args.rows,
-        radii: args.radii.clone(),
-        seed: args.seed,
-    };
-    let calibration_config = CalibrationConfig {
-        rows: args.rows,
-        radii: args.radii,
-        windows: args.windows,
-        seed: args.seed,
-        ..CalibrationConfig::new()
-    };
-    calibration_config
-        .validate()
-        .context("check --rows, --radii and --windows")?;
     let (model, metadata) = load_dynamics(&args.model, &device)
         .with_context(|| format!("loading the model in {}", args.model.display()))?;
     let system = System::recorded(
-        metadata.provenance.task,
+        metadata.provenance.task.clone(),
         metadata.provenance.system.as_deref(),
         &args.model.join(DYNAMICS_METADATA),
     )?;
@@ -85,14 +93,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let radius = fit.map_or(LossConfig::new().radius, |fit| fit.loss.radius);
     let separation = eta_report(&model, &dataset, radius, &eta_config, &device)
         .context("check --rows and --radii")?;
-    // On the training dataset, only the trajectories the fit held out are new to the model.
-    let trained_on = metadata.provenance.dataset.as_ref().map(|d| &d.sha256);
-    let held_out = match fit {
-        Some(fit) if trained_on == Some(&sha256_file(&args.dataset)?) => {
-            dataset.split_by_trajectory(fit.valid_fraction, fit.seed).1
-        }
-        _ => dataset,
-    };
+    let held_out = new_to_the_model(dataset, &args.dataset, &metadata.provenance)?;
     let thresholds = metadata.provenance.thresholds.as_ref();
     // Random actions span the system's action space (older artifacts: the data's range).
     let actions = match &system {
@@ -120,6 +121,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!();
     print_calibration(&calibration);
     Ok(())
+}
+
+/// The part of `dataset` new to the model: on its training dataset, the
+/// trajectories the fit held out; any other dataset whole.
+fn new_to_the_model(
+    dataset: Dataset,
+    path: &Path,
+    provenance: &DynamicsProvenance,
+) -> anyhow::Result<Dataset> {
+    let trained_on = provenance.dataset.as_ref().map(|d| &d.sha256);
+    Ok(match &provenance.fit {
+        Some(fit) if trained_on == Some(&sha256_file(path)?) => {
+            dataset.split_by_trajectory(fit.valid_fraction, fit.seed).1
+        }
+        _ => dataset,
+    })
 }
 
 fn print_separation(report: &EtaReport) {
