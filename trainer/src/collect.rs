@@ -14,7 +14,7 @@ use nuno::artifact::{
     save_online_checkpoint, snapshot_online_run, start_online_run,
 };
 use nuno::data::{BehaviourLevel, BehaviourPick, LEVEL_TOLERANCE, select_behaviour};
-use nuno::envs::{EvaluationConfig, TaskConfig, TaskName, evaluate};
+use nuno::envs::{EvaluationConfig, System, TaskConfig, TaskName, evaluate};
 use nuno::infer::Kernel;
 use nuno::sde::ComputeDevice;
 use nuno::shared::{Metric, MetricsTable};
@@ -136,23 +136,34 @@ pub fn run(command: Command) -> anyhow::Result<()> {
     }
 }
 
+impl OnlineArgs {
+    /// The run's configuration, the flags checked before anything is written.
+    fn config(&self) -> anyhow::Result<OnlineSacConfig> {
+        anyhow::ensure!(
+            !self.hidden.is_empty() && self.hidden.iter().all(|&h| h > 0),
+            "--hidden needs positive layer sizes"
+        );
+        anyhow::ensure!(
+            self.refill != Some(0),
+            "--refill needs at least one step: SAC samples batches from what the refill records"
+        );
+        let sac = SacConfig::new()
+            .with_batch_size(self.batch_size)
+            .with_actor_hidden(self.hidden.clone())
+            .with_critic_hidden(self.hidden.clone());
+        Ok(OnlineSacConfig::new(sac)
+            .with_steps(self.steps)
+            .with_seed(self.seed)
+            .with_checkpoint_every(self.checkpoint_every)
+            .with_start_steps(self.start_steps)
+            .with_eval_episodes(self.eval_episodes))
+    }
+}
+
 fn online_sac(args: OnlineArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        !args.hidden.is_empty() && args.hidden.iter().all(|&h| h > 0),
-        "--hidden needs positive layer sizes"
-    );
+    let config = args.config()?;
     let system = system_of(args.task, args.system.as_deref(), args.neorl)?;
     let task = simulation_of(&system)?;
-    let sac = SacConfig::new()
-        .with_batch_size(args.batch_size)
-        .with_actor_hidden(args.hidden.clone())
-        .with_critic_hidden(args.hidden.clone());
-    let config = OnlineSacConfig::new(sac)
-        .with_steps(args.steps)
-        .with_seed(args.seed)
-        .with_checkpoint_every(args.checkpoint_every)
-        .with_start_steps(args.start_steps)
-        .with_eval_episodes(args.eval_episodes);
     let device = ComputeDevice::Cpu.device().map_err(anyhow::Error::msg)?;
     let mut run = OnlineSac::new(config, task, &device)?;
     let _claim = claim_output(&args.out)?;
@@ -163,35 +174,13 @@ fn online_sac(args: OnlineArgs) -> anyhow::Result<()> {
         args.out.display()
     );
     start_online_run(&args.out, &run, &system)?;
-    anyhow::ensure!(
-        args.refill != Some(0),
-        "--refill needs at least one step: SAC samples batches from what the refill records"
-    );
     if args.resume && load_online_checkpoint(&args.out, &mut run, args.refill)? {
         println!(
             "resumed at step {} (updates from step {})",
             run.step, run.updates_after
         );
     }
-
-    let bar = ProgressBar::new(args.steps as u64).with_style(ProgressStyle::with_template(
-        "{bar:30} {pos}/{len} steps | {msg}",
-    )?);
-    bar.set_position(run.step as u64);
-    while !run.is_finished() {
-        let record = run.run_interval()?;
-        save_online_checkpoint(&args.out, &run, &system)?;
-        write_metrics(&args.out, &run.history)?;
-        bar.set_position(run.step as u64);
-        bar.set_message(format!(
-            "return {:.0} (score {:.1}) | env steps/s {:.0} | updates/s {:.1}",
-            record.eval.mean_return,
-            record.eval.normalized_score,
-            record.env_steps_per_second,
-            record.updates_per_second
-        ));
-    }
-    bar.finish();
+    train_online(&args.out, &mut run, &system)?;
     if let Some(last) = run.history.last() {
         println!(
             "{} steps, {} updates, {} episodes: evaluation return {:.1} (normalised {:.1}); run in {}",
@@ -203,6 +192,30 @@ fn online_sac(args: OnlineArgs) -> anyhow::Result<()> {
             args.out.display()
         );
     }
+    Ok(())
+}
+
+/// Interval after interval to the run's last step, each checkpointed with its
+/// metrics in `out`, the latest evaluation on a progress bar.
+fn train_online(out: &Path, run: &mut OnlineSac, system: &System) -> anyhow::Result<()> {
+    let bar = ProgressBar::new(run.config.steps as u64).with_style(ProgressStyle::with_template(
+        "{bar:30} {pos}/{len} steps | {msg}",
+    )?);
+    bar.set_position(run.step as u64);
+    while !run.is_finished() {
+        let record = run.run_interval()?;
+        save_online_checkpoint(out, run, system)?;
+        write_metrics(out, &run.history)?;
+        bar.set_position(run.step as u64);
+        bar.set_message(format!(
+            "return {:.0} (score {:.1}) | env steps/s {:.0} | updates/s {:.1}",
+            record.eval.mean_return,
+            record.eval.normalized_score,
+            record.env_steps_per_second,
+            record.updates_per_second
+        ));
+    }
+    bar.finish();
     Ok(())
 }
 
