@@ -15,6 +15,26 @@ pub const OUTPUT_CLAIM: &str = ".writing";
 #[must_use = "the claim holds only while it lives"]
 pub struct OutputClaim {
     _locked: Option<File>,
+    out: PathBuf,
+    /// Whether the claim created `out`.
+    created: bool,
+}
+
+impl Drop for OutputClaim {
+    /// A command refused before it wrote anything leaves nothing behind: its
+    /// `--out` holds only the claim's file then, which goes, with the folder
+    /// where the claim created it.
+    fn drop(&mut self) {
+        let only_the_claim = std::fs::read_dir(&self.out).is_ok_and(|mut entries| {
+            entries.all(|e| e.is_ok_and(|e| e.file_name() == OUTPUT_CLAIM))
+        });
+        if only_the_claim {
+            let _ = std::fs::remove_file(self.out.join(OUTPUT_CLAIM));
+            if self.created {
+                let _ = std::fs::remove_dir(&self.out);
+            }
+        }
+    }
 }
 
 /// Claims `out` (created if missing) for this process, refusing it while another holds it:
@@ -23,12 +43,15 @@ pub struct OutputClaim {
 /// mounts) it warns and goes on unclaimed: the claim guards against a mistake, and a run
 /// should not fail for want of it.
 pub fn claim_output(out: &Path) -> anyhow::Result<OutputClaim> {
+    let created = !out.exists();
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let path = out.join(OUTPUT_CLAIM);
     let file = File::create(&path).with_context(|| format!("creating {}", path.display()))?;
     match file.try_lock() {
         Ok(()) => Ok(OutputClaim {
             _locked: Some(file),
+            out: out.to_path_buf(),
+            created,
         }),
         Err(TryLockError::WouldBlock) => anyhow::bail!(
             "{} is being written by another process; wait for it to end or choose another --out",
@@ -40,7 +63,11 @@ pub fn claim_output(out: &Path) -> anyhow::Result<OutputClaim> {
                 path.display(),
                 out.display()
             );
-            Ok(OutputClaim { _locked: None })
+            Ok(OutputClaim {
+                _locked: None,
+                out: out.to_path_buf(),
+                created,
+            })
         }
     }
 }

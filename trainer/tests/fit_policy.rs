@@ -464,21 +464,29 @@ fn mopo_trains_in_the_ensemble_with_its_penalty_and_no_truncation() {
         error.contains("mbpo") && error.contains("nuno-al") && error.contains("tatu-mopo"),
         "{error}"
     );
-    // The neural SDE's run needs its own model.
-    let error = fails(&[
-        "fit-policy",
-        "--model",
-        &s(&model),
-        "--dataset",
-        &s(&dataset),
-        "--preset",
-        "hopper-medium",
-        "--steps",
-        "10",
-        "--out",
-        &s(&tmp.path().join("other")),
-    ]);
-    assert!(error.contains("model.json"), "{error}");
+    // The neural SDE's run needs its own model. Refused after claiming its
+    // --out, it leaves nothing there: no folder it made, an empty one it found.
+    let (made, found) = (tmp.path().join("other"), tmp.path().join("found"));
+    std::fs::create_dir(&found).unwrap();
+    for out in [&made, &found] {
+        let error = fails(&[
+            "fit-policy",
+            "--model",
+            &s(&model),
+            "--dataset",
+            &s(&dataset),
+            "--preset",
+            "hopper-medium",
+            "--steps",
+            "10",
+            "--out",
+            &s(out),
+        ]);
+        assert!(error.contains("model.json"), "{error}");
+    }
+    assert!(!made.exists(), "the refused run left the --out it made");
+    let left: Vec<_> = std::fs::read_dir(&found).unwrap().collect();
+    assert!(left.is_empty(), "the refused run left {left:?}");
 }
 
 #[test]
