@@ -262,6 +262,90 @@ pub fn fit_ensemble(
     })
 }
 
+/// Where a fit stands: each member's best holdout MSE and its weights then,
+/// the epochs so far, and how many of the last improved no member.
+struct Progress<M> {
+    best_mse: Vec<f32>,
+    best: Vec<M>,
+    history: Vec<EnsembleEpoch>,
+    since_update: usize,
+}
+
+impl<M> Progress<M> {
+    fn fresh<T: EnsembleTrainer<Member = M>>(trainer: &T, members: usize) -> Self {
+        Self {
+            best_mse: vec![f32::INFINITY; members],
+            best: (0..members).map(|m| trainer.member(m)).collect(),
+            history: Vec::new(),
+            since_update: 0,
+        }
+    }
+
+    /// The checkpoint's progress, its current weights and Adam's state restored
+    /// into `trainer`.
+    fn resumed<T: EnsembleTrainer<Member = M>>(
+        trainer: &mut T,
+        state: EnsembleFitState,
+        members: usize,
+    ) -> Result<Self, EnsembleError> {
+        if state.best_mse.len() != members
+            || state.current.members.len() != members
+            || state.best.members.len() != members
+        {
+            return Err(EnsembleError::Config(format!(
+                "the checkpoint holds {} members, the config {members}",
+                state.current.members.len(),
+            )));
+        }
+        trainer.restore(&state.current, state.adam);
+        Ok(Self {
+            best: state
+                .best
+                .members
+                .iter()
+                .map(|m| trainer.member_of(m))
+                .collect(),
+            best_mse: state.best_mse,
+            history: state.history,
+            since_update: state.since_update,
+        })
+    }
+
+    /// Keeps each member whose holdout MSE improved on its best by more than
+    /// `min_improvement` (relative); whether any did.
+    fn keep_improved<T: EnsembleTrainer<Member = M>>(
+        &mut self,
+        trainer: &T,
+        holdout_mse: &[f32],
+        min_improvement: f64,
+    ) -> bool {
+        let mut improved = false;
+        for (m, &mse) in holdout_mse.iter().enumerate() {
+            let best = self.best_mse[m];
+            if best.is_infinite() || (best - mse) / best > min_improvement as f32 {
+                self.best_mse[m] = mse;
+                self.best[m] = trainer.member(m);
+                improved = true;
+            }
+        }
+        improved
+    }
+
+    /// The checkpoint of this point of the fit.
+    fn state<T: EnsembleTrainer<Member = M>>(&self, trainer: &T) -> EnsembleFitState {
+        let members = self.best.len();
+        let current: Vec<M> = (0..members).map(|m| trainer.member(m)).collect();
+        EnsembleFitState {
+            history: self.history.clone(),
+            since_update: self.since_update,
+            best_mse: self.best_mse.clone(),
+            current: trainer.model_with(&current),
+            best: trainer.model_with(&self.best),
+            adam: trainer.optimizer_state(),
+        }
+    }
+}
+
 /// The data side of a fit: which rows each member sees, in which order.
 struct FitRun<'a> {
     rows: &'a Rows,
@@ -282,75 +366,59 @@ impl FitRun<'_> {
         on_epoch: &mut dyn FnMut(&EnsembleFitState) -> Result<(), EnsembleError>,
     ) -> Result<(GaussianEnsemble, Vec<f32>, Vec<EnsembleEpoch>), EnsembleError> {
         let config = self.config;
-        let mut best_mse = vec![f32::INFINITY; config.members];
-        let mut best: Vec<T::Member> = (0..config.members).map(|m| trainer.member(m)).collect();
-        let mut history = Vec::new();
-        let mut since_update = 0;
-        if let Some(state) = resume {
-            if state.best_mse.len() != config.members
-                || state.current.members.len() != config.members
-                || state.best.members.len() != config.members
-            {
-                return Err(EnsembleError::Config(format!(
-                    "the checkpoint holds {} members, the config {}",
-                    state.current.members.len(),
-                    config.members
-                )));
-            }
-            trainer.restore(&state.current, state.adam);
-            best = state
-                .best
-                .members
-                .iter()
-                .map(|m| trainer.member_of(m))
-                .collect();
-            (best_mse, history, since_update) = (state.best_mse, state.history, state.since_update);
-        }
-        let train_rows = self.resamples[0].len();
+        let mut progress = match resume {
+            Some(state) => Progress::resumed(&mut trainer, state, config.members)?,
+            None => Progress::fresh(&trainer, config.members),
+        };
         let mut batches = vec![MemberBatch::default(); config.members];
-        while since_update < config.max_epochs_since_update
-            && config.max_epochs.is_none_or(|cap| history.len() < cap)
+        while progress.since_update < config.max_epochs_since_update
+            && config
+                .max_epochs
+                .is_none_or(|cap| progress.history.len() < cap)
         {
-            let epoch = history.len() + 1;
-            let orders = self.epoch_orders(epoch);
-            let mut losses = Vec::new();
-            for start in (0..train_rows).step_by(config.batch_size) {
-                let end = (start + config.batch_size).min(train_rows);
-                for (batch, order) in batches.iter_mut().zip(&orders) {
-                    self.rows.gather(&order[start..end], self.scaler, batch);
-                }
-                losses.push(trainer.step(&batches));
-            }
-
+            let epoch = progress.history.len() + 1;
+            let train_loss = self.train_epoch(&mut trainer, epoch, &mut batches);
             let holdout_mse = trainer.holdout_mse(self.holdout);
-            let mut improved = false;
-            for (m, &mse) in holdout_mse.iter().enumerate() {
-                if best_mse[m].is_infinite()
-                    || (best_mse[m] - mse) / best_mse[m] > config.min_improvement as f32
-                {
-                    best_mse[m] = mse;
-                    best[m] = trainer.member(m);
-                    improved = true;
-                }
-            }
-            since_update = if improved { 0 } else { since_update + 1 };
-            history.push(EnsembleEpoch {
+            let improved = progress.keep_improved(&trainer, &holdout_mse, config.min_improvement);
+            progress.since_update = if improved {
+                0
+            } else {
+                progress.since_update + 1
+            };
+            progress.history.push(EnsembleEpoch {
                 epoch,
-                train_loss: losses.iter().sum::<f64>() / losses.len().max(1) as f64,
+                train_loss,
                 holdout_mse,
                 improved,
             });
-            let current: Vec<T::Member> = (0..config.members).map(|m| trainer.member(m)).collect();
-            on_epoch(&EnsembleFitState {
-                history: history.clone(),
-                since_update,
-                best_mse: best_mse.clone(),
-                current: trainer.model_with(&current),
-                best: trainer.model_with(&best),
-                adam: trainer.optimizer_state(),
-            })?;
+            on_epoch(&progress.state(&trainer))?;
         }
-        Ok((trainer.model_with(&best), best_mse, history))
+        Ok((
+            trainer.model_with(&progress.best),
+            progress.best_mse,
+            progress.history,
+        ))
+    }
+
+    /// One pass over every member's resample in minibatches; the mean loss.
+    fn train_epoch<T: EnsembleTrainer>(
+        &self,
+        trainer: &mut T,
+        epoch: usize,
+        batches: &mut [MemberBatch],
+    ) -> f64 {
+        let batch_size = self.config.batch_size;
+        let train_rows = self.resamples[0].len();
+        let orders = self.epoch_orders(epoch);
+        let mut losses = Vec::new();
+        for start in (0..train_rows).step_by(batch_size) {
+            let end = (start + batch_size).min(train_rows);
+            for (batch, order) in batches.iter_mut().zip(&orders) {
+                self.rows.gather(&order[start..end], self.scaler, batch);
+            }
+            losses.push(trainer.step(batches));
+        }
+        losses.iter().sum::<f64>() / losses.len().max(1) as f64
     }
 
     /// Each member's order of its resample in `epoch`: a fresh permutation
