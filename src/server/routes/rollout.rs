@@ -185,17 +185,7 @@ pub async fn rollout(
         .metrics
         .batch("rollout", &id, batch * r.particles * r.horizon);
 
-    let config = RolloutConfig {
-        horizon: r.horizon,
-        particles: r.particles,
-        penalty: r.penalty,
-        threshold,
-        noise_scale,
-        halt: None,
-        state_box: None,
-        observation_clip: None,
-        truncated_step: TruncatedStep::Drop,
-    };
+    let config = served_rollout(&r, threshold, noise_scale);
     let (seed, mode) = (r.seed, r.policy_mode);
     let worker = model.clone();
     // The trajectories are built and serialised in the compute work too: at
@@ -225,7 +215,6 @@ pub async fn rollout(
                     clipped_rows,
                 );
             }
-            let trajectories = trajectories(&out.trace, r.penalty, r.particles, (obs_dim, act_dim));
             json_response(&RolloutResponse {
                 model: id,
                 horizon: r.horizon,
@@ -233,10 +222,28 @@ pub async fn rollout(
                 threshold,
                 noise_scale,
                 clipped_rows,
-                trajectories,
+                trajectories: trajectories(&out.trace, r.penalty, r.particles, (obs_dim, act_dim)),
             })
         })
         .await
+}
+
+/// The rollout a request asks for: its horizon, particles, λ and ε, the
+/// model's own noise scale unless it gives one; the truncating step dropped, as
+/// the paper does, and none of the training loop's guards (HALT, state box,
+/// clipping): the server answers what the model does.
+fn served_rollout(r: &RolloutRequest, threshold: Option<f32>, noise_scale: f32) -> RolloutConfig {
+    RolloutConfig {
+        horizon: r.horizon,
+        particles: r.particles,
+        penalty: r.penalty,
+        threshold,
+        noise_scale,
+        halt: None,
+        state_box: None,
+        observation_clip: None,
+        truncated_step: TruncatedStep::Drop,
+    }
 }
 
 /// The request's horizon, particles, penalty and the size of its work and
