@@ -33,7 +33,11 @@
 //! file = "data/hopper-random.hdf5"   # relative to the grid file
 //! task = "hopper"
 //! preset = "hopper-random"           # Table 3 row: h, α, λ_pen
-//! methods = ["nuno", "nuno-r", "nuno-al", "mopo", "tatu-mopo"]
+//! # The baselines' settings where their tables have no row for the preset (optional):
+//! rambo = { horizon = 2, weight = 3e-4 }    # RAMBO's h and w_adv
+//! combo = { horizon = 5, weight = 5.0 }     # COMBO's h and β
+//! edac = { critics = 50, eta = 1.0 }        # EDAC's N and η
+//! methods = ["nuno", "nuno-r", "nuno-al", "mopo", "tatu-mopo", "rambo", "combo", "edac"]
 //! seeds = [0, 1, 2]
 //!
 //! [[datasets]]
@@ -416,6 +420,75 @@ mod tests {
         );
     }
 
+    /// RAMBO's, COMBO's and EDAC's settings on a dataset their tables lack
+    /// (random data) reach their own cells only; without them the row is
+    /// refused by name, as is a row that gives them where the table has its
+    /// own, for a method it does not run, or out of range.
+    #[test]
+    fn a_random_row_gives_the_baselines_settings_their_tables_lack() {
+        let row = "[budget]\nmodel_steps = 100\npolicy_steps = 100\n\
+                   [[datasets]]\nname = \"random\"\nfile = \"r.hdf5\"\ntask = \"hopper\"\n\
+                   preset = \"hopper-random\"\nrambo = { horizon = 2, weight = 3e-4 }\n\
+                   combo = { horizon = 5, weight = 5.0 }\nedac = { critics = 50, eta = 1.0 }\n\
+                   methods = [\"mopo\", \"rambo\", \"combo\", \"edac\"]\nseeds = [0]\n";
+        let grid: Grid = toml::from_str(row).unwrap();
+        let cells = grid.cells(Path::new("/grids")).unwrap();
+        let cell = |m: Method| cells.iter().find(|c| c.method == m).unwrap().clone();
+        let (rambo, combo, edac) = (cell(Method::Rambo), cell(Method::Combo), cell(Method::Edac));
+        let (h2, h5) = (
+            HorizonWeight {
+                horizon: 2,
+                weight: 3e-4,
+            },
+            HorizonWeight {
+                horizon: 5,
+                weight: 5.0,
+            },
+        );
+        assert_eq!(
+            (rambo.rambo, rambo.combo, rambo.edac),
+            (Some(h2), None, None)
+        );
+        assert_eq!(
+            (combo.rambo, combo.combo, combo.edac),
+            (None, Some(h5), None)
+        );
+        let n50 = EdacRow {
+            critics: 50,
+            eta: 1.0,
+        };
+        assert_eq!((edac.rambo, edac.combo, edac.edac), (None, None, Some(n50)));
+        let mopo = cell(Method::Mopo);
+        assert_eq!((mopo.rambo, mopo.combo, mopo.edac), (None, None, None));
+        // A kept result of the same cell with other settings is another cell's.
+        assert!(!rambo.is_same_cell_as(&Cell {
+            rambo: Some(h5),
+            ..rambo.clone()
+        }));
+
+        let without = row.replace("rambo = { horizon = 2, weight = 3e-4 }\n", "");
+        let error = refusal(&without);
+        assert!(error.contains("rambo needs its own row"), "{error}");
+        let own = row.replace("hopper-random", "hopper-medium");
+        let error = refusal(&own);
+        assert!(error.contains("`hopper-medium` has its own row"), "{error}");
+        let unread = row.replace("\"combo\", ", "");
+        let error = refusal(&unread);
+        assert!(
+            error.contains("`combo` sets combo's settings, but the row runs no combo"),
+            "{error}"
+        );
+        let lone = row.replace("critics = 50", "critics = 1");
+        let error = refusal(&lone);
+        assert!(error.contains("`edac` needs critics ≥ 2"), "{error}");
+        let negative = row.replace("weight = 3e-4", "weight = -1.0");
+        let error = refusal(&negative);
+        assert!(
+            error.contains("`rambo` needs horizon ≥ 1 and a finite weight ≥ 0"),
+            "{error}"
+        );
+    }
+
     /// A row's own drift inputs are its SDE cells' budget and no other row's;
     /// MOPO's cells, which fit no SDE, read none; a row that fits no SDE is refused.
     #[test]
@@ -480,6 +553,18 @@ pub struct GridDataset {
     /// mopo and tatu-mopo run with, and morel's h.
     #[serde(default)]
     pub mopo: Option<MopoRow>,
+    /// RAMBO's h and w_adv for a preset its table has no row for (random
+    /// data): fit-policy's `--horizon` and `--rambo-weight`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rambo: Option<HorizonWeight>,
+    /// COMBO's h and β for a preset its table has no row for: `--horizon`
+    /// and `--combo-weight`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub combo: Option<HorizonWeight>,
+    /// EDAC's N and η for a preset its table has no row for:
+    /// `--edac-critics` and `--edac-eta`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub edac: Option<EdacRow>,
     /// fit-model's `--drift-inputs` for this row's SDEs, in place of the
     /// budget's: a task whose data the grid's drift does not suit
     /// (halfcheetah's, where the z-score drift runs away: BENCHMARKS.md).
@@ -495,6 +580,23 @@ pub struct GridDataset {
 pub struct MopoRow {
     pub horizon: usize,
     pub penalty: f64,
+}
+
+/// A rollout length h and a method's weight (RAMBO's w_adv, COMBO's β), given
+/// in a grid row.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HorizonWeight {
+    pub horizon: usize,
+    pub weight: f64,
+}
+
+/// EDAC's critics N and diversity weight η, given in a grid row.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EdacRow {
+    pub critics: usize,
+    pub eta: f64,
 }
 
 /// fit-policy's `--horizon`, `--cvar-alpha` and `--penalty`: h, α and λ_pen
@@ -578,10 +680,14 @@ impl GridDataset {
                     Method::Mopo | Method::TatuMopo | Method::Morel if self.mopo.is_none() => {
                         crate::agent::mopo_preset(preset).err()
                     }
-                    Method::Combo => crate::agent::combo_preset(preset).err(),
+                    Method::Combo if self.combo.is_none() => {
+                        crate::agent::combo_preset(preset).err()
+                    }
                     Method::Mobile => crate::agent::mobile_preset(preset).err(),
-                    Method::Rambo => crate::agent::rambo_preset(preset).err(),
-                    Method::Edac => crate::agent::edac_preset(preset).err(),
+                    Method::Rambo if self.rambo.is_none() => {
+                        crate::agent::rambo_preset(preset).err()
+                    }
+                    Method::Edac if self.edac.is_none() => crate::agent::edac_preset(preset).err(),
                     _ => None,
                 };
                 if let Some(e) = missing {
@@ -590,6 +696,7 @@ impl GridDataset {
             }
         }
         self.check_mopo_row(&methods)?;
+        self.check_baseline_rows(&methods)?;
         if self.model_drift_inputs.is_some() && !methods.iter().any(|m| m.uses_sde()) {
             return Err(format!(
                 "dataset `{name}`: `model_drift_inputs` sets the SDE's drift, but the row runs no nuno, nuno-r or nuno-al"
@@ -624,6 +731,58 @@ impl GridDataset {
             return Err(format!(
                 "dataset `{name}`: `mopo` needs horizon ≥ 1 and a finite penalty ≥ 0"
             ));
+        }
+        Ok(())
+    }
+
+    /// A row's `rambo`, `combo` and `edac` settings: each only where its
+    /// method's table has no row for the preset, with that method in the row,
+    /// and in range.
+    fn check_baseline_rows(&self, methods: &[Method]) -> Result<(), String> {
+        let name = &self.name;
+        let given = [
+            (
+                self.rambo.map(|r| (r.horizon, r.weight)),
+                Method::Rambo,
+                "rambo",
+            ),
+            (
+                self.combo.map(|r| (r.horizon, r.weight)),
+                Method::Combo,
+                "combo",
+            ),
+            (self.edac.map(|r| (r.critics, r.eta)), Method::Edac, "edac"),
+        ];
+        for (row, method, key) in given {
+            let Some((count, weight)) = row else { continue };
+            let table = |preset: &str| match method {
+                Method::Rambo => crate::agent::rambo_preset(preset).is_ok(),
+                Method::Combo => crate::agent::combo_preset(preset).is_ok(),
+                _ => crate::agent::edac_preset(preset).is_ok(),
+            };
+            if let Some(preset) = &self.preset
+                && table(preset)
+            {
+                return Err(format!(
+                    "dataset `{name}`: `{key}` is for datasets {method}'s table lacks; `{preset}` has its own row"
+                ));
+            }
+            if !methods.contains(&method) {
+                return Err(format!(
+                    "dataset `{name}`: `{key}` sets {method}'s settings, but the row runs no {method}"
+                ));
+            }
+            // EDAC's diversity term compares critics pairwise: two at least.
+            let fewest = if method == Method::Edac { 2 } else { 1 };
+            if count < fewest || !(weight.is_finite() && weight >= 0.0) {
+                let (count_key, weight_key) = match method {
+                    Method::Edac => ("critics", "eta"),
+                    _ => ("horizon", "weight"),
+                };
+                return Err(format!(
+                    "dataset `{name}`: `{key}` needs {count_key} ≥ {fewest} and a finite {weight_key} ≥ 0"
+                ));
+            }
         }
         Ok(())
     }
@@ -698,6 +857,9 @@ impl GridDataset {
             mopo: self
                 .mopo
                 .filter(|_| method.is_mopo() || method == Method::Morel),
+            rambo: self.rambo.filter(|_| method == Method::Rambo),
+            combo: self.combo.filter(|_| method == Method::Combo),
+            edac: self.edac.filter(|_| method == Method::Edac),
             method,
             seed,
         };
@@ -759,6 +921,15 @@ pub struct Cell {
     /// MOPO's h and λ the row gives (its methods' cells only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mopo: Option<MopoRow>,
+    /// RAMBO's h and w_adv the row gives (RAMBO's cells only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rambo: Option<HorizonWeight>,
+    /// COMBO's h and β the row gives (COMBO's cells only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub combo: Option<HorizonWeight>,
+    /// EDAC's N and η the row gives (EDAC's cells only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub edac: Option<EdacRow>,
     pub method: Method,
     pub seed: u64,
 }
@@ -784,6 +955,9 @@ impl Cell {
                 == other.system_in_grid.as_ref().map(|f| f.file_name())
             && self.policy == other.policy
             && self.mopo == other.mopo
+            && self.rambo == other.rambo
+            && self.combo == other.combo
+            && self.edac == other.edac
             && self.method == other.method
             && self.seed == other.seed
     }

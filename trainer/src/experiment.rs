@@ -469,6 +469,9 @@ fn policy_args(cell: &Cell, b: &Budget, model: Option<PathBuf>, dir: PathBuf) ->
     args.steps_per_epoch = b.steps_per_epoch;
     args.eval_episodes = b.eval_episodes;
     args.hidden = b.hidden.clone();
+    if let Some(edac) = cell.edac {
+        (args.edac_critics, args.edac_eta) = (Some(edac.critics), Some(edac.eta));
+    }
     if cell.method.is_model_free() {
         args.task = cell.task;
         args.neorl = cell.layout == ObservationLayout::Neorl;
@@ -484,6 +487,12 @@ fn policy_args(cell: &Cell, b: &Budget, model: Option<PathBuf>, dir: PathBuf) ->
         // MOReL reads MOPO's h alone (it has no penalty).
         args.horizon = Some(mopo.horizon);
         args.penalty = cell.method.is_mopo().then_some(mopo.penalty);
+    }
+    if let Some(rambo) = cell.rambo {
+        (args.horizon, args.rambo_weight) = (Some(rambo.horizon), Some(rambo.weight));
+    }
+    if let Some(combo) = cell.combo {
+        (args.horizon, args.combo_weight) = (Some(combo.horizon), Some(combo.weight));
     }
     args.rollout_batch = b.rollout_batch;
     args.model_buffer_factor = b.model_buffer_factor;
@@ -628,7 +637,7 @@ mod tests {
     use std::path::Path;
 
     use clap::Parser;
-    use nuno::agent::{PolicyLoopConfig, TruncatedStep};
+    use nuno::agent::{LearnerConfig, PolicyLoopConfig, TruncatedStep};
     use nuno::envs::RootXReward;
     use nuno::experiment::{Grid, fit_changes};
 
@@ -893,6 +902,36 @@ mod tests {
             fit_policy::Training::InModel(run) => run.config,
             fit_policy::Training::ModelFree(_) => panic!("{} trains in a model", cell.method),
         }
+    }
+
+    /// A random row's RAMBO, COMBO and EDAC settings are what their cells'
+    /// runs take, as `--horizon` and each method's weight or critics would give them.
+    #[test]
+    fn a_rows_baseline_settings_reach_their_methods_runs() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("random.toml");
+        let text = format!(
+            "[budget]\n{SHARED}\n[[datasets]]\nname = \"r\"\nfile = \"r.hdf5\"\ntask = \"hopper\"\n\
+             preset = \"hopper-random\"\nrambo = {{ horizon = 2, weight = 3e-4 }}\n\
+             combo = {{ horizon = 3, weight = 2.5 }}\nedac = {{ critics = 7, eta = 0.5 }}\n\
+             methods = [\"rambo\", \"combo\", \"edac\"]\nseeds = [0]\n"
+        );
+        std::fs::write(&path, text).unwrap();
+        let (grid, cells) = Grid::read(&path).unwrap();
+        let rambo = loop_config(&grid, &cells[0]);
+        let adversary = rambo.rambo.expect("RAMBO's adversary").adversary;
+        assert_eq!((rambo.horizon, adversary.adv_weight), (2, 3e-4));
+        let combo = loop_config(&grid, &cells[1]);
+        let term = combo.conservative.expect("COMBO's conservative term");
+        assert_eq!((combo.horizon, term.cql_weight), (3, 2.5));
+        let edac = policy_args(&cells[2], &grid.budget_for(&cells[2]), None, "c".into());
+        let fit_policy::Training::ModelFree(plan) = edac.plan().unwrap().training else {
+            panic!("EDAC trains on the data alone");
+        };
+        let LearnerConfig::Edac(config) = plan.config.learner else {
+            panic!("an EDAC cell plans EDAC");
+        };
+        assert_eq!((config.num_critics, config.eta), (7, 0.5));
     }
 
     /// The budget's truncated step reaches the methods that truncate on an
