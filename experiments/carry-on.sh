@@ -127,9 +127,12 @@ keep() {
         mkdir -p "$kept"
         (cd "$out" && find . -name result.json -newer .carried-on -exec cp --parents {} "$kept/" \;)
         echo "carry-on: $(cd "$out" && find . -name result.json -newer .carried-on | wc -l) cells of $grid kept in $kept"
-        # The grid's report (borrowed cells included) kept beside its cells, never older than they.
-        "$trainer" experiment report --grid "$grid" --out "$out" >/dev/null
-        cp "$out/results.md" "$out/results.csv" "$out"/curves-*.svg "$kept/"
+        # The grid's report (borrowed cells included) kept beside its cells, never older than
+        # they; a grid with no finished cell yet has none.
+        if [ -n "$(find "$out" -name result.json | head -n 1)" ]; then
+            "$trainer" experiment report --grid "$grid" --out "$out" >/dev/null
+            cp "$out/results.md" "$out/results.csv" "$out"/curves-*.svg "$kept/"
+        fi
     done
 }
 
