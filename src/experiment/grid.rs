@@ -574,6 +574,19 @@ pub struct GridDataset {
     pub seeds: Vec<u64>,
 }
 
+/// Why `method`'s per-task table (OfflineRL-Kit's, MOPO's for its family)
+/// has no row for `preset`; none where it has one or the method reads no table.
+fn missing_table_row(method: Method, preset: &str) -> Option<crate::agent::AgentError> {
+    match method {
+        Method::Mopo | Method::TatuMopo | Method::Morel => crate::agent::mopo_preset(preset).err(),
+        Method::Combo => crate::agent::combo_preset(preset).err(),
+        Method::Mobile => crate::agent::mobile_preset(preset).err(),
+        Method::Rambo => crate::agent::rambo_preset(preset).err(),
+        Method::Edac => crate::agent::edac_preset(preset).err(),
+        _ => None,
+    }
+}
+
 /// MOPO's rollout length h and penalty λ, given in a grid row.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -675,22 +688,15 @@ impl GridDataset {
         } = &system
         {
             // The baselines' per-dataset tables, checked before anything runs.
-            for m in &methods {
-                let missing = match m {
-                    Method::Mopo | Method::TatuMopo | Method::Morel if self.mopo.is_none() => {
-                        crate::agent::mopo_preset(preset).err()
-                    }
-                    Method::Combo if self.combo.is_none() => {
-                        crate::agent::combo_preset(preset).err()
-                    }
-                    Method::Mobile => crate::agent::mobile_preset(preset).err(),
-                    Method::Rambo if self.rambo.is_none() => {
-                        crate::agent::rambo_preset(preset).err()
-                    }
-                    Method::Edac if self.edac.is_none() => crate::agent::edac_preset(preset).err(),
-                    _ => None,
+            for &m in &methods {
+                let given = match m {
+                    Method::Mopo | Method::TatuMopo | Method::Morel => self.mopo.is_some(),
+                    Method::Rambo => self.rambo.is_some(),
+                    Method::Combo => self.combo.is_some(),
+                    Method::Edac => self.edac.is_some(),
+                    _ => false,
                 };
-                if let Some(e) = missing {
+                if let Some(e) = missing_table_row(m, preset).filter(|_| !given) {
                     return Err(format!("dataset `{name}`: {m} needs its own row: {e}"));
                 }
             }
@@ -716,7 +722,7 @@ impl GridDataset {
             return Ok(());
         };
         if let Some(preset) = &self.preset
-            && crate::agent::mopo_preset(preset).is_ok()
+            && missing_table_row(Method::Mopo, preset).is_none()
         {
             return Err(format!(
                 "dataset `{name}`: `mopo` is for datasets MOPO's table lacks; `{preset}` has its own row"
@@ -755,13 +761,8 @@ impl GridDataset {
         ];
         for (row, method, key) in given {
             let Some((count, weight)) = row else { continue };
-            let table = |preset: &str| match method {
-                Method::Rambo => crate::agent::rambo_preset(preset).is_ok(),
-                Method::Combo => crate::agent::combo_preset(preset).is_ok(),
-                _ => crate::agent::edac_preset(preset).is_ok(),
-            };
             if let Some(preset) = &self.preset
-                && table(preset)
+                && missing_table_row(method, preset).is_none()
             {
                 return Err(format!(
                     "dataset `{name}`: `{key}` is for datasets {method}'s table lacks; `{preset}` has its own row"
